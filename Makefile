@@ -1,0 +1,29 @@
+# Two commands do everything on a fresh machine (see README):
+#   make demo   set up, then run the main job on the built-in apartment
+#   make test   set up, then run the test suite
+PY ?= $(shell command -v python3.11 || command -v python3)
+VENV ?= .venv
+OUT ?= out
+PYTEST_ARGS ?=
+
+.PHONY: setup demo test clean
+.DEFAULT_GOAL := demo
+
+$(VENV)/.installed: pyproject.toml
+	@$(PY) -c 'import sys; sys.exit(0 if sys.version_info[:2] == (3, 11) else "Python 3.11 is required (the bpy 4.5 wheel is built for it); set PY=/path/to/python3.11")'
+	$(PY) -m venv $(VENV)
+	$(VENV)/bin/python -m pip install -q --upgrade pip
+	$(VENV)/bin/python -m pip install -q -e ".[test]"
+	@touch $@
+
+setup: $(VENV)/.installed
+	@bash tools/system_deps.sh $(VENV)
+
+demo: setup
+	$(VENV)/bin/synth scene build --out $(OUT)/scenes
+
+test: setup
+	$(VENV)/bin/python -m pytest $(PYTEST_ARGS)
+
+clean:
+	rm -rf $(VENV) $(OUT) .pytest_cache
