@@ -1,0 +1,242 @@
+"""Physical plausibility of a layout: interpenetrations, support, passable doors.
+
+``check_layout`` is what ``synth scene check`` prints. It works from boxes (an object's mesh lies
+inside its box: a property of every generator in ``synth.assets``), the supporting surfaces of
+procedural objects, and a free-space grid for door reachability.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from matplotlib.path import Path as MplPath
+from scipy import ndimage
+
+from . import assets
+from . import geometry as geo
+from .placement import door_zone, opening_box
+from .scene import Layout, object_box
+
+Z_TOL = 0.003  # how far an object may float above / sink into its support (m)
+XY_TOL = 0.002
+OVERLAP_TOL = 0.005  # boxes may touch; interpenetration deeper than this counts
+WALL_TOL = 0.03
+GRID = 0.05  # free-space grid resolution (m)
+WALKER_RADIUS = 0.2  # half the width a person needs to pass (m)
+OBSTACLE_BELOW = 1.5  # objects whose box starts below this height obstruct walking (m)
+DOOR_PROBE = 0.45  # how far in front of a door its reachability is tested (m)
+
+
+@dataclass
+class CheckReport:
+    layout: str
+    objects: int
+    classes: int
+    collisions: list[dict] = field(default_factory=list)
+    unsupported: list[dict] = field(default_factory=list)
+    blocked_doors: list[dict] = field(default_factory=list)
+    covered_openings: list[dict] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return not (self.collisions or self.unsupported or self.blocked_doors or self.covered_openings)
+
+    def to_dict(self) -> dict:
+        return {
+            "layout": self.layout,
+            "objects": self.objects,
+            "classes": self.classes,
+            "collisions": self.collisions,
+            "unsupported": self.unsupported,
+            "blocked_doors": self.blocked_doors,
+            "covered_openings": self.covered_openings,
+            "ok": self.ok,
+        }
+
+
+def _support_problem(layout: Layout, o, box: geo.OrientedBox, by_id, boxes) -> str | None:
+    st = layout.stage
+    floor, ceil = st.floor_z, st.floor_z + st.ceiling_height
+    if o.support == "floor":
+        if abs(box.zmin - floor) > Z_TOL:
+            return f"bottom at z={box.zmin:.3f} m, floor at {floor:.3f} m"
+        if st.rooms and not any(geo.polygon_inside_rect(box.corners_2d(), r.rect, XY_TOL) for r in st.rooms):
+            return "footprint not inside any room"
+        return None
+    if o.support == "ceiling":
+        if abs(box.zmax - ceil) > Z_TOL:
+            return f"top at z={box.zmax:.3f} m, ceiling at {ceil:.3f} m"
+        return None
+    if o.support.startswith("wall:"):
+        w = st.wall(o.support.split(":", 1)[1])
+        d = w.direction
+        n = np.array([-d[1], d[0]])
+        rel = np.asarray(box.center[:2]) - np.asarray(w.start)
+        dist = abs(rel @ n)
+        want = w.thickness / 2 + box.size[1] / 2
+        wyaw = math.atan2(d[1], d[0])
+        if abs(math.sin(box.yaw - wyaw)) > 0.02:
+            return "not parallel to its wall"
+        if abs(dist - want) > WALL_TOL:
+            return f"{dist - want:+.3f} m off its wall face"
+        along = rel @ d
+        if along - box.size[0] / 2 < -XY_TOL or along + box.size[0] / 2 > w.length + XY_TOL:
+            return "extends beyond its wall"
+        if box.zmin < floor - Z_TOL or box.zmax > ceil + Z_TOL:
+            return "extends beyond floor or ceiling"
+        return None
+    if o.support.startswith("object:"):
+        pid, k = o.support_parent()
+        parent = by_id.get(pid)
+        if parent is None:
+            return f"stands on object {pid}, which is missing"
+        if not parent.asset.startswith("proc:"):
+            return _rests_on_some_box(box, [boxes[pid]], floor)
+        surfs = assets.support_surfaces(parent.cls, parent.size, parent.params)
+        if k >= len(surfs):
+            return f"surface {k} of object {pid} ({parent.cls}) does not exist"
+        s = surfs[k]
+        if abs(box.zmin - (parent.position[2] + s.z)) > Z_TOL:
+            return f"bottom {box.zmin - parent.position[2] - s.z:+.3f} m off surface {k} of object {pid}"
+        if box.size[2] > s.clearance + Z_TOL:
+            return f"taller than the {s.clearance:.2f} m clearance of surface {k} of object {pid}"
+        # footprint in the parent's frame
+        Rp = geo.rot_z(parent.yaw)[:2, :2]
+        local = (box.corners_2d() - np.asarray(parent.position[:2])) @ Rp
+        if not geo.polygon_inside_rect(local, (s.xmin, s.ymin, s.xmax, s.ymax), XY_TOL):
+            return f"footprint overhangs surface {k} of object {pid} ({parent.cls})"
+        return None
+    if o.support == "free":
+        return _rests_on_some_box(box, list(boxes.values()), floor)
+    return f"unknown support '{o.support}'"
+
+
+def _rests_on_some_box(box, others, floor) -> str | None:
+    if abs(box.zmin - floor) <= 0.02:
+        return None
+    for b in others:
+        if b.id != box.id and abs(b.zmax - box.zmin) <= 0.02 and geo.polygons_overlap_2d(b.corners_2d(), box.corners_2d()):
+            return None
+    return f"bottom at z={box.zmin:.3f} m rests on nothing"
+
+
+def free_space(layout: Layout, boxes: list[geo.OrientedBox], grid: float = GRID, radius: float = WALKER_RADIUS):
+    """Walkable grid: room interiors and door gaps, minus obstacles, eroded by the walker radius.
+
+    Returns (walkable bool array [ny, nx], origin xy, grid).
+    """
+    st = layout.stage
+    xs = [r.rect[0] for r in st.rooms] + [r.rect[2] for r in st.rooms]
+    ys = [r.rect[1] for r in st.rooms] + [r.rect[3] for r in st.rooms]
+    x0, y0 = min(xs) - 0.5, min(ys) - 0.5
+    nx, ny = int(math.ceil((max(xs) + 0.5 - x0) / grid)), int(math.ceil((max(ys) + 0.5 - y0) / grid))
+    gx, gy = np.meshgrid(x0 + (np.arange(nx) + 0.5) * grid, y0 + (np.arange(ny) + 0.5) * grid)
+    pts = np.stack([gx.ravel(), gy.ravel()], axis=1)
+    free = np.zeros(ny * nx, bool)
+    for r in st.rooms:
+        free |= (pts[:, 0] >= r.rect[0]) & (pts[:, 0] <= r.rect[2]) & (pts[:, 1] >= r.rect[1]) & (pts[:, 1] <= r.rect[3])
+    for op in st.openings:
+        if op.kind == "door":
+            gap = opening_box(st, op, depth_extra=0.01)
+            free |= MplPath(gap.corners_2d()).contains_points(pts)
+    for b in boxes:
+        if b.zmin < st.floor_z + OBSTACLE_BELOW:
+            c = b.corners_2d()
+            lo, hi = c.min(0), c.max(0)
+            m = (pts[:, 0] >= lo[0]) & (pts[:, 0] <= hi[0]) & (pts[:, 1] >= lo[1]) & (pts[:, 1] <= hi[1])
+            idx = np.nonzero(m)[0]
+            if len(idx):
+                free[idx[MplPath(c).contains_points(pts[idx])]] = False
+    free = free.reshape(ny, nx)
+    r = int(math.ceil(radius / grid))
+    yy, xx = np.mgrid[-r : r + 1, -r : r + 1]
+    disk = (xx**2 + yy**2) <= r * r
+    walkable = ~ndimage.binary_dilation(~free, structure=disk)
+    return walkable, (x0, y0), grid
+
+
+def check_layout(layout: Layout) -> CheckReport:
+    objs = layout.objects
+    by_id = {o.id: o for o in objs}
+    boxes = {o.id: object_box(o) for o in objs}
+    rep = CheckReport(layout.name, len(objs), len({o.cls for o in objs}))
+    st = layout.stage
+
+    # support
+    for o in objs:
+        why = _support_problem(layout, o, boxes[o.id], by_id, boxes)
+        if why:
+            rep.unsupported.append({"id": o.id, "class": o.cls, "support": o.support, "why": why})
+
+    # interpenetration between objects (an object may overlap the box of what holds it)
+    ids = sorted(boxes)
+    parent = {o.id: (o.support_parent() or (None, None))[0] for o in objs}
+    for i, a in enumerate(ids):
+        for b in ids[i + 1 :]:
+            if parent[a] == b or parent[b] == a:
+                continue
+            if geo.boxes_overlap(boxes[a], boxes[b], OVERLAP_TOL):
+                rep.collisions.append({"a": a, "b": b, "classes": [by_id[a].cls, by_id[b].cls]})
+    # objects poking through the ceiling (a ceiling light touches it; nothing may go through)
+    ceil = st.floor_z + st.ceiling_height
+    for o in objs:
+        if boxes[o.id].zmax > ceil + Z_TOL:
+            rep.collisions.append({"a": o.id, "b": "ceiling", "classes": [o.cls, "ceiling"]})
+    # objects poking through walls: footprints must lie inside a room (procedural stages)
+    if st.rooms:
+        for o in objs:
+            if o.support.startswith("wall:") or o.support.startswith("object:"):
+                continue
+            if not any(geo.polygon_inside_rect(boxes[o.id].corners_2d(), r.rect, XY_TOL) for r in st.rooms):
+                if not any(u["id"] == o.id for u in rep.unsupported):
+                    rep.collisions.append({"a": o.id, "b": "wall", "classes": [o.cls, "wall"]})
+
+    # openings covered by objects: a picture hung over a window or door, or anything reaching
+    # into the hole in the wall itself (things merely standing in front of a window are fine)
+    for op in st.openings:
+        hole = opening_box(st, op)
+        front = opening_box(st, op, depth_extra=0.05)
+        for o in objs:
+            zone = front if o.support.startswith("wall:") else hole
+            if geo.boxes_overlap(boxes[o.id], zone, tol=0.0):
+                rep.covered_openings.append({"opening": op.id, "id": o.id, "class": o.cls})
+
+    # doors: free clearance zones and one connected walkable space joining all of them
+    doors = [op for op in st.openings if op.kind == "door"]
+    if doors and st.rooms:
+        for op in doors:
+            z = door_zone(st, op)
+            hit = [o.id for o in objs if geo.boxes_overlap(boxes[o.id], z, tol=0.0)]
+            if hit:
+                rep.blocked_doors.append({"door": op.id, "why": f"clearance zone holds object(s) {hit}"})
+        walkable, (x0, y0), g = free_space(layout, list(boxes.values()))
+        labels, _ = ndimage.label(walkable)
+
+        def label_at(xy):
+            i, j = int((xy[1] - y0) / g), int((xy[0] - x0) / g)
+            return labels[i, j] if 0 <= i < labels.shape[0] and 0 <= j < labels.shape[1] else 0
+
+        # a door is passable when the spots just in front of it, in every room it connects,
+        # lie in walkable space, and all doors join one walkable component
+        sides = {}
+        for op in doors:
+            w = st.wall(op.wall)
+            c = op.center_xy(w)
+            n = np.array([-w.direction[1], w.direction[0]])
+            spots = [c + sgn * n * (w.thickness / 2 + DOOR_PROBE) for sgn in (-1, 1)]
+            spots = [p for p in spots if st.room_at(p) is not None]
+            sides[op.id] = [label_at(p) for p in spots]
+        counts = {}
+        for labs in sides.values():
+            for lab in set(labs):
+                if lab:
+                    counts[lab] = counts.get(lab, 0) + 1
+        main = max(counts, key=counts.get) if counts else 0
+        for op in doors:
+            labs = sides[op.id]
+            if not labs or any(lab != main for lab in labs):
+                if not any(d["door"] == op.id for d in rep.blocked_doors):
+                    rep.blocked_doors.append({"door": op.id, "why": "no walkable way through it to the other doors"})
+    return rep
