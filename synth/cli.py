@@ -1,0 +1,273 @@
+"""``synth``: build, inspect and check scene layouts (and, later, render them).
+
+Every user error (bad file, unknown name) is one line on stderr and exit status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections import Counter
+from pathlib import Path
+
+from .errors import UserError
+
+
+def _print_json(obj) -> None:
+    print(json.dumps(obj, indent=2))
+
+
+def _write_json(path: Path, obj) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps(obj, indent=1) + "\n")
+    tmp.replace(path)
+
+
+def _load(name):
+    from .scene import load_layout
+
+    return load_layout(name)
+
+
+# ---------------------------------------------------------------------------------------------
+# scene subcommands
+
+
+def cmd_list(args) -> int:
+    from .scene import list_layouts, load_layout
+
+    names = list_layouts()
+    if not names:
+        print("no layouts (run `synth scene generate`)")
+        return 0
+    print(f"{'layout':<10} {'reference':<10} {'objects':>7} {'classes':>7} {'area_m2':>8}")
+    for n in names:
+        lay = load_layout(n)
+        print(f"{n:<10} {lay.reference or '-':<10} {len(lay.objects):>7} {len({o.cls for o in lay.objects}):>7} {lay.stage.area:>8.1f}")
+    return 0
+
+
+def _summary(lay) -> dict:
+    return {
+        "name": lay.name,
+        "reference": lay.reference,
+        "seed": lay.seed,
+        "floor_area_m2": round(lay.stage.area, 2),
+        "ceiling_height_m": lay.stage.ceiling_height,
+        "rooms": {r.name: {"type": r.type, "area_m2": round(r.area, 2)} for r in lay.stage.rooms},
+        "walls": len(lay.stage.walls),
+        "doors": sum(o.kind == "door" for o in lay.stage.openings),
+        "windows": sum(o.kind == "window" for o in lay.stage.openings),
+        "objects": len(lay.objects),
+        "movable": sum(o.movable for o in lay.objects),
+        "classes": dict(sorted(Counter(o.cls for o in lay.objects).items())),
+        "fixtures": dict(Counter(f.kind for f in lay.fixtures)),
+    }
+
+
+def cmd_show(args) -> int:
+    lay = _load(args.name)
+    s = _summary(lay)
+    if args.json:
+        _print_json(s)
+        return 0
+    print(f"layout {s['name']}" + (f" (rearranged from {s['reference']})" if s["reference"] else ""))
+    print(f"  floor area {s['floor_area_m2']} m2, ceiling {s['ceiling_height_m']} m, {s['walls']} walls, {s['doors']} doors, {s['windows']} windows")
+    for name, r in s["rooms"].items():
+        print(f"  room {name:<10} {r['type']:<9} {r['area_m2']:6.1f} m2")
+    print(f"  {s['objects']} objects ({s['movable']} movable) in {len(s['classes'])} classes:")
+    print("   " + ", ".join(f"{c} x{n}" for c, n in s["classes"].items()))
+    print("  fixtures: " + ", ".join(f"{k} x{v}" for k, v in s["fixtures"].items()))
+    return 0
+
+
+def cmd_stats(args) -> int:
+    from .stats import PAPER_RANGES, change_stats, within_paper_ranges
+
+    st = change_stats(_load(args.ref), _load(args.var))
+    if args.json:
+        _print_json(st)
+        return 0
+    ok = within_paper_ranges(st)
+    print(f"{st['variant']} against {st['reference']}:")
+    for k, (lo, hi) in PAPER_RANGES.items():
+        print(f"  {k:<16} {st[k]:>7}   paper {lo}-{hi}  {'ok' if ok[k] else 'OUT OF RANGE'}")
+    return 0
+
+
+def cmd_check(args) -> int:
+    from .checks import check_layout
+
+    rep = check_layout(_load(args.name))
+    if args.json:
+        _print_json(rep.to_dict())
+    else:
+        print(f"{rep.layout}: {rep.objects} objects, {rep.classes} classes")
+        print(f"  collisions {len(rep.collisions)}, unsupported {len(rep.unsupported)}, "
+              f"blocked doors {len(rep.blocked_doors)}, covered openings {len(rep.covered_openings)}")
+        for c in rep.collisions:
+            print(f"  collision: {c['a']} ({c['classes'][0]}) x {c['b']} ({c['classes'][1]})")
+        for u in rep.unsupported:
+            print(f"  unsupported: {u['id']} ({u['class']}) on {u['support']}: {u['why']}")
+        for d in rep.blocked_doors:
+            print(f"  blocked door {d['door']}: {d['why']}")
+        for c in rep.covered_openings:
+            print(f"  opening {c['opening']} covered by {c['id']} ({c['class']})")
+        print("  OK" if rep.ok else "  PROBLEMS FOUND")
+    return 0 if rep.ok else 1
+
+
+def cmd_export_boxes(args) -> int:
+    from .scene import boxes_document
+
+    doc = boxes_document(_load(args.name))
+    out = Path(args.out)
+    _write_json(out, doc)
+    print(f"wrote {len(doc['boxes'])} boxes of {doc['layout']} to {out} ({out.stat().st_size / 1024:.1f} kB)")
+    return 0
+
+
+def cmd_preview(args) -> int:
+    from .preview import plot_layout
+
+    lay = _load(args.name)
+    ref = _load(args.diff) if args.diff else None
+    out = plot_layout(lay, args.out, ref=ref)
+    print(f"wrote {out}")
+    return 0
+
+
+def cmd_generate(args) -> int:
+    """Regenerate the built-in layouts apt_0..apt_5 (deterministic)."""
+    from tqdm import tqdm
+
+    from .apartment import DEFAULT_SEED, generate_apartment
+    from .paths import layouts_dir
+    from .rearrange import BUILTIN_VARIANTS, make_variant
+    from .scene import save_layout
+
+    out = Path(args.out_dir) if args.out_dir else layouts_dir()
+    ref = generate_apartment(DEFAULT_SEED, "apt_0")
+    save_layout(ref, out / "apt_0.yaml")
+    specs = [v for v in BUILTIN_VARIANTS if not args.only or v.name in args.only]
+    for spec in tqdm(specs, desc="variants", unit="layout", disable=args.quiet):
+        save_layout(make_variant(ref, spec), out / f"{spec.name}.yaml")
+    if not args.quiet:
+        print(f"wrote apt_0 and {len(specs)} variants to {out}")
+    return 0
+
+
+def cmd_build(args) -> int:
+    """The scene pipeline: generate apt_0..apt_5, check them, print their change statistics, plot them."""
+    from tqdm import tqdm
+
+    from .apartment import DEFAULT_SEED, generate_apartment
+    from .checks import check_layout
+    from .preview import plot_layout
+    from .rearrange import BUILTIN_VARIANTS, make_variant
+    from .scene import boxes_document, save_layout
+    from .stats import PAPER_RANGES, change_stats
+
+    out = Path(args.out)
+    (out / "layouts").mkdir(parents=True, exist_ok=True)
+    ref = generate_apartment(DEFAULT_SEED, "apt_0")
+    layouts = [ref]
+    for spec in tqdm(BUILTIN_VARIANTS, desc="rearranging", unit="layout"):
+        layouts.append(make_variant(ref, spec))
+    rows = []
+    for lay in tqdm(layouts, desc="checking + previews", unit="layout"):
+        save_layout(lay, out / "layouts" / f"{lay.name}.yaml")
+        rep = check_layout(lay)
+        plot_layout(lay, out / "previews" / f"{lay.name}.png", ref=ref if lay is not ref else None)
+        _write_json(out / "boxes" / f"{lay.name}.json", boxes_document(lay))
+        st = change_stats(ref, lay) if lay is not ref else None
+        rows.append((lay, rep, st))
+    print()
+    s = _summary(ref)
+    print(f"apt_0: {s['floor_area_m2']} m2, {len(s['rooms'])} rooms, {s['objects']} objects in {len(s['classes'])} classes")
+    hdr = f"{'layout':<7} {'objects':>7} {'check':>6} " + " ".join(f"{k:>15}" for k in PAPER_RANGES)
+    print(hdr)
+    print(f"{'paper':<7} {'':>7} {'':>6} " + " ".join(f"{f'{lo}-{hi}':>15}" for lo, hi in PAPER_RANGES.values()))
+    for lay, rep, st in rows:
+        vals = " ".join(f"{st[k]:>15}" for k in PAPER_RANGES) if st else " ".join(f"{'-':>15}" for _ in PAPER_RANGES)
+        print(f"{lay.name:<7} {len(lay.objects):>7} {'ok' if rep.ok else 'FAIL':>6} {vals}")
+    print(f"\nlayouts, boxes and previews in {out}/ (previews: {out / 'previews'})")
+    return 0 if all(r.ok for _, r, _ in rows) else 1
+
+
+def cmd_import_replicacad(args) -> int:
+    from .replicacad import load_replicacad
+    from .scene import save_layout
+
+    lay = load_replicacad(args.root, args.scene, allow_unknown=args.allow_unknown)
+    out = save_layout(lay, args.out)
+    print(f"wrote {out}: {len(lay.objects)} objects in {len({o.cls for o in lay.objects})} classes")
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="synth", description="Build, check and render controlled-change indoor scenes.")
+    sub = p.add_subparsers(dest="group", required=True)
+    sc = sub.add_parser("scene", help="layouts: list, show, check, stats, preview, export boxes")
+    ss = sc.add_subparsers(dest="cmd", required=True)
+
+    a = ss.add_parser("list", help="list the layouts in scenes/layouts")
+    a.set_defaults(fn=cmd_list)
+    a = ss.add_parser("show", help="summary of a layout")
+    a.add_argument("name", help="layout name (apt_0) or file")
+    a.add_argument("--json", action="store_true")
+    a.set_defaults(fn=cmd_show)
+    a = ss.add_parser("stats", help="change statistics of VAR against REF (paper Sec. IV-A)")
+    a.add_argument("ref")
+    a.add_argument("var")
+    a.add_argument("--json", action="store_true")
+    a.set_defaults(fn=cmd_stats)
+    a = ss.add_parser("check", help="interpenetrations, unsupported objects, blocked doors (exit 1 if any)")
+    a.add_argument("name", help="layout name or file")
+    a.add_argument("--json", action="store_true")
+    a.set_defaults(fn=cmd_check)
+    a = ss.add_parser("export-boxes", help="ground-truth boxes in the relocalizer's map format")
+    a.add_argument("name")
+    a.add_argument("--out", required=True)
+    a.set_defaults(fn=cmd_export_boxes)
+    a = ss.add_parser("preview", help="top-down plot of a layout (with --diff: changes against REF)")
+    a.add_argument("name")
+    a.add_argument("--diff", metavar="REF")
+    a.add_argument("--out", required=True)
+    a.set_defaults(fn=cmd_preview)
+    a = ss.add_parser("generate", help="regenerate the built-in layouts apt_0..apt_5")
+    a.add_argument("--out-dir", help="default: scenes/layouts")
+    a.add_argument("--only", nargs="*", help="variant names to regenerate (apt_0 is always written)")
+    a.add_argument("--quiet", action="store_true")
+    a.set_defaults(fn=cmd_generate)
+    a = ss.add_parser("build", help="the scene pipeline: generate, check, stats, boxes and previews into --out")
+    a.add_argument("--out", default="out/scenes")
+    a.set_defaults(fn=cmd_build)
+    a = ss.add_parser("import-replicacad", help="convert a ReplicaCAD scene instance to a layout file")
+    a.add_argument("root", help="ReplicaCAD dataset folder (holds configs/)")
+    a.add_argument("scene", help="scene instance name, e.g. apt_0")
+    a.add_argument("--out", required=True)
+    a.add_argument("--allow-unknown", action="store_true", help="map unknown templates to class 'other'")
+    a.set_defaults(fn=cmd_import_replicacad)
+    return p
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.fn(args)
+    except UserError as e:
+        print(f"synth: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("synth: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
