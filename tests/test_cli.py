@@ -1,0 +1,77 @@
+"""Command line: what a user types and sees, and the architecture rule that bpy stays out of the model."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import matplotlib.image as mpimg
+import pytest
+
+from synth.cli import main as synth_main
+
+
+def test_list_and_show(capsys):
+    assert synth_main(["scene", "list"]) == 0
+    out = capsys.readouterr().out
+    for n in range(6):
+        assert f"apt_{n}" in out
+    assert synth_main(["scene", "show", "apt_0", "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["objects"] >= 90 and len(s["classes"]) >= 25 and len(s["rooms"]) >= 5
+    assert synth_main(["scene", "show", "apt_2"]) == 0
+    assert "rearranged from apt_0" in capsys.readouterr().out
+
+
+def test_preview_cli_writes_png(tmp_path, capsys):
+    out = tmp_path / "sub" / "d.png"
+    assert synth_main(["scene", "preview", "apt_2", "--diff", "apt_0", "--out", str(out)]) == 0
+    img = mpimg.imread(out)
+    assert img.shape[0] > 500 and img.shape[1] > 500
+    assert not list(out.parent.glob(".*"))  # no temporary file left behind
+
+
+def test_check_exit_status_on_problems(tmp_path, capsys):
+    from synth.scene import load_layout, save_layout
+
+    lay = load_layout("apt_0")
+    a, b = [o for o in lay.objects if o.cls == "chair"][:2]
+    b.position = a.position
+    p = save_layout(lay, tmp_path / "bad.yaml")
+    assert synth_main(["scene", "check", str(p)]) == 1
+    assert "collision" in capsys.readouterr().out
+
+
+def test_import_replicacad_errors_are_one_line(tmp_path, capsys):
+    assert synth_main(["scene", "import-replicacad", str(tmp_path / "missing"), "apt_0", "--out", str(tmp_path / "x.yaml")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("synth: error: ") and "missing" in err and len(err.splitlines()) == 1
+    assert not (tmp_path / "x.yaml").exists()
+
+
+def test_console_script_reports_errors_with_status_2(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("format: synth-layout/1\nname: x\nstage: {ceiling_height: -2}\n")
+    r = subprocess.run([sys.executable, "-m", "synth.cli", "scene", "check", str(bad)], capture_output=True, text=True)
+    assert r.returncode == 2
+    assert r.stderr.strip() == f"synth: error: {bad}: stage.ceiling_height: must be > 0, got -2.0"
+
+
+def test_model_and_reloc_do_not_import_bpy():
+    code = (
+        "import sys, pkgutil, importlib, synth, reloc\n"
+        "for pkg in (synth, reloc):\n"
+        "    for m in pkgutil.iter_modules(pkg.__path__):\n"
+        "        importlib.import_module(pkg.__name__ + '.' + m.name)\n"
+        "print('bpy' in sys.modules)\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert r.stdout.strip() == "False"
+
+
+@pytest.mark.blender
+def test_pinned_bpy_wheel_imports():
+    r = subprocess.run([sys.executable, "-c", "import bpy; print(bpy.app.version_string)"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip().startswith("4.5")
