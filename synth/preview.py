@@ -389,6 +389,7 @@ class _Labeler:
         self.fig, self.ax = fig, ax
         self.renderer = fig.canvas.get_renderer()
         self.taken: list[Bbox] = []
+        self._arr: np.ndarray | None = None  # self.taken as an (n, 4) array, rebuilt when it grows
         self.ax_box = ax.get_window_extent(self.renderer)
 
     def extent(self, t) -> Bbox:
@@ -397,7 +398,13 @@ class _Labeler:
     def free(self, bb: Bbox) -> bool:
         if not (self.ax_box.x0 <= bb.x0 and bb.x1 <= self.ax_box.x1 and self.ax_box.y0 <= bb.y0 and bb.y1 <= self.ax_box.y1):
             return False
-        return not any(bb.overlaps(o) for o in self.taken)
+        if not self.taken:
+            return True
+        if self._arr is None or len(self._arr) != len(self.taken):
+            self._arr = np.array([[o.x0, o.y0, o.x1, o.y1] for o in self.taken])
+        a = self._arr  # strict overlap, as Bbox.overlaps
+        hit = (bb.x0 < a[:, 2]) & (bb.x1 > a[:, 0]) & (bb.y0 < a[:, 3]) & (bb.y1 > a[:, 1])
+        return not hit.any()
 
     def block_point(self, xy, radius_pt: float) -> None:
         """Keep labels off a marker drawn at data point ``xy``."""

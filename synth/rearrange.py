@@ -102,17 +102,16 @@ def _pick_room(placer: Placer, current, p_other: float, cls: str):
     return others[placer.rng.choice(len(others), p=w / w.sum())]
 
 
-def _relocate_floor(placer: Placer, obj: ObjectInstance, p_other: float, tries: int = 12) -> bool:
+def _move_family(placer: Placer, obj: ObjectInstance, propose, tries: int = 12) -> bool:
+    """Move ``obj`` to the first valid pose from ``propose(ignore_ids)`` and carry what stands on it.
+
+    Every proposal is checked with the whole family at its new place; nothing changes on failure.
+    """
     fam = _family(placer, obj)
     ids = {o.id for o in fam}
     saved = {i: placer.boxes.pop(i) for i in ids}
-    cur_room = placer.stage.room_at(obj.position[:2])
     for _ in range(tries):
-        room = _pick_room(placer, cur_room, p_other, obj.cls)
-        if obj.cls in AGAINST_WALL:
-            cand = placer.against_wall(obj.id, obj.cls, obj.size, obj.params, room, tries=10)
-        else:
-            cand = placer.free_spot(obj.id, obj.cls, obj.size, obj.params, room, tries=10, jitter_deg=12.0)
+        cand = propose(ids)
         if cand is None:
             continue
         moved = _transform_family(fam, cand)
@@ -126,28 +125,30 @@ def _relocate_floor(placer: Placer, obj: ObjectInstance, p_other: float, tries: 
     return False
 
 
-def _nudge(placer: Placer, obj: ObjectInstance, tries: int = 12) -> bool:
+def _relocate_floor(placer: Placer, obj: ObjectInstance, p_other: float) -> bool:
+    """Somewhere else on the floor, in the same room or (with probability ``p_other``) another."""
+    cur_room = placer.stage.room_at(obj.position[:2])
+
+    def propose(ids):
+        room = _pick_room(placer, cur_room, p_other, obj.cls)
+        if obj.cls in AGAINST_WALL:
+            return placer.against_wall(obj.id, obj.cls, obj.size, obj.params, room, tries=10)
+        return placer.free_spot(obj.id, obj.cls, obj.size, obj.params, room, tries=10, jitter_deg=12.0)
+
+    return _move_family(placer, obj, propose)
+
+
+def _nudge(placer: Placer, obj: ObjectInstance) -> bool:
     """Push a floor object 0.15-0.45 m in a random direction and turn it by up to 20 deg."""
-    fam = _family(placer, obj)
-    ids = {o.id for o in fam}
-    saved = {i: placer.boxes.pop(i) for i in ids}
-    for _ in range(tries):
+
+    def propose(ids):
         ang = placer.rng.uniform(-math.pi, math.pi)
         dist = placer.rng.uniform(0.15, 0.45)
         xy = (obj.position[0] + dist * math.cos(ang), obj.position[1] + dist * math.sin(ang))
         yaw = geo.wrap_angle(obj.yaw + math.radians(placer.rng.uniform(-20, 20)))
-        cand = placer.floor_at(obj.id, obj.cls, obj.size, obj.params, xy, yaw, ignore=ids)
-        if cand is None:
-            continue
-        moved = _transform_family(fam, cand)
-        boxes = {o.id: object_box(o) for o in moved}
-        if any(placer.collides(b, ids) for b in boxes.values()):
-            continue
-        _replace(placer.layout, moved)
-        placer.boxes.update(boxes)
-        return True
-    placer.boxes.update(saved)
-    return False
+        return placer.floor_at(obj.id, obj.cls, obj.size, obj.params, xy, yaw, ignore=ids)
+
+    return _move_family(placer, obj, propose)
 
 
 def rearrange(ref: Layout, name: str, seed: int, plan: RearrangePlan = RearrangePlan()) -> Layout:

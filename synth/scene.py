@@ -128,7 +128,7 @@ class Stage:
 class ObjectInstance:
     id: int
     cls: str
-    asset: str  # "proc:<class>" (synth.assets generator) or "replicacad:<relative glb path>"
+    asset: str  # "proc:<class>" (synth.assets generator) or "replicacad:<glb path relative to meta.root>"
     position: tuple[float, float, float]
     rotation: geo.Quat
     size: tuple[float, float, float]
@@ -479,8 +479,12 @@ def layout_from_dict(doc, source: str = "<memory>", classes: ClassTable | None =
         if not isinstance(movable, bool):
             rd.fail(f + ".movable", f"expected true or false, got {movable!r}")
         asset = rd.string(o["asset"], f + ".asset")
-        if not (asset.startswith("proc:") or asset.startswith("replicacad:") or asset.startswith("file:")):
-            rd.fail(f + ".asset", f"expected 'proc:<class>', 'replicacad:<path>' or 'file:<path>', got {asset!r}")
+        if asset.startswith("proc:"):
+            gen = asset[5:]
+            if gen not in classes or classes.get(gen).structure:
+                rd.fail(f + ".asset", f"unknown procedural asset '{gen}' (generators exist for the object classes of {classes.source})")
+        elif not asset.startswith("replicacad:") or len(asset) == len("replicacad:"):
+            rd.fail(f + ".asset", f"expected 'proc:<class>' or 'replicacad:<glb path>', got {asset!r}")
         objects.append(ObjectInstance(
             id=oid, cls=cls, asset=asset, position=rd.vec(o["position"], f + ".position", 3), rotation=rot, size=size,
             box_offset=rd.vec(o.get("box_offset", [0.0, 0.0, size[2] / 2.0]), f + ".box_offset", 3),

@@ -10,6 +10,7 @@ import matplotlib.image as mpimg
 import pytest
 
 from synth.cli import main as synth_main
+from synth.paths import REPO_ROOT as REPO
 
 
 def test_list_and_show(capsys):
@@ -75,3 +76,15 @@ def test_pinned_bpy_wheel_imports():
     r = subprocess.run([sys.executable, "-c", "import bpy; print(bpy.app.version_string)"], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert r.stdout.strip().startswith("4.5")
+
+
+@pytest.mark.slow
+def test_scene_build_is_the_main_job(tmp_path, capsys):
+    out = tmp_path / "scenes"
+    assert synth_main(["scene", "build", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "paper" in text and "apt_5" in text and "FAIL" not in text
+    for n in range(6):
+        assert (out / "layouts" / f"apt_{n}.yaml").read_bytes() == (REPO / "scenes" / "layouts" / f"apt_{n}.yaml").read_bytes()
+        assert (out / "previews" / f"apt_{n}.png").stat().st_size > 10_000
+        assert json.loads((out / "boxes" / f"apt_{n}.json").read_text())["layout"] == f"apt_{n}"

@@ -173,6 +173,16 @@ def test_unknown_class_is_named(tmp_path):
         load_layout(_write(tmp_path, doc))
 
 
+def test_unknown_asset_is_named(tmp_path):
+    doc = layout_to_dict(small_layout())
+    doc["objects"][0]["asset"] = "proc:sofaa"
+    with pytest.raises(SceneFormatError, match="objects\\[0\\].asset: unknown procedural asset 'sofaa'"):
+        load_layout(_write(tmp_path, doc))
+    doc["objects"][0]["asset"] = "http://example/sofa.glb"
+    with pytest.raises(SceneFormatError, match="objects\\[0\\].asset: expected"):
+        load_layout(_write(tmp_path, doc))
+
+
 def test_malformed_yaml_and_missing_file_exit_2(tmp_path, capsys):
     p = tmp_path / "broken.yaml"
     p.write_text("name: x\nstage: [unclosed\n")
