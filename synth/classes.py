@@ -10,7 +10,7 @@ from pathlib import Path
 import yaml
 
 from .errors import SceneFormatError, UnknownNameError
-from .paths import classes_file
+from .resources import classes_file
 
 SUPPORTS = ("floor", "surface", "wall", "ceiling")
 

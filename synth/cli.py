@@ -144,7 +144,7 @@ def cmd_generate(args) -> int:
     from tqdm import tqdm
 
     from .apartment import DEFAULT_SEED, generate_apartment
-    from .paths import layouts_dir
+    from .resources import layouts_dir
     from .rearrange import BUILTIN_VARIANTS, make_variant
     from .scene import save_layout
 
@@ -207,6 +207,29 @@ def cmd_import_replicacad(args) -> int:
     return 0
 
 
+def cmd_tour_render(args) -> int:
+    from .tour import TourSpec, render_tour
+
+    w, h = _size(args.size)
+    spec = TourSpec(layout=args.layout, path=args.path, out=args.out, lighting=args.lighting, renderer=args.renderer,
+                    quality=args.quality, width=w, height=h, frames=args.frames, seed=args.seed, device=args.device,
+                    previews=args.previews, chunk_size=args.chunk_size, workers=args.workers)
+    meta = render_tour(spec, progress=not args.quiet)
+    print(f"{args.out}: {meta['n_frames']} frames of {meta['layout']} / {meta['lighting'] or 'geometry only'} / "
+          f"{meta['path']} ({meta['renderer']}) in {meta['wall_time_s']:.1f} s")
+    return 0
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+        if w <= 0 or h <= 0:
+            raise ValueError
+        return w, h
+    except ValueError:
+        raise UserError(f"--size must look like 640x480, got {text!r}") from None
+
+
 # ---------------------------------------------------------------------------------------------
 
 
@@ -254,6 +277,26 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--out", required=True)
     a.add_argument("--allow-unknown", action="store_true", help="map unknown templates to class 'other'")
     a.set_defaults(fn=cmd_import_replicacad)
+    from .dataset import register_cli as _r; _r(sub)
+    tr = sub.add_parser("tour", help="render one tour: a layout x a lighting x a camera path")
+    ts = tr.add_subparsers(dest="cmd", required=True)
+    a = ts.add_parser("render", help="render (or finish rendering) a tour directory")
+    a.add_argument("layout", help="layout name (apt_0) or file")
+    a.add_argument("path", help="camera path name (query, mapping) or TUM file")
+    a.add_argument("--out", required=True, help="tour directory")
+    a.add_argument("--lighting", help="lighting preset (day, evening, night) or file; omit for geometry only")
+    a.add_argument("--renderer", choices=["blender", "fast"], default="blender")
+    a.add_argument("--quality", default="preview", help="preview | standard | paper")
+    a.add_argument("--size", default="640x480", help="WIDTHxHEIGHT (default 640x480)")
+    a.add_argument("--frames", type=int, help="render the first N frames of the path")
+    a.add_argument("--seed", type=int, default=0, help="Cycles seed")
+    a.add_argument("--device", default="cpu", help="cpu | gpu | auto (GPU: OptiX, else CUDA)")
+    a.add_argument("--previews", action="store_true", help="also write 8-bit PNG previews")
+    a.add_argument("--workers", type=int, default=1, help="Blender processes at a time")
+    a.add_argument("--chunk-size", type=int, default=50, help="frames per Blender process")
+    a.add_argument("--quiet", action="store_true")
+    a.set_defaults(fn=cmd_tour_render)
+    from .camera_paths import register_cli as _rp; _rp(sub)  # synth path plan|show|preview
     return p
 
 

@@ -35,7 +35,7 @@ import yaml
 from . import geometry as geo
 from .classes import ClassTable, class_table
 from .errors import SceneFormatError, UnknownNameError
-from .paths import layouts_dir
+from .resources import layouts_dir
 
 FORMAT = "synth-layout/1"
 MAX_OBJECT_ID = 999

@@ -10,7 +10,7 @@ import matplotlib.image as mpimg
 import pytest
 
 from synth.cli import main as synth_main
-from synth.paths import REPO_ROOT as REPO
+from synth.resources import REPO_ROOT as REPO
 
 
 def test_list_and_show(capsys):

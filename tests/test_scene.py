@@ -60,7 +60,7 @@ def test_round_trip_exact(tmp_path):
 def test_builtin_layout_round_trips(tmp_path):
     lay = load_layout("apt_0")
     p = save_layout(lay, tmp_path / "apt_0.yaml")
-    from synth.paths import layouts_dir
+    from synth.resources import layouts_dir
 
     assert p.read_bytes() == (layouts_dir() / "apt_0.yaml").read_bytes()
 

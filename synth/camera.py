@@ -1,0 +1,190 @@
+"""Camera conventions: intrinsics, poses, TUM trajectories. One place; never re-derive them.
+
+- Camera axes are **OpenCV** in every file and API: x right, y down, z forward.
+- A pose is camera-to-world ``T_world_cam`` (4x4): ``p_world = T[:3, :3] @ p_cam + T[:3, 3]``.
+- Pixel (u, v) has its centre at integer coordinates (u = column, v = row); the principal point
+  is the image centre, ``cx = (width - 1) / 2``, ``cy = (height - 1) / 2``; square pixels, fx = fy.
+- Depth is planar: the camera-frame z of the surface point, in metres (0 = no surface).
+- Text trajectories are TUM: ``t tx ty tz qx qy qz qw`` per line, ``t = frame / fps``.
+
+Blender's camera looks down its -Z with +Y up; ``blender_from_opencv`` converts a pose once, for
+the bpy camera code.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from . import geometry as geo
+from .errors import SceneFormatError
+
+DEFAULT_WIDTH, DEFAULT_HEIGHT = 640, 480
+DEFAULT_HFOV_DEG = 75.0  # horizontal field of view of the default camera
+DEFAULT_FPS = 30.0
+
+# OpenCV camera axes expressed in Blender camera axes: x same, y and z flipped
+CV_TO_BLENDER_CAM = np.diag([1.0, -1.0, -1.0])
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+    @property
+    def K(self) -> np.ndarray:
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def hfov(self) -> float:
+        """Horizontal field of view (radians) spanned by the image's outer pixel edges."""
+        return 2.0 * math.atan(self.width / (2.0 * self.fx))
+
+    @staticmethod
+    def from_fov(width: int, height: int, hfov_deg: float = DEFAULT_HFOV_DEG) -> "Intrinsics":
+        f = width / (2.0 * math.tan(math.radians(hfov_deg) / 2.0))
+        return Intrinsics(int(width), int(height), f, f, (width - 1) / 2.0, (height - 1) / 2.0)
+
+    def scaled(self, width: int, height: int) -> "Intrinsics":
+        """The same camera at another resolution (same field of view)."""
+        s = width / self.width
+        return Intrinsics(width, height, self.fx * s, self.fy * s, (width - 1) / 2.0, (height - 1) / 2.0)
+
+    def to_dict(self) -> dict:
+        return {
+            "width": self.width,
+            "height": self.height,
+            "K": self.K.tolist(),
+            "fx": self.fx,
+            "fy": self.fy,
+            "cx": self.cx,
+            "cy": self.cy,
+        }
+
+    @staticmethod
+    def from_dict(d: dict, source: str = "<camera>") -> "Intrinsics":
+        try:
+            return Intrinsics(int(d["width"]), int(d["height"]), float(d["fx"]), float(d["fy"]), float(d["cx"]), float(d["cy"]))
+        except (KeyError, TypeError, ValueError) as e:
+            raise SceneFormatError(source, None, f"camera intrinsics need width, height, fx, fy, cx, cy ({e})") from None
+
+    def pixel_rays(self) -> np.ndarray:
+        """(H, W, 3) camera-frame ray directions with z = 1 through every pixel centre.
+
+        A surface at planar depth d along pixel (u, v) is at ``d * rays[v, u]``.
+        """
+        u = np.arange(self.width, dtype=np.float64)
+        v = np.arange(self.height, dtype=np.float64)
+        uu, vv = np.meshgrid(u, v)
+        return np.stack([(uu - self.cx) / self.fx, (vv - self.cy) / self.fy, np.ones_like(uu)], axis=-1)
+
+
+CAMERA_DOC = {
+    "camera_axes": "OpenCV: x right, y down, z forward",
+    "pose": "camera-to-world (T_world_cam) in poses.txt (TUM: t tx ty tz qx qy qz qw, t = frame / fps)",
+    "pixel_centers": "integer coordinates: pixel (u, v) = (column, row) is centred at (u, v); cx = (width - 1) / 2",
+    "depth": "planar z in metres along the camera's +z axis (not ray length), float32, 0 where no surface was hit",
+    "world": "right-handed, Z up, metres",
+}
+
+
+def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """Camera-to-world pose (OpenCV axes) of a camera at ``eye`` looking at ``target``."""
+    eye, target, up = (np.asarray(v, dtype=float) for v in (eye, target, up))
+    z = target - eye
+    z /= np.linalg.norm(z)
+    x = np.cross(z, up)
+    if np.linalg.norm(x) < 1e-9:
+        x = np.cross(z, [0.0, 1.0, 0.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    T = np.eye(4)
+    T[:3, :3] = np.stack([x, y, z], axis=1)
+    T[:3, 3] = eye
+    return T
+
+
+def pose_from_ypr(position, yaw: float, pitch: float = 0.0, roll: float = 0.0) -> np.ndarray:
+    """Camera-to-world pose (OpenCV axes) from a position and heading angles.
+
+    ``yaw`` is the heading of the optical axis in the world XY plane (0 = looking along +X,
+    counter-clockwise), ``pitch`` tilts it up (positive = looking up), ``roll`` turns the image
+    clockwise about the optical axis. Zero pitch and roll give a level camera whose image
+    y axis points down the world Z axis.
+    """
+    cy_, sy_ = math.cos(yaw), math.sin(yaw)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    fwd = np.array([cy_ * cp, sy_ * cp, sp])
+    left = np.array([-sy_, cy_, 0.0])
+    up = np.cross(fwd, left)
+    x, y, z = -left, -up, fwd  # OpenCV: x right, y down, z forward
+    R = np.stack([x, y, z], axis=1)
+    if roll:
+        cr, sr = math.cos(roll), math.sin(roll)
+        R = R @ np.array([[cr, -sr, 0.0], [sr, cr, 0.0], [0.0, 0.0, 1.0]])
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = position
+    return T
+
+
+def blender_from_opencv(T_world_cam: np.ndarray) -> np.ndarray:
+    """Blender camera object's world matrix for an OpenCV camera-to-world pose."""
+    T = np.array(T_world_cam, dtype=float, copy=True)
+    T[:3, :3] = T[:3, :3] @ CV_TO_BLENDER_CAM
+    return T
+
+
+def write_tum(path, poses, fps: float = DEFAULT_FPS, frames=None, header: str | None = None) -> Path:
+    """Write camera-to-world poses as TUM lines (atomically). ``frames`` gives each pose's frame index."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    frames = range(len(poses)) if frames is None else frames
+    lines = [] if header is None else [f"# {h}" for h in header.splitlines()]
+    for i, T in zip(frames, poses):
+        q = geo.matrix_to_quat(np.asarray(T)[:3, :3])  # (w, x, y, z)
+        t = np.asarray(T)[:3, 3]
+        lines.append(f"{i / fps:.6f} {t[0]:.6f} {t[1]:.6f} {t[2]:.6f} {q[1]:.9f} {q[2]:.9f} {q[3]:.9f} {q[0]:.9f}")
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text("\n".join(lines) + "\n")
+    tmp.replace(path)
+    return path
+
+
+def read_tum(path, fps: float = DEFAULT_FPS) -> tuple[np.ndarray, np.ndarray]:
+    """(frame indices, (N, 4, 4) camera-to-world poses) from a TUM file; errors name file and line."""
+    path = Path(path)
+    if not path.exists():
+        raise SceneFormatError(path, None, "trajectory file not found")
+    frames, poses = [], []
+    for ln, line in enumerate(path.read_text().splitlines(), start=1):
+        s = line.strip()
+        if not s or s.startswith("#"):
+            continue
+        parts = s.split()
+        if len(parts) != 8:
+            raise SceneFormatError(path, f"line {ln}", f"expected 8 numbers 't tx ty tz qx qy qz qw', got {len(parts)}")
+        try:
+            v = [float(x) for x in parts]
+        except ValueError:
+            raise SceneFormatError(path, f"line {ln}", f"not a number in {s!r}") from None
+        if not all(math.isfinite(x) for x in v):
+            raise SceneFormatError(path, f"line {ln}", "non-finite value")
+        q = np.array([v[7], v[4], v[5], v[6]])
+        n = np.linalg.norm(q)
+        if abs(n - 1.0) > 1e-3:
+            raise SceneFormatError(path, f"line {ln}", f"quaternion is not unit length (norm {n:.4f})")
+        T = np.eye(4)
+        T[:3, :3] = geo.quat_to_matrix(q)
+        T[:3, 3] = v[1:4]
+        frames.append(int(round(v[0] * fps)))
+        poses.append(T)
+    return np.asarray(frames, dtype=int), np.asarray(poses).reshape(-1, 4, 4)
