@@ -145,15 +145,16 @@ def cmd_generate(args) -> int:
 
     from .apartment import DEFAULT_SEED, generate_apartment
     from .resources import layouts_dir
-    from .rearrange import BUILTIN_VARIANTS, make_variant
+    from .rearrange import BUILTIN_VARIANTS, make_variant, reference_walkway
     from .scene import save_layout
 
     out = Path(args.out_dir) if args.out_dir else layouts_dir()
     ref = generate_apartment(DEFAULT_SEED, "apt_0")
     save_layout(ref, out / "apt_0.yaml")
     specs = [v for v in BUILTIN_VARIANTS if not args.only or v.name in args.only]
+    walkway = reference_walkway(ref)
     for spec in tqdm(specs, desc="variants", unit="layout", disable=args.quiet):
-        save_layout(make_variant(ref, spec), out / f"{spec.name}.yaml")
+        save_layout(make_variant(ref, spec, walkway=walkway), out / f"{spec.name}.yaml")
     if not args.quiet:
         print(f"wrote apt_0 and {len(specs)} variants to {out}")
     return 0
@@ -166,7 +167,7 @@ def cmd_build(args) -> int:
     from .apartment import DEFAULT_SEED, generate_apartment
     from .checks import check_layout
     from .preview import plot_layout
-    from .rearrange import BUILTIN_VARIANTS, make_variant
+    from .rearrange import BUILTIN_VARIANTS, make_variant, reference_walkway
     from .scene import boxes_document, save_layout
     from .stats import PAPER_RANGES, change_stats
 
@@ -174,8 +175,9 @@ def cmd_build(args) -> int:
     (out / "layouts").mkdir(parents=True, exist_ok=True)
     ref = generate_apartment(DEFAULT_SEED, "apt_0")
     layouts = [ref]
+    walkway = reference_walkway(ref)
     for spec in tqdm(BUILTIN_VARIANTS, desc="rearranging", unit="layout"):
-        layouts.append(make_variant(ref, spec))
+        layouts.append(make_variant(ref, spec, walkway=walkway))
     rows = []
     for lay in tqdm(layouts, desc="checking + previews", unit="layout"):
         save_layout(lay, out / "layouts" / f"{lay.name}.yaml")

@@ -132,10 +132,24 @@ class Placed:
     box: geo.OrientedBox
 
 
-class Placer:
-    """Keeps the boxes of a layout and answers whether a new placement is valid."""
+def distance_to_box_2d(points: np.ndarray, box: geo.OrientedBox) -> np.ndarray:
+    """Horizontal distance from each point (N, 2) to the box's footprint (0 inside)."""
+    c, s = math.cos(box.yaw), math.sin(box.yaw)
+    d = np.asarray(points, float) - np.asarray(box.center[:2])
+    local = np.stack([d[:, 0] * c + d[:, 1] * s, -d[:, 0] * s + d[:, 1] * c], axis=1)
+    out = np.maximum(np.abs(local) - np.array([box.size[0] / 2, box.size[1] / 2]), 0.0)
+    return np.hypot(out[:, 0], out[:, 1])
 
-    def __init__(self, layout: Layout, rng: np.random.Generator):
+
+class Placer:
+    """Keeps the boxes of a layout and answers whether a new placement is valid.
+
+    ``keepout`` (points (N, 2), radius) reserves a walkway: no object except ceiling-mounted ones
+    may come closer than the radius to any of the points (horizontally).
+    """
+
+    def __init__(self, layout: Layout, rng: np.random.Generator, keepout: tuple[np.ndarray, float] | None = None):
+        self.keepout = keepout
         self.layout = layout
         self.stage = layout.stage
         self.rng = rng
@@ -212,9 +226,16 @@ class Placer:
                 return r
         return None
 
+    def in_keepout(self, box: geo.OrientedBox) -> bool:
+        if self.keepout is None:
+            return False
+        pts, r = self.keepout
+        return bool((distance_to_box_2d(pts, box) < r).any())
+
     def valid_floor(self, box: geo.OrientedBox, ignore: set[int] = frozenset()) -> bool:
         return (
             box.zmax <= self.ceiling_z - CEILING_GAP
+            and not self.in_keepout(box)
             and self.room_of(box) is not None
             and not self.in_door_zone(box)
             and not self.blocks_window(box)
@@ -331,7 +352,7 @@ class Placer:
         z = parent.position[2] + s.z
         yaw = geo.wrap_angle(pyaw + dyaw)
         box = self._box(oid, cls, size, xy, z, yaw)
-        if box.zmax > self.ceiling_z - CEILING_GAP or self.collides(box, ignore | {parent.id}):
+        if box.zmax > self.ceiling_z - CEILING_GAP or self.in_keepout(box) or self.collides(box, ignore | {parent.id}):
             return None
         return proc_instance(oid, cls, size, params, (xy[0], xy[1], z), yaw, f"object:{parent.id}:{k}")
 
@@ -354,7 +375,7 @@ class Placer:
             z0 = self.stage.floor_z + zc - size[2] / 2
             xy = along_to_xy(room, s, a, size[1], gap=0.002)
             box = self._box(oid, cls, size, xy, z0, SIDE_YAW[s])
-            if self.covers_opening(box) or self.in_door_zone(box) or self.collides(box, ignore):
+            if self.covers_opening(box) or self.in_door_zone(box) or self.in_keepout(box) or self.collides(box, ignore):
                 continue
             return proc_instance(oid, cls, size, params, (xy[0], xy[1], z0), SIDE_YAW[s], f"wall:{w.id}")
         return None

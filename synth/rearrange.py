@@ -55,6 +55,21 @@ class RearrangePlan:
     other_room: float = 0.2  # probability that a relocated object changes room
 
 
+# The query camera path of an experiment must keep 0.3 m from every object in every layout
+# (it is planned on the free space they share). Variants therefore keep out of the reference
+# layout's own walkway: a tour through every room of the reference, planned with this clearance.
+WALKWAY_CLEARANCE = 0.35  # 0.3 m for the camera + 5 cm margin
+WALKWAY_FRAMES = 1500
+
+
+def reference_walkway(ref: Layout, seed: int = 0) -> np.ndarray:
+    """(N, 2) points of a walk through every room of ``ref`` that variants must keep free."""
+    from .camera_paths import plan_query_path
+
+    path = plan_query_path([ref], frames=WALKWAY_FRAMES, seed=seed, clearance=WALKWAY_CLEARANCE, obstacles="all", name="walkway")
+    return path.poses[::3, :2, 3].copy()
+
+
 @dataclass(frozen=True)
 class VariantSpec:
     name: str
@@ -151,13 +166,17 @@ def _nudge(placer: Placer, obj: ObjectInstance) -> bool:
     return _move_family(placer, obj, propose)
 
 
-def rearrange(ref: Layout, name: str, seed: int, plan: RearrangePlan = RearrangePlan()) -> Layout:
-    """One rearranged variant of ``ref``. Non-movable objects and the stage are never touched."""
+def rearrange(ref: Layout, name: str, seed: int, plan: RearrangePlan = RearrangePlan(),
+              walkway: np.ndarray | None = None) -> Layout:
+    """One rearranged variant of ``ref``. Non-movable objects and the stage are never touched;
+    nothing is placed within ``WALKWAY_CLEARANCE`` of the ``walkway`` points (if given)."""
     lay = ref.copy()
     lay.name, lay.reference, lay.seed = name, ref.name, seed
     lay.meta = {"generator": "synth.rearrange", "plan": asdict(plan)}
+    if walkway is not None:
+        lay.meta["walkway"] = {"planned_on": ref.name, "clearance_m": WALKWAY_CLEARANCE, "frames": WALKWAY_FRAMES}
     rng = np.random.default_rng(seed)
-    placer = Placer(lay, rng)
+    placer = Placer(lay, rng, keepout=None if walkway is None else (walkway, WALKWAY_CLEARANCE))
 
     # remove: movable objects that hold nothing
     leaves = [o for o in lay.objects if o.movable and not placer.children(o.id)]
@@ -248,12 +267,13 @@ def in_ranges(stats: dict, ranges: dict) -> bool:
     return all(lo <= stats[k] <= hi for k, (lo, hi) in ranges.items())
 
 
-def make_variant(ref: Layout, spec: VariantSpec, ranges: dict = PAPER_RANGES, max_attempts: int = 40) -> Layout:
+def make_variant(ref: Layout, spec: VariantSpec, ranges: dict = PAPER_RANGES, max_attempts: int = 40,
+                 walkway: np.ndarray | None = None) -> Layout:
     """``rearrange`` with sub-seeds ``spec.seed * 1000 + k`` until stats are in range and checks pass."""
     last = None
     for k in range(max_attempts):
         sub = spec.seed * 1000 + k
-        var = rearrange(ref, spec.name, sub, spec.plan)
+        var = rearrange(ref, spec.name, sub, spec.plan, walkway)
         st = change_stats(ref, var)
         last = st
         if in_ranges(st, ranges) and check_layout(var).ok:
