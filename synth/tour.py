@@ -1,0 +1,343 @@
+"""Render one tour (a layout x a lighting x a camera path) into a tour directory. No bpy here.
+
+Tour directory (documented in README, "Output format")::
+
+    TOUR/camera.json  poses.txt  objects.json  meta.json  frames/NNNNNN.exr  [previews/NNNNNN.png]
+
+With the Blender renderer the geometry passes (depth, instance, semantic) are rendered once per
+layout + path + camera into a shared cache (``<tour parent>/_geometry/<key>/``) and every lighting
+takes them from there; the RGB pass runs per lighting. With the fast renderer (Open3D) a tour has
+geometry only. Work is cut into chunks of frames, each rendered by a fresh Blender process
+(``synth.blender.worker``); frames that already exist are skipped, so re-running a killed render
+finishes it without re-rendering anything. Every file appears only once complete.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from . import frames as fr
+from .camera import CAMERA_DOC, Intrinsics, write_tum
+from .errors import UserError
+from .render_settings import DEVICES, quality
+from .scene import boxes_document, load_layout, resolve_layout_path
+
+
+class RenderError(UserError):
+    """A chunk failed to render; the message names the chunk's log file."""
+
+
+@dataclass
+class TourSpec:
+    layout: str  # layout name or file
+    path: str  # camera path name or file
+    out: str  # tour directory
+    lighting: str | None = None  # preset name or file; None = geometry only
+    renderer: str = "blender"  # blender | fast
+    quality: str = "preview"
+    width: int = 640
+    height: int = 480
+    hfov_deg: float = 75.0
+    frames: int | None = None  # the first N frames of the path (default: all)
+    seed: int = 0
+    device: str = "cpu"  # cpu | gpu | auto
+    previews: bool = False
+    chunk_size: int = 50
+    workers: int = 1
+    threads: int = 0  # Cycles threads per worker (0 = all)
+    geometry_cache: str | None = None  # default: <out parent>/_geometry
+
+
+@dataclass
+class Prepared:
+    spec: TourSpec
+    layout_file: Path
+    layout_name: str
+    path_name: str
+    path_fps: float
+    poses: np.ndarray
+    frame_ids: list[int]
+    intr: Intrinsics
+    out: Path
+    geometry_dir: Path | None
+    lighting_name: str | None
+    extra: dict = field(default_factory=dict)
+
+
+def _check_writable(d: Path) -> None:
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=d, prefix=".write_test_"):
+            pass
+    except OSError as e:
+        raise UserError(f"cannot write to output folder {d}: {e.strerror or e}") from None
+
+
+def _hash(*chunks: bytes) -> str:
+    h = hashlib.sha256()
+    for c in chunks:
+        h.update(c)
+        h.update(b"\0")
+    return h.hexdigest()[:10]
+
+
+def prepare(spec: TourSpec) -> Prepared:
+    """Validate everything before anything is written; raise a UserError naming what is wrong."""
+    from .camera_paths import load_path
+    from .lighting import load_lighting
+
+    if spec.renderer not in ("blender", "fast"):
+        raise UserError(f"unknown renderer '{spec.renderer}'; use blender or fast")
+    if spec.device not in DEVICES:
+        raise UserError(f"unknown device '{spec.device}'; use one of {', '.join(DEVICES)}")
+    quality(spec.quality)
+    if spec.width <= 0 or spec.height <= 0:
+        raise UserError(f"image size must be positive, got {spec.width}x{spec.height}")
+    if spec.chunk_size <= 0 or spec.workers <= 0:
+        raise UserError("chunk size and workers must be positive")
+    layout_file = resolve_layout_path(spec.layout)
+    layout = load_layout(layout_file)
+    lighting_name = None
+    if spec.lighting is not None:
+        if spec.renderer == "fast":
+            raise UserError("the fast renderer makes geometry only (depth, instance, semantic); drop --lighting or use --renderer blender")
+        lighting_name = load_lighting(spec.lighting).name
+    cpath = load_path(spec.path)
+    n = len(cpath.poses)
+    if n == 0:
+        raise UserError(f"camera path '{spec.path}' has no poses")
+    if spec.frames is not None:
+        if spec.frames <= 0:
+            raise UserError(f"--frames must be positive, got {spec.frames}")
+        if spec.frames > n:
+            raise UserError(f"--frames {spec.frames} exceeds the {n} frames of camera path '{cpath.name}'")
+        n = spec.frames
+    out = Path(spec.out)
+    _check_writable(out)
+    intr = Intrinsics.from_fov(spec.width, spec.height, spec.hfov_deg)
+    poses = cpath.poses[:n]
+    geometry_dir = None
+    if spec.renderer == "blender":
+        root = Path(spec.geometry_cache) if spec.geometry_cache else out.parent / "_geometry"
+        key = _hash(layout_file.read_bytes(), np.ascontiguousarray(poses, dtype=np.float64).tobytes(),
+                    json.dumps(intr.to_dict(), sort_keys=True).encode())
+        geometry_dir = root / f"{layout.name}__{cpath.name}__{spec.width}x{spec.height}__{key}"
+        _check_writable(geometry_dir)
+    return Prepared(spec, layout_file, layout.name, cpath.name, cpath.fps, poses, list(range(n)), intr, out,
+                    geometry_dir, lighting_name, {"path_meta": cpath.meta})
+
+
+def write_static_files(p: Prepared) -> None:
+    """camera.json, poses.txt, objects.json (atomically; identical on every re-run)."""
+    cam = {**p.intr.to_dict(), "fps": p.path_fps, "hfov_deg": p.spec.hfov_deg, **CAMERA_DOC}
+    _write_json(p.out / "camera.json", cam)
+    write_tum(p.out / "poses.txt", p.poses, fps=p.path_fps, frames=p.frame_ids,
+              header=f"camera-to-world poses (OpenCV camera axes) of path '{p.path_name}'\nt tx ty tz qx qy qz qw, t = frame / {p.path_fps:g}")
+    _write_json(p.out / "objects.json", boxes_document(load_layout(p.layout_file)))
+
+
+def _write_json(path: Path, obj) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps(obj, indent=1) + "\n")
+    os.replace(tmp, path)
+
+
+def missing_frames(frames_dir: Path, frame_ids) -> list[int]:
+    return [i for i in frame_ids if not (frames_dir / fr.frame_name(i)).exists()]
+
+
+def chunks(ids: list[int], size: int) -> list[list[int]]:
+    return [ids[k : k + size] for k in range(0, len(ids), size)]
+
+
+def package_versions() -> dict:
+    from importlib import metadata
+
+    out = {"synth": __version__, "python": platform.python_version()}
+    for pkg in ("numpy", "open3d", "trimesh", "OpenEXR", "bpy", "scipy"):
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            pass
+    return out
+
+
+class _Progress:
+    """frames done/total, frames/s, ETA and failures, on a tqdm bar."""
+
+    def __init__(self, total: int, desc: str, enabled: bool):
+        from tqdm import tqdm
+
+        self.bar = tqdm(total=total, desc=desc, unit="frame", disable=not enabled, dynamic_ncols=True)
+        self.failures = 0
+
+    def frame(self, n: int = 1) -> None:
+        self.bar.update(n)
+
+    def failed(self) -> None:
+        self.failures += 1
+        self.bar.set_postfix(failures=self.failures)
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def run_worker_chunks(jobs: list[dict], job_dir: Path, workers: int, progress: _Progress) -> dict:
+    """Run chunk jobs in fresh Blender processes, ``workers`` at a time. Returns info from the workers.
+
+    Raises RenderError naming the log of the first failed chunk (after the others finished)."""
+    job_dir.mkdir(parents=True, exist_ok=True)
+    pending = list(enumerate(jobs))
+    running: list[tuple[int, subprocess.Popen, Path]] = []
+    info: dict = {}
+    failed: list[tuple[int, Path, str]] = []
+
+    def start(k, job):
+        jf = job_dir / f"chunk_{k:05d}.json"
+        jf.write_text(json.dumps(job))
+        log = job_dir / f"chunk_{k:05d}.log"
+        proc = subprocess.Popen([sys.executable, "-m", "synth.blender.worker", str(jf)], stdout=subprocess.PIPE,
+                                stderr=open(log, "w"), text=True, bufsize=1)
+        running.append((k, proc, log))
+
+    import selectors
+
+    sel = selectors.DefaultSelector()
+    while pending or running:
+        while pending and len(running) < workers:
+            k, job = pending.pop(0)
+            start(k, job)
+            sel.register(running[-1][1].stdout, selectors.EVENT_READ, running[-1])
+        for key, _ in sel.select(timeout=1.0):
+            k, proc, log = key.data
+            line = proc.stdout.readline()
+            if not line:
+                sel.unregister(proc.stdout)
+                rc = proc.wait()
+                running.remove((k, proc, log))
+                if rc != 0:
+                    failed.append((k, log, info.pop(f"error_{k}", f"exit status {rc}")))
+                    progress.failed()
+                continue
+            try:
+                ev = json.loads(line)
+            except json.JSONDecodeError:
+                continue  # Blender's own chatter
+            if ev.get("event") == "frame":
+                progress.frame()
+            elif ev.get("event") == "start":
+                info["blender"] = ev.get("blender")
+            elif ev.get("event") == "ready":
+                info["device"] = ev.get("device")
+            elif ev.get("event") == "error":
+                info[f"error_{k}"] = ev.get("error")
+    sel.close()
+    if failed:
+        k, log, err = failed[0]
+        raise RenderError(f"{len(failed)} chunk(s) failed; chunk {k}: {err} (log: {log})")
+    return info
+
+
+def _job(p: Prepared, pass_: str, frames: list[int], out_dir: Path, poses_file: Path) -> dict:
+    s = p.spec
+    return {
+        "pass": pass_, "layout": str(p.layout_file.resolve()), "lighting": s.lighting, "poses": str(poses_file),
+        "fps": p.path_fps, "frames": frames, "intrinsics": p.intr.to_dict(), "quality": s.quality, "seed": s.seed,
+        "device": s.device, "out_dir": str(out_dir), "geometry_dir": str(p.geometry_dir) if p.geometry_dir else None,
+        "previews_dir": str(p.out / "previews") if s.previews else None, "threads": s.threads,
+    }
+
+
+def render_tour(spec: TourSpec, progress: bool = True) -> dict:
+    """Render (or finish rendering) one tour; returns its meta.json content."""
+    t0 = time.time()
+    p = prepare(spec)
+    write_static_files(p)
+    frames_dir = p.out / "frames"
+    frames_dir.mkdir(parents=True, exist_ok=True)
+    info: dict = {}
+    geometry_rendered = 0
+    if spec.renderer == "fast":
+        from .fast_render import FastRenderer
+
+        todo = missing_frames(frames_dir, p.frame_ids)
+        bar = _Progress(len(p.frame_ids), f"{p.layout_name} geometry (fast)", progress)
+        bar.frame(len(p.frame_ids) - len(todo))
+        if todo:
+            r = FastRenderer(load_layout(p.layout_file))
+            for i in todo:
+                d, ins, sem = r.render(p.poses[i], p.intr)
+                fr.write_frame(frames_dir / fr.frame_name(i), depth=d, instance=ins, semantic=sem)
+                bar.frame()
+        bar.close()
+        geometry_rendered = len(todo)
+    else:
+        gdir = p.geometry_dir
+        poses_file = p.out / "poses.txt"
+        work = Path(tempfile.mkdtemp(prefix=".jobs_", dir=p.out))
+        ok = False
+        try:
+            todo = missing_frames(gdir, p.frame_ids)
+            geometry_rendered = len(todo)
+            if todo:
+                bar = _Progress(len(p.frame_ids), f"{p.layout_name} geometry", progress)
+                bar.frame(len(p.frame_ids) - len(todo))
+                try:
+                    info.update(run_worker_chunks([_job(p, "geometry", c, gdir, poses_file) for c in chunks(todo, spec.chunk_size)],
+                                                  work / "geometry", spec.workers, bar))
+                finally:
+                    bar.close()
+            if p.lighting_name is None:  # geometry-only tour: the cached frames are the tour's frames
+                for i in missing_frames(frames_dir, p.frame_ids):
+                    src, dst = gdir / fr.frame_name(i), frames_dir / fr.frame_name(i)
+                    tmp = fr.tmp_name(dst)
+                    shutil.copyfile(src, tmp)
+                    os.replace(tmp, dst)
+            else:
+                todo = missing_frames(frames_dir, p.frame_ids)
+                bar = _Progress(len(p.frame_ids), f"{p.layout_name} {p.lighting_name} rgb", progress)
+                bar.frame(len(p.frame_ids) - len(todo))
+                try:
+                    info.update(run_worker_chunks([_job(p, "rgb", c, frames_dir, poses_file) for c in chunks(todo, spec.chunk_size)],
+                                                  work / "rgb", spec.workers, bar))
+                finally:
+                    bar.close()
+            ok = True
+        finally:
+            if ok:  # a failed chunk's job and log stay for the user to read
+                shutil.rmtree(work, ignore_errors=True)
+    meta = {
+        "toolkit": package_versions(),
+        "blender": info.get("blender"),
+        "device": info.get("device", "CPU" if spec.renderer == "blender" else None),
+        "layout": p.layout_name,
+        "layout_file": str(p.layout_file),
+        "lighting": p.lighting_name,
+        "path": p.path_name,
+        "renderer": spec.renderer,
+        "seed": spec.seed,
+        "settings": {**asdict(spec), "quality_settings": quality(spec.quality) if spec.lighting else None},
+        "frames": [p.frame_ids[0], p.frame_ids[-1]],
+        "n_frames": len(p.frame_ids),
+        "geometry_cache": str(p.geometry_dir) if p.geometry_dir else None,
+        "geometry_frames_rendered_now": geometry_rendered,
+        "wall_time_s": round(time.time() - t0, 3),
+        "host": {"platform": platform.platform(), "cpus": os.cpu_count()},
+        "complete": not missing_frames(frames_dir, p.frame_ids),
+    }
+    _write_json(p.out / "meta.json", meta)
+    return meta
