@@ -22,8 +22,7 @@ import math
 
 import numpy as np
 
-from . import geometry as geo
-from .placement import Placer, proc_instance
+from .placement import Placer
 from .scene import Layout, LightFixture, ObjectInstance, Opening, Room, Stage, Wall
 
 EXTERIOR_T = 0.2

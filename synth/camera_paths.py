@@ -1272,8 +1272,6 @@ def path_summary(path: CameraPath, layout: Layout | None = None) -> dict:
 
 def plot_path(path: CameraPath, layout: Layout, out_path, dpi: float = 150, tick_every_s: float = 2.0) -> Path:
     """``preview.plot_layout``'s top-down plan with the path over it: coloured by frame, start marker, heading ticks."""
-    import os
-    import uuid
 
     import matplotlib
     from matplotlib import cm, colors
@@ -1325,19 +1323,7 @@ def plot_path(path: CameraPath, layout: Layout, out_path, dpi: float = 150, tick
     cb = fig.colorbar(cm.ScalarMappable(norm=norm, cmap=cmap), cax=cax, orientation="horizontal")
     cb.ax.tick_params(labelsize=6.5, length=2)
     cb.set_label(f"frame (ticks: heading every {tick_every_s:g} s)", fontsize=7, labelpad=1)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
-    try:
-        fig.savefig(tmp, format=fmt, dpi=dpi, facecolor="white",
-                    metadata={"png": {"Software": None}}.get(fmt))
-        os.replace(tmp, out)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-    return out
+    return pv.save_figure(fig, out, dpi)
 
 
 # --------------------------------------------------------------------------------------------

@@ -279,7 +279,6 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--out", required=True)
     a.add_argument("--allow-unknown", action="store_true", help="map unknown templates to class 'other'")
     a.set_defaults(fn=cmd_import_replicacad)
-    from .dataset import register_cli as _r; _r(sub)
     tr = sub.add_parser("tour", help="render one tour: a layout x a lighting x a camera path")
     ts = tr.add_subparsers(dest="cmd", required=True)
     a = ts.add_parser("render", help="render (or finish rendering) a tour directory")
@@ -298,7 +297,12 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--chunk-size", type=int, default=50, help="frames per Blender process")
     a.add_argument("--quiet", action="store_true")
     a.set_defaults(fn=cmd_tour_render)
-    from .camera_paths import register_cli as _rp; _rp(sub)  # synth path plan|show|preview
+    # stages with their own subcommands register them here
+    from . import bench, camera_paths, dataset
+
+    camera_paths.register_cli(sub)  # synth path plan|show|preview|generate
+    dataset.register_cli(sub)  # synth dataset check|show
+    bench.register_cli(sub)  # synth bench
     return p
 
 

@@ -28,7 +28,6 @@ import json
 import math
 import os
 import sys
-import uuid
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
@@ -896,18 +895,9 @@ def contact_sheet(tour: Tour, index: int, out, exposure: float | None = None, dp
     fig.suptitle(f"{tour.name}  |  frame {index}  |  camera at ({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f}) m"
                  + (f"\n{sub}" if sub else ""), fontsize=12, y=1 - 0.1 / fig.get_figheight(), va="top")
 
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
-    try:
-        fig.savefig(tmp, format=fmt, dpi=dpi, facecolor="white", metadata={"Software": None} if fmt == "png" else None)
-        os.replace(tmp, out)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-    return out
+    from .preview import save_figure
+
+    return save_figure(fig, out, dpi)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -485,6 +485,20 @@ def plot_layout(layout: Layout, out_path, ref: Layout | None = None, title: str 
     ax = fig.add_axes((LEFT / plan.fig_w, BOTTOM / plan.fig_h, plan.ax_w / plan.fig_w, plan.ax_h / plan.fig_h))
     _draw(fig, ax, layout, ref, diff, plan, title, labels)
 
+    return save_figure(fig, out, dpi)
+
+
+def save_figure(fig, out_path, dpi: float) -> Path:
+    """Write a matplotlib figure atomically (temporary name next to the target, then rename).
+
+    The format follows the extension (no extension: png); an unsupported one is a UserError.
+    Metadata that changes on every run (dates, software) is left out, so reruns give equal files.
+    """
+    out = Path(out_path)
+    fmt = out.suffix.lower().lstrip(".") or "png"
+    supported = fig.canvas.get_supported_filetypes()
+    if fmt not in supported:
+        raise UserError(f"{out}: cannot write '.{fmt}' plots; use one of: {', '.join(sorted(supported))}")
     out.parent.mkdir(parents=True, exist_ok=True)
     # a fresh name next to the target (created by savefig, so with the usual permissions)
     tmp = out.with_name(f".{out.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")

@@ -7,8 +7,9 @@ from .errors import UnknownNameError
 # Cycles settings per quality preset. Geometry passes (depth, ids) ignore these: they are traced with
 # one sample through each pixel centre.
 QUALITY = {
-    # 4 samples + OpenImageDenoise: about 1 s per 320x240 frame on 2 cores, close to 16 samples by eye
-    "preview": {"samples": 4, "adaptive_threshold": 0.05, "max_bounces": 2, "diffuse_bounces": 1, "glossy_bounces": 1,
+    # 3 samples + OpenImageDenoise (fast prefilter): under 1 s per 320x240 frame on 2 cores, close to
+    # 16 samples by eye (and cleaner than 4 samples without the prefilter)
+    "preview": {"samples": 3, "adaptive_threshold": 0.05, "max_bounces": 2, "diffuse_bounces": 1, "glossy_bounces": 1,
                 "transmission_bounces": 2, "denoise": True, "denoise_prefilter": "FAST"},
     "standard": {"samples": 32, "adaptive_threshold": 0.02, "max_bounces": 4, "diffuse_bounces": 2, "glossy_bounces": 2,
                  "transmission_bounces": 4, "denoise": True, "denoise_prefilter": "ACCURATE"},

@@ -19,7 +19,6 @@ from synth.camera import Intrinsics, pose_from_ypr, read_tum, write_tum
 from synth.camera_paths import load_path
 from synth.cli import main as synth_main
 from synth.dataset import Tour, check_tour
-from synth.errors import UserError
 from synth.fast_render import FastRenderer
 from synth.scene import load_layout
 from synth.tour import TourSpec, render_tour

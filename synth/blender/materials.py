@@ -169,6 +169,9 @@ def _sock(coll, key):
     raise KeyError(key)
 
 
+
+MAX_DETAIL = 2.0  # noise octaves (see _Tree.noise)
+
 class _Tree:
     """Tiny node-graph builder: nodes laid out left to right, inputs given as values or sockets."""
 
@@ -215,7 +218,8 @@ class _Tree:
         return m.outputs["Vector"]
 
     def noise(self, vec, scale, detail=2.0, roughness=0.5, distortion=0.0, **kw):
-        return self.add("ShaderNodeTexNoise", inputs={"Vector": vec, "Scale": scale, "Detail": detail,
+        # octaves beyond MAX_DETAIL are sub-pixel at 640x480 from a few metres but cost CPU time
+        return self.add("ShaderNodeTexNoise", inputs={"Vector": vec, "Scale": scale, "Detail": min(detail, MAX_DETAIL),
                                                       "Roughness": roughness, "Distortion": distortion}, **kw)
 
     def ramp(self, fac, stops, interpolation="LINEAR"):
@@ -280,7 +284,7 @@ def _wood(t: _Tree, color, seed, default):
     # long and gentle: on faces the rings read as long grain lines along x, ~1-2 cm apart
     vec = t.coords(seed, scale=(0.12, 1.0, 1.0))
     wave = t.add("ShaderNodeTexWave", wave_type="RINGS", rings_direction="X", wave_profile="SIN",
-                 inputs={"Vector": vec, "Scale": 16.0, "Distortion": 9.0, "Detail": 3.0, "Detail Scale": 0.3,
+                 inputs={"Vector": vec, "Scale": 16.0, "Distortion": 9.0, "Detail": 2.0, "Detail Scale": 0.3,
                          "Detail Roughness": 0.55})
     # fine pores / streaks along x
     gmap = t.add("ShaderNodeMapping", inputs={"Vector": vec, "Scale": (25.0, 150.0, 150.0)})
@@ -313,7 +317,7 @@ def _floor_wood(t: _Tree, color, seed):
     shift = t.add("ShaderNodeMapping", inputs={"Vector": vec, "Location": brick.outputs["Color"],
                                                "Scale": (0.12, 1.0, 1.0)})
     wave = t.add("ShaderNodeTexWave", wave_type="RINGS", rings_direction="X", wave_profile="SIN",
-                 inputs={"Vector": shift.outputs["Vector"], "Scale": 7.0, "Distortion": 12.0, "Detail": 3.0,
+                 inputs={"Vector": shift.outputs["Vector"], "Scale": 7.0, "Distortion": 12.0, "Detail": 2.0,
                          "Detail Scale": 0.25, "Detail Roughness": 0.6,
                          "Phase Offset": float(_rng(seed, 2).uniform(0, 6.28)) if seed else 0.0})
     col = t.ramp(wave.outputs["Fac"], [(0.0, light), (0.5, mid), (1.0, dark)])
@@ -339,31 +343,31 @@ def _floor_tile(t: _Tree, color, seed):
     return t.bsdf(Base_Color=brick.outputs["Color"], Roughness=rough.outputs["Result"], Normal=nrm)
 
 
-def _paint(t: _Tree, base: Color, seed, low=0.06, rough=0.75, fine=0.04, low_scale=0.9):
+def _paint(t: _Tree, base: Color, seed, low=0.06, rough=0.75, low_scale=0.9):
     vec = t.coords(seed)
     lo = t.noise(vec, low_scale, detail=3.0, roughness=0.55)
     col = t.ramp(lo.outputs["Fac"], [(0.3, _scale(base, 1.0 - low)), (0.7, _scale(base, 1.0 + low))])
-    hi = t.noise(vec, 220.0, detail=2.0, roughness=0.5)
+    hi = t.noise(vec, 220.0, detail=0.0, roughness=0.5)
     r = t.add("ShaderNodeMapRange", inputs={"Value": hi.outputs["Fac"], "To Min": rough - 0.12, "To Max": rough + 0.12})
-    nrm = t.bump(hi.outputs["Fac"], fine, 0.001)
-    return t.bsdf(Base_Color=col, Roughness=r.outputs["Result"], Normal=nrm)
+    # no bump: millimetre relief is sub-pixel here, and a bump node evaluates its input three times
+    return t.bsdf(Base_Color=col, Roughness=r.outputs["Result"])
 
 
 def _wall_paint(t, c, s):
-    return _paint(t, c or (0.74, 0.72, 0.68), s, low=0.07, rough=0.8, fine=0.05, low_scale=0.7)
+    return _paint(t, c or (0.74, 0.72, 0.68), s, low=0.07, rough=0.8, low_scale=0.7)
 
 
 def _ceiling_paint(t, c, s):
-    return _paint(t, c or (0.84, 0.84, 0.82), s, low=0.04, rough=0.85, fine=0.04, low_scale=0.5)
+    return _paint(t, c or (0.84, 0.84, 0.82), s, low=0.04, rough=0.85, low_scale=0.5)
 
 
 def _painted(t, c, s):
-    return _paint(t, c or (0.70, 0.70, 0.68), s, low=0.05, rough=0.38, fine=0.03, low_scale=2.5)
+    return _paint(t, c or (0.70, 0.70, 0.68), s, low=0.05, rough=0.38, low_scale=2.5)
 
 
 def _door_frame(t: _Tree, color, seed):
     """Door and window frames: smooth semi-gloss paint (faint mottling and orange peel)."""
-    return _paint(t, color or (0.80, 0.79, 0.76), seed, low=0.04, rough=0.3, fine=0.02, low_scale=3.0)
+    return _paint(t, color or (0.80, 0.79, 0.76), seed, low=0.04, rough=0.3, low_scale=3.0)
 
 
 def _fabric(t: _Tree, color, seed, default=(0.42, 0.42, 0.44), sheen=0.6, rough=0.9):
@@ -542,7 +546,7 @@ def _marble(t: _Tree, color, seed):
     vein = (0.12, 0.12, 0.13) if _lum(base) > 0.3 else (0.75, 0.74, 0.72)
     vec = t.coords(seed)
     w = t.add("ShaderNodeTexWave", wave_type="BANDS", bands_direction="DIAGONAL", wave_profile="SIN",
-              inputs={"Vector": vec, "Scale": 1.2, "Distortion": 14.0, "Detail": 6.0, "Detail Scale": 0.8,
+              inputs={"Vector": vec, "Scale": 1.2, "Distortion": 14.0, "Detail": 2.0, "Detail Scale": 0.8,
                       "Detail Roughness": 0.65})
     cloud = t.noise(vec, 4.0, detail=5.0, roughness=0.6)
     col = t.ramp(w.outputs["Fac"], [(0.0, _lerp(base, vein, 0.85)), (0.06, _lerp(base, vein, 0.35)),

@@ -8,7 +8,6 @@ through ``synth.camera.blender_from_opencv``, and the intrinsics become lens and
 
 from __future__ import annotations
 
-import math
 
 import bpy
 import numpy as np
