@@ -21,6 +21,7 @@ setup: $(VENV)/.installed
 
 demo: setup
 	$(VENV)/bin/synth scene build --out $(OUT)/scenes
+	$(VENV)/bin/synth render render_jobs/demo.yaml --out $(OUT)/demo --workers 2 $(if $(wildcard $(OUT)/demo/job_state.json),--resume,)
 
 test: setup
 	$(VENV)/bin/python -m pytest $(PYTEST_ARGS)

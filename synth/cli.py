@@ -298,9 +298,10 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--quiet", action="store_true")
     a.set_defaults(fn=cmd_tour_render)
     # stages with their own subcommands register them here
-    from . import bench, camera_paths, dataset
+    from . import bench, camera_paths, dataset, jobs
 
     camera_paths.register_cli(sub)  # synth path plan|show|preview|generate
+    jobs.register_cli(sub)  # synth render SPEC.yaml
     dataset.register_cli(sub)  # synth dataset check|show
     bench.register_cli(sub)  # synth bench
     return p

@@ -48,8 +48,11 @@ class FrameImages:
 
 
 def tmp_name(path: Path) -> Path:
-    """The hidden temporary name a file is written under before it is renamed into place."""
-    return path.with_name(f".{path.name}.tmp")
+    """The hidden temporary name a file is written under before it is renamed into place.
+
+    It carries the process id, so two processes writing the same frame (a resumed job next to an
+    orphaned worker) never share a temporary file."""
+    return path.with_name(f".{path.name}.{os.getpid()}.tmp")
 
 
 def write_frame(path, rgb=None, depth=None, instance=None, semantic=None) -> Path:

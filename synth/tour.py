@@ -77,6 +77,18 @@ class Prepared:
     extra: dict = field(default_factory=dict)
 
 
+def _check_can_create(d: Path) -> None:
+    """Fail now if ``d`` could not be created or written later (checks its nearest existing ancestor)."""
+    d = Path(d).absolute()
+    anc = d
+    while not anc.exists():
+        anc = anc.parent
+    if not anc.is_dir():
+        raise UserError(f"cannot write to output folder {d}: {anc} is not a folder")
+    if not os.access(anc, os.W_OK | os.X_OK):
+        raise UserError(f"cannot write to output folder {d}: {anc} is not writable")
+
+
 def _check_writable(d: Path) -> None:
     try:
         d.mkdir(parents=True, exist_ok=True)
@@ -94,8 +106,10 @@ def _hash(*chunks: bytes) -> str:
     return h.hexdigest()[:10]
 
 
-def prepare(spec: TourSpec) -> Prepared:
-    """Validate everything before anything is written; raise a UserError naming what is wrong."""
+def prepare(spec: TourSpec, create: bool = True) -> Prepared:
+    """Validate everything before anything is written; raise a UserError naming what is wrong.
+
+    With ``create`` the output and geometry-cache folders are created (and proven writable)."""
     from .camera_paths import load_path
     from .lighting import load_lighting
 
@@ -126,7 +140,7 @@ def prepare(spec: TourSpec) -> Prepared:
             raise UserError(f"--frames {spec.frames} exceeds the {n} frames of camera path '{cpath.name}'")
         n = spec.frames
     out = Path(spec.out)
-    _check_writable(out)
+    (_check_writable if create else _check_can_create)(out)
     intr = Intrinsics.from_fov(spec.width, spec.height, spec.hfov_deg)
     poses = cpath.poses[:n]
     geometry_dir = None
@@ -135,7 +149,7 @@ def prepare(spec: TourSpec) -> Prepared:
         key = _hash(layout_file.read_bytes(), np.ascontiguousarray(poses, dtype=np.float64).tobytes(),
                     json.dumps(intr.to_dict(), sort_keys=True).encode())
         geometry_dir = root / f"{layout.name}__{cpath.name}__{spec.width}x{spec.height}__{key}"
-        _check_writable(geometry_dir)
+        (_check_writable if create else _check_can_create)(geometry_dir)
     return Prepared(spec, layout_file, layout.name, cpath.name, cpath.fps, poses, list(range(n)), intr, out,
                     geometry_dir, lighting_name, {"path_meta": cpath.meta})
 

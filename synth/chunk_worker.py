@@ -1,0 +1,72 @@
+"""Chunks that need no Blender: ``python -m synth.chunk_worker JOB.json``.
+
+``fast``: render depth, instance and semantic with the Open3D renderer (``synth.fast_render``).
+``copy``: copy shared geometry frames (the Blender geometry cache) into a geometry-only tour.
+Frames already on disk are skipped; progress goes to stdout as JSON lines, like the Blender worker.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import sys
+import time
+from pathlib import Path
+
+from . import frames as fr
+
+
+def _emit(**kw) -> None:
+    print(json.dumps(kw), flush=True)
+
+
+def run(job: dict) -> int:
+    out = Path(job["out_dir"])
+    out.mkdir(parents=True, exist_ok=True)
+    todo = [int(i) for i in job["frames"] if not (out / fr.frame_name(int(i))).exists()]
+    _emit(event="start", pass_=job["pass"], frames=len(job["frames"]), todo=len(todo))
+    if job["pass"] == "copy":
+        src = Path(job["geometry_dir"])
+        for i in todo:
+            t0 = time.time()
+            dst = out / fr.frame_name(i)
+            tmp = fr.tmp_name(dst)
+            shutil.copyfile(src / fr.frame_name(i), tmp)
+            os.replace(tmp, dst)
+            _emit(event="frame", frame=i, seconds=round(time.time() - t0, 4))
+        return 0
+    if job["pass"] != "fast":
+        raise ValueError(f"unknown pass {job['pass']!r}")
+    from .camera import Intrinsics, read_tum
+    from .fast_render import FastRenderer
+    from .scene import load_layout
+
+    intr = Intrinsics.from_dict(job["intrinsics"])
+    ids, poses = read_tum(job["poses"], fps=float(job.get("fps", 30.0)))
+    pose_of = dict(zip(ids.tolist(), poses))
+    if todo:
+        r = FastRenderer(load_layout(job["layout"]))
+        _emit(event="ready", device="CPU")
+        for i in todo:
+            t0 = time.time()
+            d, ins, sem = r.render(pose_of[i], intr)
+            fr.write_frame(out / fr.frame_name(i), depth=d, instance=ins, semantic=sem)
+            _emit(event="frame", frame=i, seconds=round(time.time() - t0, 4))
+    return 0
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if len(argv) != 1:
+        print("usage: python -m synth.chunk_worker JOB.json", file=sys.stderr)
+        return 2
+    try:
+        return run(json.loads(Path(argv[0]).read_text()))
+    except Exception as e:
+        _emit(event="error", error=f"{type(e).__name__}: {e}")
+        raise
+
+
+if __name__ == "__main__":
+    sys.exit(main())

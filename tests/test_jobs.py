@@ -1,0 +1,187 @@
+"""Render jobs: spec validation, the plan, retries and state, kill + resume, and the Ray backend."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from synth import jobs
+from synth.cli import main as synth_main
+from synth.dataset import Tour
+from synth.resources import REPO_ROOT
+
+SMOKE = REPO_ROOT / "render_jobs" / "smoke.yaml"
+
+
+def write_spec(tmp_path, **changes) -> Path:
+    doc = yaml.safe_load(SMOKE.read_text())
+    doc.update(changes)
+    p = tmp_path / "spec.yaml"
+    p.write_text(yaml.safe_dump(doc))
+    return p
+
+
+def test_shipped_specs_validate_and_expand():
+    for name in ("smoke", "demo", "replicacad_6x3"):
+        plan = jobs.expand(jobs.load_spec(REPO_ROOT / "render_jobs" / f"{name}.yaml"), out=Path("/nonexistent/x"))
+        assert plan.tours and plan.chunks
+    paper = jobs.expand(jobs.load_spec(REPO_ROOT / "render_jobs" / "replicacad_6x3.yaml"), out=Path("/nonexistent/x"))
+    # the paper's design: 6 layouts x 3 lightings on the 4,000-frame query path + the 6,000-frame mapping tour
+    assert len(paper.tours) == 19
+    query = [p for n, p in paper.tours.items() if n.endswith("__query")]
+    assert len(query) == 18 and all(len(p.frame_ids) == 4000 for p in query)
+    assert len(paper.tours["apt_0__day__mapping"].frame_ids) == 6000
+    rgb = sum(len(c.frames) for c in paper.chunks if c.kind == "rgb")
+    geo = sum(len(c.frames) for c in paper.chunks if c.kind == "geometry")
+    assert rgb == 18 * 4000 + 6000 and geo == 6 * 4000 + 6000  # geometry once per layout + path
+
+
+def test_plan_shares_geometry_between_lightings(tmp_path):
+    plan = jobs.expand(jobs.load_spec(SMOKE), out=tmp_path / "o")
+    geo = [c for c in plan.chunks if c.kind == "geometry"]
+    rgb = [c for c in plan.chunks if c.kind == "rgb"]
+    assert len(geo) == 2 * 2 and len(rgb) == 2 * 2 * 2  # 2 layouts x 2 chunks; x 2 lightings for rgb
+    assert {c.needs for c in rgb} == {c.id for c in geo}
+    assert not (tmp_path / "o").exists()  # planning writes nothing
+
+
+@pytest.mark.parametrize(
+    "changes, message",
+    [
+        ({"colour": "red"}, "colour: unknown key"),
+        ({"designs": [{"layouts": ["apt_0"], "lightings": ["day"], "path": "query", "extra": 1}]}, "designs[0].extra: unknown key"),
+        ({"designs": [{"layouts": ["apt_9"], "lightings": ["day"], "path": "query"}]}, "unknown layout 'apt_9'"),
+        ({"designs": [{"layouts": ["apt_0"], "lightings": ["dusk"], "path": "query"}]}, "unknown lighting preset 'dusk'"),
+        ({"designs": [{"layouts": ["apt_0"], "lightings": ["day"], "path": "nowhere"}]}, "unknown camera path 'nowhere'"),
+        ({"designs": [{"layouts": ["apt_0"], "lightings": ["day"], "path": {"name": "query", "frames": 0}}]}, "designs[0].path.frames: expected a positive integer"),
+        ({"designs": [{"layouts": ["apt_0"], "lightings": ["day"], "path": {"name": "query", "frames": -5}}]}, "expected a positive integer"),
+        ({"chunk_size": 0}, "chunk_size: expected a positive integer"),
+        ({"size": [64, -48]}, "size: expected a positive integer"),
+        ({"quality": "ultra"}, "unknown quality preset 'ultra'"),
+        ({"designs": []}, "designs: expected a non-empty list"),
+    ],
+)
+def test_bad_specs_one_line_exit_2_nothing_written(tmp_path, capsys, changes, message):
+    spec = write_spec(tmp_path, **changes)
+    out = tmp_path / "out"
+    assert synth_main(["render", str(spec), "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("synth: error:") and message in err and len(err.splitlines()) == 1, err
+    assert not out.exists()
+
+
+def test_malformed_yaml_and_unwritable_out(tmp_path, capsys):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: x\ndesigns: [\n")
+    assert synth_main(["render", str(bad), "--quiet"]) == 2
+    assert str(bad) in capsys.readouterr().err
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    assert synth_main(["render", str(SMOKE), "--out", str(blocker / "out"), "--quiet"]) == 2
+    assert "is not a folder" in capsys.readouterr().err
+
+
+def test_failing_chunk_is_retried_then_reported_and_others_go_on(tmp_path, monkeypatch):
+    """The scheduler with a worker that always fails on one chunk (a stand-in for a crashing Blender)."""
+    spec = jobs.load_spec(write_spec(tmp_path, renderer="fast", designs=[{"layouts": ["apt_0", "apt_1"], "path": {"name": "query", "frames": 6}}]))
+    calls = []
+    real = jobs.run_chunk_process
+
+    def flaky(kind, job, job_file, log_file, on_frame=None):
+        calls.append(job["frames"][0])
+        if "apt_1" in job["layout"] and job["frames"][0] == 3:
+            Path(log_file).write_text("boom")
+            return 1, "RuntimeError: simulated crash", {}
+        return real(kind, job, job_file, log_file, on_frame)
+
+    monkeypatch.setattr(jobs, "run_chunk_process", flaky)
+    s = jobs.run_job(spec, tmp_path / "o", workers=1, progress=False)
+    assert list(s["failed"]) == ["fast/apt_1__geometry__query/0001"]
+    assert "simulated crash" in s["failed"]["fast/apt_1__geometry__query/0001"]
+    state = json.loads((tmp_path / "o" / "job_state.json").read_text())
+    bad = state["chunks"]["fast/apt_1__geometry__query/0001"]
+    assert bad["state"] == "failed" and bad["attempts"] == spec.retries + 1
+    assert sum(c["state"] == "done" for c in state["chunks"].values()) == 3
+    assert len(list((tmp_path / "o" / "apt_0__geometry__query" / "frames").glob("*.exr"))) == 6
+    # the same job again without --resume is refused; with --resume only the failed chunk runs
+    with pytest.raises(jobs.UserError, match="--resume"):
+        jobs.run_job(spec, tmp_path / "o", progress=False)
+    monkeypatch.setattr(jobs, "run_chunk_process", real)
+    s2 = jobs.run_job(spec, tmp_path / "o", resume=True, progress=False)
+    assert s2["failed"] == {} and s2["frames_rendered_now"] == 3
+
+
+def _frames(root: Path) -> dict[str, list[Path]]:
+    return {t.name: sorted((t / "frames").glob("*.exr")) for t in sorted(root.iterdir()) if (t / "frames").is_dir()}
+
+
+def _assert_same_job(a: Path, b: Path) -> None:
+    fa, fb = _frames(a), _frames(b)
+    assert fa.keys() == fb.keys() and fa
+    for name in fa:
+        assert [p.name for p in fa[name]] == [p.name for p in fb[name]]
+        for fname in ("camera.json", "poses.txt", "objects.json", "meta.json"):
+            assert (a / name / fname).read_bytes() == (b / name / fname).read_bytes(), (name, fname)
+        ta, tb = Tour(a / name), Tour(b / name)
+        for x, y in zip(ta, tb):
+            assert np.array_equal(x.depth, y.depth) and np.array_equal(x.instance, y.instance)
+            assert np.array_equal(x.semantic, y.semantic)
+            assert np.array_equal(x.rgb, y.rgb)  # same Cycles seed, same CPU: the same image
+
+
+@pytest.mark.blender
+@pytest.mark.slow
+def test_killed_job_resumes_to_the_same_result(tmp_path):
+    ref = tmp_path / "ref"
+    assert synth_main(["render", str(SMOKE), "--out", str(ref), "--quiet", "--workers", "2"]) == 0
+    out = tmp_path / "killed"
+    proc = subprocess.Popen([sys.executable, "-m", "synth.cli", "render", str(SMOKE), "--out", str(out), "--quiet"],
+                            start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 120
+    while time.time() < deadline:  # kill once some, but not all, frames exist
+        n = len(list(out.glob("*/frames/*.exr"))) if out.exists() else 0
+        if n >= 8:
+            break
+        time.sleep(0.2)
+    os.killpg(proc.pid, signal.SIGKILL)  # the runner and its Blender workers
+    proc.wait()
+    partial = len(list(out.glob("*/frames/*.exr")))
+    assert 0 < partial < 24
+    assert not [p for p in out.rglob("*.exr") if p.stat().st_size == 0]
+    before = {p: p.stat().st_mtime_ns for p in out.rglob("frames/*.exr")} | {p: p.stat().st_mtime_ns for p in (out / "_geometry").rglob("*.exr")}
+    s = jobs.run_job(jobs.load_spec(SMOKE), out, resume=True, progress=False)
+    assert s["failed"] == {}
+    # nothing that was done is rendered again
+    assert all(p.stat().st_mtime_ns == t for p, t in before.items())
+    assert not list(out.rglob(".*.tmp"))
+    _assert_same_job(ref, out)
+
+
+@pytest.mark.blender
+@pytest.mark.slow
+def test_ray_backend_on_loopback_renders_the_smoke_spec(tmp_path):
+    pytest.importorskip("ray")
+    ref = tmp_path / "local"
+    assert synth_main(["render", str(SMOKE), "--out", str(ref), "--quiet", "--workers", "2"]) == 0
+    out = tmp_path / "ray"
+    s = jobs.run_job(jobs.load_spec(SMOKE), out, backend="ray", progress=False)
+    assert s["failed"] == {} and s["frames_rendered_now"] == 36
+    _assert_same_job(ref, out)
+
+
+def test_dry_run_prints_plan_and_estimate_writes_nothing(tmp_path, capsys):
+    spec = write_spec(tmp_path, renderer="fast", designs=[{"layouts": ["apt_0"], "path": {"name": "query", "frames": 30}}])
+    out = tmp_path / "o"
+    assert synth_main(["render", str(spec), "--out", str(out), "--dry-run"]) == 0
+    text = capsys.readouterr().out
+    assert "1 tours, 30 chunk-frames" in text and "estimate with 1 worker(s)" in text and "calibration" in text
+    assert not out.exists()
