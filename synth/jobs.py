@@ -360,77 +360,96 @@ class _Bar:
         self.bar.close()
 
 
+class _Queue:
+    """Chunk bookkeeping shared by both backends: what may start, and what a finished chunk means.
+
+    rgb and copy chunks wait for their geometry chunk; a chunk that failed is put back until it has
+    had ``retries`` more attempts, then reported failed, and whatever waits on it fails with it."""
+
+    def __init__(self, plan: Plan, state: JobState, todo: list[Chunk], bar: _Bar):
+        self.spec, self.state, self.bar = plan.spec, state, bar
+        self.pending = list(todo)
+        self.done = {c.id for c in plan.chunks if c not in todo}
+        self.failed: set[str] = set()
+
+    def take_ready(self, limit: int) -> list[Chunk]:
+        for c in [c for c in self.pending if c.needs in self.failed]:
+            self.pending.remove(c)
+            self._fail(c, f"its geometry chunk {c.needs} failed")
+        out = []
+        for c in list(self.pending):
+            if len(out) >= limit:
+                break
+            if c.needs is None or c.needs in self.done:
+                self.pending.remove(c)
+                self.state.set(c.id, "running", attempt=True)
+                out.append(c)
+        return out
+
+    def finished(self, c: Chunk, rc: int, err: str | None, log: str) -> bool:
+        """Record a chunk's end; True when it is done, False when it will be retried or failed."""
+        if rc == 0 and not c.missing():
+            self.done.add(c.id)
+            self.state.set(c.id, "done")
+            return True
+        msg = f"{err or 'frames missing after the chunk ended'} (log: {log})"
+        if self.state.doc["chunks"][c.id]["attempts"] <= self.spec.retries:
+            self.state.set(c.id, "pending", msg)
+            self.pending.insert(0, c)
+        else:
+            self._fail(c, msg)
+        return False
+
+    def _fail(self, c: Chunk, msg: str) -> None:
+        self.failed.add(c.id)
+        self.state.set(c.id, "failed", msg)
+        self.bar.fail()
+
+
+def _files(work: Path, c: Chunk) -> tuple[str, str]:
+    base = work / c.id.replace("/", "_")
+    return str(base) + ".json", str(base) + ".log"
+
+
 def run_local(plan: Plan, state: JobState, todo: list[Chunk], workers: int, bar: _Bar, work: Path) -> dict:
-    """Local backend: ``workers`` chunk processes at a time; rgb and copy chunks wait for their geometry."""
+    """Local backend: ``workers`` chunk processes at a time, each a fresh (Blender) process."""
     import threading
     from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
-    spec = plan.spec
     info: dict = {}
     lock = threading.Lock()
-    pending = list(todo)
-    done_ids = {c.id for c in plan.chunks if c not in todo}
-    failed_ids: set[str] = set()
+    q = _Queue(plan, state, todo, bar)
 
-    def one(c: Chunk):
+    def on_frame(_ev):
         with lock:
-            state.set(c.id, "running", attempt=True)
-        jf = work / (c.id.replace("/", "_") + ".json")
-        log = work / (c.id.replace("/", "_") + ".log")
-
-        def on_frame(_ev):
-            with lock:
-                bar.update()
-
-        return run_chunk_process(c.kind, c.job, str(jf), str(log), on_frame) + (str(log),)
+            bar.update()
 
     with ThreadPoolExecutor(max_workers=workers) as pool:
         running = {}
-        while pending or running:
-            ready = [c for c in pending if c.needs is None or c.needs in done_ids]
-            blocked = [c for c in pending if c.needs in failed_ids]
-            for c in blocked:
-                pending.remove(c)
-                failed_ids.add(c.id)
-                state.set(c.id, "failed", f"its geometry chunk {c.needs} failed")
-                bar.fail()
-            while ready and len(running) < workers:
-                c = ready.pop(0)
-                pending.remove(c)
-                running[pool.submit(one, c)] = c
+        while True:
+            for c in q.take_ready(workers - len(running)):
+                jf, log = _files(work, c)
+                running[pool.submit(run_chunk_process, c.kind, c.job, jf, log, on_frame)] = (c, log)
             if not running:
-                if pending:  # nothing can start: everything left waits on a failed chunk
-                    continue
                 break
             finished, _ = wait(running, return_when=FIRST_COMPLETED)
             for fut in finished:
-                c = running.pop(fut)
-                rc, err, inf, log = fut.result()
+                c, log = running.pop(fut)
+                rc, err, inf = fut.result()
                 info.update(inf)
-                if rc == 0 and not c.missing():
-                    done_ids.add(c.id)
-                    state.set(c.id, "done")
-                    continue
-                attempts = state.doc["chunks"][c.id]["attempts"]
-                msg = f"{err or 'frames missing after the chunk ended'} (log: {log})"
-                if attempts <= spec.retries:
-                    state.set(c.id, "pending", msg)
-                    pending.insert(0, c)
-                else:
-                    failed_ids.add(c.id)
-                    state.set(c.id, "failed", msg)
-                    bar.fail()
+                q.finished(c, rc, err, log)
     return info
 
 
 def run_ray(plan: Plan, state: JobState, todo: list[Chunk], address: str | None, bar: _Bar, work: Path) -> dict:
-    """Ray backend: each chunk is a Ray task (CPU or GPU request) that runs the chunk in a fresh process."""
+    """Ray backend: each chunk is a Ray task (CPU or GPU request) that runs the chunk in a fresh process.
+
+    Progress advances when a chunk ends (its frames are counted on disk)."""
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
     try:
         import ray
     except ImportError:
         raise UserError("the ray backend needs Ray: pip install 'videoreloc-synth[ray]'") from None
-    spec = plan.spec
     started = False
     if not ray.is_initialized():
         if address:
@@ -438,49 +457,24 @@ def run_ray(plan: Plan, state: JobState, todo: list[Chunk], address: str | None,
         else:  # a local instance on loopback only
             ray.init(_node_ip_address="127.0.0.1", include_dashboard=False, log_to_driver=False)
         started = True
-    gpu = 1 if spec.device == "gpu" else 0
-    task = ray.remote(num_cpus=1, num_gpus=gpu, max_retries=0)(run_chunk_process)
+    task = ray.remote(num_cpus=1, num_gpus=1 if plan.spec.device == "gpu" else 0, max_retries=0)(run_chunk_process)
     info: dict = {}
+    q = _Queue(plan, state, todo, bar)
     try:
-        pending = list(todo)
-        done_ids = {c.id for c in plan.chunks if c not in todo}
-        failed_ids: set[str] = set()
         running = {}
-        while pending or running:
-            for c in [c for c in pending if c.needs in failed_ids]:
-                pending.remove(c)
-                failed_ids.add(c.id)
-                state.set(c.id, "failed", f"its geometry chunk {c.needs} failed")
-                bar.fail()
-            for c in [c for c in pending if c.needs is None or c.needs in done_ids]:
-                pending.remove(c)
-                state.set(c.id, "running", attempt=True)
-                jf = work / (c.id.replace("/", "_") + ".json")
-                log = work / (c.id.replace("/", "_") + ".log")
-                running[task.remote(c.kind, c.job, str(jf), str(log))] = (c, str(log))
+        while True:
+            for c in q.take_ready(len(q.pending)):
+                jf, log = _files(work, c)
+                running[task.remote(c.kind, c.job, jf, log)] = (c, log, len(c.frames) - len(c.missing()))
             if not running:
                 break
             ready, _ = ray.wait(list(running), num_returns=1)
             for ref in ready:
-                c, log = running.pop(ref)
+                c, log, had = running.pop(ref)
                 rc, err, inf = ray.get(ref)
                 info.update(inf)
-                have = len(c.frames) - len(c.missing())
-                bar.update(have)
-                if rc == 0 and have == len(c.frames):
-                    done_ids.add(c.id)
-                    state.set(c.id, "done")
-                    continue
-                attempts = state.doc["chunks"][c.id]["attempts"]
-                msg = f"{err or 'frames missing'} (log: {log})"
-                if attempts <= spec.retries:
-                    state.set(c.id, "pending", msg)
-                    bar.update(-have)
-                    pending.insert(0, c)
-                else:
-                    failed_ids.add(c.id)
-                    state.set(c.id, "failed", msg)
-                    bar.fail()
+                bar.update(len(c.frames) - len(c.missing()) - had)
+                q.finished(c, rc, err, log)
     finally:
         if started:
             ray.shutdown()
