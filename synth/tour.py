@@ -19,8 +19,6 @@ import json
 import os
 import platform
 import shutil
-import subprocess
-import sys
 import tempfile
 import time
 from dataclasses import asdict, dataclass, field
@@ -191,79 +189,64 @@ def package_versions() -> dict:
 
 
 class _Progress:
-    """frames done/total, frames/s, ETA and failures, on a tqdm bar."""
+    """frames done/total, frames/s and ETA on a tqdm bar."""
 
     def __init__(self, total: int, desc: str, enabled: bool):
         from tqdm import tqdm
 
         self.bar = tqdm(total=total, desc=desc, unit="frame", disable=not enabled, dynamic_ncols=True)
-        self.failures = 0
 
     def frame(self, n: int = 1) -> None:
         self.bar.update(n)
-
-    def failed(self) -> None:
-        self.failures += 1
-        self.bar.set_postfix(failures=self.failures)
 
     def close(self) -> None:
         self.bar.close()
 
 
-def run_worker_chunks(jobs: list[dict], job_dir: Path, workers: int, progress: _Progress) -> dict:
-    """Run chunk jobs in fresh Blender processes, ``workers`` at a time. Returns info from the workers.
+def _render_pass(p: Prepared, kind: str, out_dir: Path, work: Path, desc: str, progress: bool) -> tuple[dict, int]:
+    """Render the frames of one pass (geometry or rgb) that ``out_dir`` lacks, in chunks, each in a
+    fresh worker process (``synth.jobs.run_chunk_process``), ``spec.workers`` at a time.
 
-    Raises RenderError naming the log of the first failed chunk (after the others finished)."""
-    job_dir.mkdir(parents=True, exist_ok=True)
-    pending = list(enumerate(jobs))
-    running: list[tuple[int, subprocess.Popen, Path]] = []
+    Returns (worker info, frames rendered); raises RenderError naming the log of a failed chunk
+    after the other chunks finished."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    from .jobs import run_chunk_process
+
+    todo = missing_frames(out_dir, p.frame_ids)
+    if not todo:
+        return {}, 0
+    work.mkdir(parents=True, exist_ok=True)
+    bar = _Progress(len(p.frame_ids), desc, progress)
+    bar.frame(len(p.frame_ids) - len(todo))
+    lock = threading.Lock()
+
+    def on_frame(_ev):
+        with lock:
+            bar.frame()
+
+    def one(k_frames):
+        k, frames = k_frames
+        jf, log = work / f"{kind}_{k:05d}.json", work / f"{kind}_{k:05d}.log"
+        job = _job(p, kind, frames, out_dir, p.out / "poses.txt")
+        return run_chunk_process(kind, job, str(jf), str(log), on_frame) + (log,)
+
+    try:
+        with ThreadPoolExecutor(max_workers=p.spec.workers) as pool:
+            results = list(pool.map(one, enumerate(chunks(todo, p.spec.chunk_size))))
+    finally:
+        bar.close()
     info: dict = {}
-    failed: list[tuple[int, Path, str]] = []
-
-    def start(k, job):
-        jf = job_dir / f"chunk_{k:05d}.json"
-        jf.write_text(json.dumps(job))
-        log = job_dir / f"chunk_{k:05d}.log"
-        proc = subprocess.Popen([sys.executable, "-m", "synth.blender.worker", str(jf)], stdout=subprocess.PIPE,
-                                stderr=open(log, "w"), text=True, bufsize=1)
-        running.append((k, proc, log))
-
-    import selectors
-
-    sel = selectors.DefaultSelector()
-    while pending or running:
-        while pending and len(running) < workers:
-            k, job = pending.pop(0)
-            start(k, job)
-            sel.register(running[-1][1].stdout, selectors.EVENT_READ, running[-1])
-        for key, _ in sel.select(timeout=1.0):
-            k, proc, log = key.data
-            line = proc.stdout.readline()
-            if not line:
-                sel.unregister(proc.stdout)
-                rc = proc.wait()
-                running.remove((k, proc, log))
-                if rc != 0:
-                    failed.append((k, log, info.pop(f"error_{k}", f"exit status {rc}")))
-                    progress.failed()
-                continue
-            try:
-                ev = json.loads(line)
-            except json.JSONDecodeError:
-                continue  # Blender's own chatter
-            if ev.get("event") == "frame":
-                progress.frame()
-            elif ev.get("event") == "start":
-                info["blender"] = ev.get("blender")
-            elif ev.get("event") == "ready":
-                info["device"] = ev.get("device")
-            elif ev.get("event") == "error":
-                info[f"error_{k}"] = ev.get("error")
-    sel.close()
+    failed = []
+    for rc, err, inf, log in results:
+        info.update(inf)
+        if rc != 0:
+            failed.append((err, log))
     if failed:
-        k, log, err = failed[0]
-        raise RenderError(f"{len(failed)} chunk(s) failed; chunk {k}: {err} (log: {log})")
-    return info
+        err, log = failed[0]
+        raise RenderError(f"{len(failed)} chunk(s) failed; first: {err} (log: {log})")
+    return info, len(todo)
 
 
 def _job(p: Prepared, pass_: str, frames: list[int], out_dir: Path, poses_file: Path) -> dict:
@@ -301,20 +284,11 @@ def render_tour(spec: TourSpec, progress: bool = True) -> dict:
         geometry_rendered = len(todo)
     else:
         gdir = p.geometry_dir
-        poses_file = p.out / "poses.txt"
         work = Path(tempfile.mkdtemp(prefix=".jobs_", dir=p.out))
         ok = False
         try:
-            todo = missing_frames(gdir, p.frame_ids)
-            geometry_rendered = len(todo)
-            if todo:
-                bar = _Progress(len(p.frame_ids), f"{p.layout_name} geometry", progress)
-                bar.frame(len(p.frame_ids) - len(todo))
-                try:
-                    info.update(run_worker_chunks([_job(p, "geometry", c, gdir, poses_file) for c in chunks(todo, spec.chunk_size)],
-                                                  work / "geometry", spec.workers, bar))
-                finally:
-                    bar.close()
+            inf, geometry_rendered = _render_pass(p, "geometry", gdir, work, f"{p.layout_name} geometry", progress)
+            info.update(inf)
             if p.lighting_name is None:  # geometry-only tour: the cached frames are the tour's frames
                 for i in missing_frames(frames_dir, p.frame_ids):
                     src, dst = gdir / fr.frame_name(i), frames_dir / fr.frame_name(i)
@@ -322,14 +296,8 @@ def render_tour(spec: TourSpec, progress: bool = True) -> dict:
                     shutil.copyfile(src, tmp)
                     os.replace(tmp, dst)
             else:
-                todo = missing_frames(frames_dir, p.frame_ids)
-                bar = _Progress(len(p.frame_ids), f"{p.layout_name} {p.lighting_name} rgb", progress)
-                bar.frame(len(p.frame_ids) - len(todo))
-                try:
-                    info.update(run_worker_chunks([_job(p, "rgb", c, frames_dir, poses_file) for c in chunks(todo, spec.chunk_size)],
-                                                  work / "rgb", spec.workers, bar))
-                finally:
-                    bar.close()
+                inf, _ = _render_pass(p, "rgb", frames_dir, work, f"{p.layout_name} {p.lighting_name} rgb", progress)
+                info.update(inf)
             ok = True
         finally:
             if ok:  # a failed chunk's job and log stay for the user to read
