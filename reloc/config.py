@@ -1,0 +1,187 @@
+"""Every threshold of VideoReloc in one place, with the paper's values as defaults.
+
+Section references are to the paper (``shared/seeds/000_e8a71d5c68add1c5.txt``): Sec. III-B map,
+III-C per-clip graph construction, III-D candidates and verification, III-E orientation cues and
+refinement, IV-A implementation details. Values the paper does not state are marked "ours" with
+the reason for the choice.
+
+A config is a frozen dataclass tree; ``Config().replace("registration.center_match_m", 0.4)``
+returns a modified copy, and ``Config.from_dict`` / ``to_dict`` round-trip it through YAML/JSON
+for experiment specs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+
+@dataclass(frozen=True)
+class MapConfig:
+    # Sec. III-B: "nearby object pairs form center-distance edges, and non-degenerate triples form
+    # an index keyed by vertex classes and edge lengths". Edge range from Sec. IV-A (0.2-8 m).
+    triangle_edge_min_m: float = 0.2
+    triangle_edge_max_m: float = 8.0
+    # ours: a triangle whose smallest angle is below this is degenerate (collinear centers fix
+    # no rotation about their line)
+    triangle_min_angle_deg: float = 10.0
+
+
+@dataclass(frozen=True)
+class OdometryConfig:
+    # Sec. III-C: Open3D geometry-based RGB-D odometry chains consecutive frames. Resolution and
+    # stride are ours, chosen by `reloc bench odometry` (speed/drift trade-off, see README).
+    method: str = "point_to_plane"  # point_to_plane (depth only) | hybrid (Open3D, needs RGB)
+    width: int = 160  # odometry image width; height keeps the aspect ratio
+    stride: int = 2  # run odometry every `stride` frames, interpolate the poses in between
+    depth_max_m: float = 6.0
+    depth_diff_max_m: float = 0.07  # projective association: larger depth / plane gaps are outliers
+    depth_huber_delta_m: float = 0.05  # ours: Huber delta of the point-to-plane loss (Open3D's default)
+    iterations: tuple[int, ...] = (10, 6, 4)  # per pyramid level, coarse to fine... finest last
+    # ours: gates that end a clip (Open3D's own success flag is True even without overlap)
+    min_fitness: float = 0.5  # fraction of valid pixels with a correspondence
+    max_inlier_rmse_m: float = 0.05
+    max_step_translation_m: float = 0.5  # per odometry step: larger means a capture gap
+    max_step_rotation_deg: float = 30.0
+    min_valid_depth_fraction: float = 0.05
+    # ours: directions whose point-to-plane information (normalised, per inlier; rotations scaled
+    # by the median depth) is below this are degenerate (e.g. sliding along one wall); the
+    # constant-velocity prediction replaces the estimate along them
+    min_information: float = 0.01
+
+
+@dataclass(frozen=True)
+class DetectionConfig:
+    # Sec. IV-A: a mask-box pair requires 2D IoU > 0.4 and center-depth difference <= 0.4 z + 0.5 m
+    mask_box_iou: float = 0.4
+    depth_check_scale: float = 0.4
+    depth_check_offset_m: float = 0.5
+    min_mask_pixels: int = 20  # ours: smaller masks carry too few depth pixels to place anything
+
+
+@dataclass(frozen=True)
+class ObservationConfig:
+    # Sec. IV-A: object observations use every fifth frame and the final frame of a clip
+    stride: int = 5
+    # Sec. III-C: farthest-point sampling retains up to twelve visible-surface samples
+    surface_samples: int = 12
+    # ours: "depth-consistent" mask pixels lie within this band of the mask's median depth
+    depth_band_scale: float = 0.15
+    depth_band_offset_m: float = 0.3
+    # ours: same-class observations closer than this (centers, clip frame) join one fused node
+    fusion_radius_m: float = 0.5
+    max_node_samples: int = 96  # ours: per node, farthest-point subsampled when exceeded
+
+
+@dataclass(frozen=True)
+class ClipConfig:
+    # Sec. IV-A: clips begin at 100 frames, grow by 50 to at most 600, and close once
+    # |K_c| >= 20 and the camera path reaches 2 m
+    start_frames: int = 100
+    grow_frames: int = 50
+    max_frames: int = 600
+    min_nodes: int = 20
+    min_path_m: float = 2.0
+    adaptive: bool = True  # False: fixed clips of `start_frames` (the paper's Table III ablation)
+
+
+@dataclass(frozen=True)
+class RegistrationConfig:
+    # Sec. IV-A: at most 48 local instances form the query triplets
+    max_local_instances: int = 48
+    # compatible map triangles have 0.2-8 m edges within 0.3 m of the query
+    triangle_edge_tol_m: float = 0.3
+    max_indexed_matches: int = 500
+    random_draws: int = 2000
+    # Sec. III-D: same-class pairs within 0.5 m
+    center_match_m: float = 0.5
+    # anchor route runs when S_g is absent, has fewer than 6 center matches, or fewer than 60 %
+    # of instances pass the 0.5 m box-surface test
+    min_graph_matches: int = 6
+    min_graph_surface_fraction: float = 0.6
+    # per-frame RANSAC: poses ranked by 0.3 m box-surface inliers
+    anchor_inlier_m: float = 0.3
+    anchor_ransac_iterations: int = 200  # ours
+    anchor_min_inliers: int = 6
+    anchor_max_rmse_m: float = 0.5
+    max_anchors: int = 25
+    anchor_consensus: float = 0.6  # translation (m) + rotation (rad)
+    anchor_min_support: int = 3
+    # anchors reject S_g beyond a median disagreement of 1.5 m or 40 degrees
+    veto_translation_m: float = 1.5
+    veto_rotation_deg: float = 40.0
+    # Eq. 2: box-surface consistency with tau = 0.5 m
+    kappa_tau_m: float = 0.5
+    # orientation fallback: four yaw candidates; inliers within 0.5 m; 45 degrees of the
+    # odometry prediction
+    fallback_inlier_m: float = 0.5
+    fallback_yaw_window_deg: float = 45.0
+    seed: int = 0  # ours: the random route's generator
+
+
+@dataclass(frozen=True)
+class RefinementConfig:
+    # Sec. III-E gravity gate: 30 degrees, 60 for the camera-up fallback
+    gravity_gate_deg: float = 30.0
+    gravity_gate_camera_up_deg: float = 60.0
+    # Manhattan yaw: at least five normals, circular MAD <= 12 degrees
+    manhattan_min_normals: int = 5
+    manhattan_max_mad_deg: float = 12.0
+    # Eq. 3 scales (ours; the paper names them without values)
+    sigma_f_m: float = 0.1
+    sigma_g_deg: float = 2.0
+    prior_translation_m: float = 1.0
+    prior_rotation_deg: float = 10.0
+    iterations: int = 8  # outer iterations: assignments, closest points, one Gauss-Newton step
+    orientation_aware: bool = True  # False: point-to-point refinement (Table III ablation)
+    # ours: plane fitting for the gravity/wall cues
+    plane_min_points: int = 30
+    plane_max_rms_m: float = 0.03
+
+
+@dataclass(frozen=True)
+class Config:
+    map: MapConfig = field(default_factory=MapConfig)
+    odometry: OdometryConfig = field(default_factory=OdometryConfig)
+    detection: DetectionConfig = field(default_factory=DetectionConfig)
+    observation: ObservationConfig = field(default_factory=ObservationConfig)
+    clips: ClipConfig = field(default_factory=ClipConfig)
+    registration: RegistrationConfig = field(default_factory=RegistrationConfig)
+    refinement: RefinementConfig = field(default_factory=RefinementConfig)
+
+    def replace(self, dotted: str, value: Any) -> "Config":
+        section, _, name = dotted.partition(".")
+        if not name or section not in {f.name for f in dataclasses.fields(self)}:
+            raise KeyError(f"unknown config key {dotted!r} (expected SECTION.NAME)")
+        sub = getattr(self, section)
+        if name not in {f.name for f in dataclasses.fields(sub)}:
+            raise KeyError(f"unknown config key {dotted!r}")
+        return dataclasses.replace(self, **{section: dataclasses.replace(sub, **{name: value})})
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @staticmethod
+    def from_dict(d: dict | None, source: str = "<config>") -> "Config":
+        """Overrides on top of the defaults; unknown sections or keys are errors naming them."""
+        cfg = Config()
+        for section, values in (d or {}).items():
+            if not isinstance(values, dict):
+                raise ValueError(f"{source}: {section}: expected a mapping")
+            for name, v in values.items():
+                try:
+                    cur = getattr(getattr(cfg, section), name)
+                except AttributeError:
+                    raise ValueError(f"{source}: {section}.{name}: unknown setting") from None
+                if isinstance(cur, tuple):
+                    v = tuple(v)
+                elif isinstance(cur, bool):
+                    if not isinstance(v, bool):
+                        raise ValueError(f"{source}: {section}.{name}: expected true or false, got {v!r}")
+                elif isinstance(cur, (int, float)) and (isinstance(v, bool) or not isinstance(v, (int, float))):
+                    raise ValueError(f"{source}: {section}.{name}: expected a number, got {v!r}")
+                elif isinstance(cur, int) and not isinstance(cur, bool) and isinstance(v, float) and not v.is_integer():
+                    raise ValueError(f"{source}: {section}.{name}: expected an integer, got {v!r}")
+                cfg = cfg.replace(f"{section}.{name}", type(cur)(v) if not isinstance(cur, tuple) else v)
+        return cfg
