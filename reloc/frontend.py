@@ -1,0 +1,227 @@
+"""The streaming front-end: frames in, placed clips out (paper Secs. III-C to III-E).
+
+:class:`FrontEnd` takes frames one at a time. A pose stream (RGB-D odometry, or ground truth for
+experiments that isolate registration) gives each frame its pose in the current odometry chain;
+a chain break (capture gap, inconsistent odometry) ends the clip. Every fifth frame of a clip and
+its last frame are detected and observed; at each checkpoint (100, 150, ... 600 frames) the
+observations are fused and the clip closes once it has enough nodes and camera travel. A closed
+clip is localized (:func:`reloc.localize.localize_clip`) and returned as a :class:`ClipResult`.
+
+Within one chain, consecutive clips are connected by boundary odometry
+``O_c = chain_pose(p)^-1 chain_pose(q)`` between the last frame p of clip c and the first frame q
+of clip c+1, which the back-end uses for tracking and runs.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Protocol
+
+import numpy as np
+
+from .clips import Clip, ClipPolicy, Node, fuse
+from .config import Config
+from .detection import Detector, FrameData
+from .geometry import inv_T
+from .localize import Placement, localize_clip
+from .map import BoxMap
+from .observations import observe
+
+STAGES = ("io", "odometry", "detection", "observation", "registration", "refinement")
+
+
+@dataclass
+class PoseEvent:
+    index: int
+    pose: np.ndarray  # camera -> chain coordinates
+    new_chain: bool = False  # this frame starts a new chain (first frame, or after a break)
+    reason: str = ""  # why the previous chain ended
+
+
+class PoseStream(Protocol):
+    def add(self, frame: FrameData, gt_pose: np.ndarray | None = None) -> list[PoseEvent]: ...
+
+    def flush(self) -> list[PoseEvent]: ...
+
+
+class GroundTruthPoses:
+    """Within-clip poses from the tour's ground truth (isolates registration from odometry)."""
+
+    name = "gt"
+
+    def __init__(self):
+        self._first = True
+
+    def add(self, frame: FrameData, gt_pose=None) -> list[PoseEvent]:
+        if gt_pose is None:
+            raise ValueError("ground-truth poses need the frame's pose")
+        ev = PoseEvent(frame.index, np.asarray(gt_pose, float), new_chain=self._first)
+        self._first = False
+        return [ev]
+
+    def flush(self) -> list[PoseEvent]:
+        return []
+
+
+class StaticPoses:
+    """Identity for every frame: enough for one-frame units, where V_i = I by definition."""
+
+    name = "none"
+
+    def __init__(self):
+        self._first = True
+
+    def add(self, frame: FrameData, gt_pose=None) -> list[PoseEvent]:
+        ev = PoseEvent(frame.index, np.eye(4), new_chain=self._first)
+        self._first = False
+        return [ev]
+
+    def flush(self) -> list[PoseEvent]:
+        return []
+
+
+@dataclass
+class ClipResult:
+    clip: Clip
+    nodes: list[Node]
+    placement: Placement
+    chain: int  # odometry chain (a run candidate): clips of one chain are connected
+    chain_poses: dict[int, np.ndarray]  # frame -> camera-to-chain pose (first and last frames)
+    timings: dict = field(default_factory=dict)
+
+    @property
+    def S(self) -> np.ndarray | None:
+        return self.placement.S
+
+    def frame_poses(self, S: np.ndarray | None = None) -> dict[int, np.ndarray]:
+        """T_i = S V_i for every frame of the clip (Eq. 1)."""
+        S = self.placement.S if S is None else S
+        if S is None:
+            return {}
+        return {i: S @ V for i, V in self.clip.V.items()}
+
+
+class FrontEnd:
+    def __init__(self, bmap: BoxMap, K: np.ndarray, detector: Detector, poses: PoseStream,
+                 config: Config | None = None, seed: int = 0, localize: bool = True,
+                 yaw_prior: Callable[[Clip], float | None] | None = None):
+        self.map = bmap
+        self.K = np.asarray(K, float)
+        self.detector = detector
+        self.poses = poses
+        self.cfg = config or Config()
+        self.policy = ClipPolicy(self.cfg.clips)
+        self.rng = np.random.default_rng(seed)
+        self.localize = localize
+        self.yaw_prior = yaw_prior
+        self.timings = {s: 0.0 for s in STAGES}
+        self.frames_in = 0
+        self._pending: dict[int, FrameData] = {}
+        self._clip: Clip | None = None
+        self._chain = -1
+        self._chain_pose: dict[int, np.ndarray] = {}
+        self._clip_start_pose: np.ndarray | None = None
+        self._last: FrameData | None = None
+        self._next_id = 0
+
+    # -- streaming -------------------------------------------------------------------------------
+
+    def add(self, frame: FrameData, gt_pose: np.ndarray | None = None) -> list[ClipResult]:
+        t = time.perf_counter()
+        events = self.poses.add(frame, gt_pose)
+        self.timings["odometry"] += time.perf_counter() - t
+        return self.feed(frame, events)
+
+    def feed(self, frame: FrameData, events: list[PoseEvent]) -> list[ClipResult]:
+        """Like :meth:`add` with pose events computed elsewhere (one pose stream, several front-ends)."""
+        self.frames_in += 1
+        self._pending[frame.index] = frame
+        out = []
+        for ev in events:
+            out += self._event(ev)
+        return out
+
+    def finish(self, events: list[PoseEvent] | None = None) -> list[ClipResult]:
+        """End of the stream: the pose stream's delayed events (or ``events``), then the open clip."""
+        if events is None:
+            t = time.perf_counter()
+            events = self.poses.flush() if self.poses is not None else []
+            self.timings["odometry"] += time.perf_counter() - t
+        out = []
+        for ev in events:
+            out += self._event(ev)
+        if self._clip is not None and len(self._clip):
+            out.append(self._close("end of tour"))
+        return out
+
+    def _event(self, ev: PoseEvent) -> list[ClipResult]:
+        out = []
+        frame = self._pending.pop(ev.index, None)
+        if frame is None:  # the pose stream reported a frame we never saw: ignore it
+            return out
+        if ev.new_chain:
+            if self._clip is not None and len(self._clip):
+                out.append(self._close(f"gap: {ev.reason}" if ev.reason else "gap"))
+            self._chain += 1
+        if self._clip is None:
+            self._clip = Clip(id=self._next_id, start=ev.index)
+            self._next_id += 1
+            self._clip_start_pose = ev.pose
+            self._chain_pose = {}
+        clip = self._clip
+        clip.frames.append(ev.index)
+        clip.V[ev.index] = inv_T(self._clip_start_pose) @ ev.pose
+        self._chain_pose[ev.index] = ev.pose
+        n = len(clip)
+        checkpoint = self.policy.is_checkpoint(n) or n >= self.cfg.clips.max_frames
+        if (n - 1) % self.cfg.observation.stride == 0 or checkpoint:
+            self._observe(clip, frame)
+        self._last = frame
+        if checkpoint:
+            path = clip.path_length()
+            t = time.perf_counter()
+            n_nodes = len(fuse(clip.clip_observations(), self.cfg.observation)) if self.cfg.clips.adaptive else 0
+            self.timings["observation"] += time.perf_counter() - t
+            if self.policy.should_close(n, n_nodes, path):
+                out.append(self._close("closed" if n < self.cfg.clips.max_frames else "max length"))
+        return out
+
+    def _observe(self, clip: Clip, frame: FrameData) -> None:
+        if frame.index in clip.observed_frames:
+            return
+        t = time.perf_counter()
+        dets = self.detector.detect(frame)
+        t2 = time.perf_counter()
+        obs = observe(frame.index, frame.depth, self.K, dets, self.cfg.observation,
+                      self.cfg.refinement.plane_min_points, self.cfg.refinement.plane_max_rms_m)
+        t3 = time.perf_counter()
+        self.timings["detection"] += t2 - t
+        self.timings["observation"] += t3 - t2
+        clip.observations += obs
+        clip.observed_frames.add(frame.index)
+
+    def _close(self, reason: str) -> ClipResult:
+        clip = self._clip
+        clip.end_reason = reason
+        if self._last is not None and self._last.index == clip.end:
+            self._observe(clip, self._last)  # the clip's last frame is always observed
+        t = time.perf_counter()
+        nodes = fuse(clip.clip_observations(), self.cfg.observation)
+        self.timings["observation"] += time.perf_counter() - t
+        if self.localize:
+            prior = self.yaw_prior(clip) if self.yaw_prior else None
+            placement = localize_clip(nodes, clip.frame_observations(), clip.V, self.map, self.cfg, self.rng,
+                                      yaw_prior=prior)
+        else:
+            placement = Placement(None, reason="localization off", nodes=len(nodes))
+        tm = placement.timings
+        self.timings["registration"] += sum(v for k, v in tm.items() if k != "refinement")
+        self.timings["refinement"] += tm.get("refinement", 0.0)
+        ends = {clip.start: self._chain_pose[clip.start], clip.end: self._chain_pose[clip.end]}
+        res = ClipResult(clip=clip, nodes=nodes, placement=placement, chain=self._chain, chain_poses=ends,
+                         timings=dict(tm))
+        clip.observations = []  # the nodes keep what later stages need; bounded memory
+        self._clip = None
+        self._chain_pose = {}
+        return res
