@@ -192,9 +192,12 @@ class FrontEnd:
             return
         t = time.perf_counter()
         dets = self.detector.detect(frame)
+        # a detector that also gives 3D boxes (Map-Det3D-like) offers them as better centers
+        boxes3d = self.detector.boxes3d(frame) if hasattr(self.detector, "boxes3d") else None
         t2 = time.perf_counter()
         obs = observe(frame.index, frame.depth, self.K, dets, self.cfg.observation,
-                      self.cfg.refinement.plane_min_points, self.cfg.refinement.plane_max_rms_m)
+                      self.cfg.refinement.plane_min_points, self.cfg.refinement.plane_max_rms_m,
+                      boxes3d=boxes3d, det_cfg=self.cfg.detection)
         t3 = time.perf_counter()
         self.timings["detection"] += t2 - t
         self.timings["observation"] += t3 - t2

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .config import ObservationConfig
+from .config import DetectionConfig, ObservationConfig
 from .detection import STRUCTURE_CLASSES, Detection
 from .geometry import farthest_point_sample
 
@@ -55,11 +55,36 @@ def clean_depth(depth: np.ndarray) -> np.ndarray:
     return d
 
 
+@dataclass
+class Box3D:
+    """A 3D box detection (camera frame), as a Map-Det3D-style detector gives them."""
+
+    center: np.ndarray  # (3,) camera frame
+    box2d: tuple[float, float, float, float]  # its projection's bounding rectangle x0, y0, x1, y1
+
+
+def box_iou(a, b) -> float:
+    ix = max(0.0, min(a[2], b[2]) - max(a[0], b[0]) + 1)
+    iy = max(0.0, min(a[3], b[3]) - max(a[1], b[1]) + 1)
+    inter = ix * iy
+    area = lambda r: max(0.0, r[2] - r[0] + 1) * max(0.0, r[3] - r[1] + 1)  # noqa: E731
+    union = area(a) + area(b) - inter
+    return inter / union if union > 0 else 0.0
+
+
 def observe(frame_index: int, depth: np.ndarray, K: np.ndarray, detections: list[Detection],
             cfg: ObservationConfig | None = None, plane_min_points: int = 30,
-            plane_max_rms_m: float = 0.03) -> list[Observation]:
-    """Observations of one frame's detections (camera frame). Masks without valid depth are skipped."""
+            plane_max_rms_m: float = 0.03, boxes3d: list[Box3D] | None = None,
+            det_cfg: DetectionConfig | None = None) -> list[Observation]:
+    """Observations of one frame's detections (camera frame). Masks without valid depth are skipped.
+
+    With ``boxes3d`` (a 3D box detector's output for the frame), an unused box replaces the mask
+    center when its projection has the highest 2D IoU (> 0.4) with the detection's box and its
+    center depth is within 0.4 z + 0.5 m of the mask-center depth z (Secs. III-C, IV-A).
+    """
     cfg = cfg or ObservationConfig()
+    det_cfg = det_cfg or DetectionConfig()
+    unused = list(range(len(boxes3d or [])))
     depth = clean_depth(depth)
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     out: list[Observation] = []
@@ -95,6 +120,14 @@ def observe(frame_index: int, depth: np.ndarray, K: np.ndarray, detections: list
                 normal = None
             elif normal @ center > 0:  # face the camera (the camera is at the origin)
                 normal = -normal
+        if unused and not structure and det.box2d is not None:
+            ious = [box_iou(det.box2d, boxes3d[b].box2d) for b in unused]
+            k = int(np.argmax(ious))
+            b = boxes3d[unused[k]]
+            if (ious[k] > det_cfg.mask_box_iou
+                    and abs(b.center[2] - center[2]) <= det_cfg.depth_check_scale * center[2] + det_cfg.depth_check_offset_m):
+                center = np.asarray(b.center, float)
+                unused.pop(k)
         out.append(Observation(frame=int(frame_index), cls=det.cls, center=center, samples=samples,
                                n_points=int(len(P)), score=float(det.score), normal=normal, plane_rms=rms))
     return out

@@ -449,6 +449,27 @@ def test_observe_back_projects_a_known_plane():
     assert np.allclose(wall.normal, [0, 0, -1], atol=1e-6)
 
 
+def test_3d_box_replaces_mask_center_only_when_iou_and_depth_agree():
+    from reloc.observations import Box3D
+
+    H, W = 60, 80
+    K = np.array([[50.0, 0, 39.5], [0, 50.0, 29.5], [0, 0, 1]])
+    depth = np.full((H, W), 2.0, np.float32)
+    mask = np.zeros((H, W), bool)
+    mask[20:40, 30:50] = True
+    det = Detection("chair", mask)
+    good = Box3D(np.array([0.0, 0.0, 2.3]), (29, 19, 50, 40))  # IoU ~0.83, depth within 0.4 z + 0.5
+    far = Box3D(np.array([0.0, 0.0, 4.0]), (30, 20, 49, 39))  # same rectangle, 2 m behind: fails the depth check
+    off = Box3D(np.array([0.0, 0.0, 2.0]), (0, 0, 15, 15))  # no overlap
+    assert np.allclose(observe(0, depth, K, [det], boxes3d=[off, good])[0].center, good.center)
+    plain = observe(0, depth, K, [det])[0].center
+    assert np.allclose(observe(0, depth, K, [det], boxes3d=[far])[0].center, plain)
+    assert np.allclose(observe(0, depth, K, [det], boxes3d=[off])[0].center, plain)
+    # a box is used once: the second detection of the same place keeps its mask center
+    two = observe(0, depth, K, [det, Detection("chair", mask)], boxes3d=[good])
+    assert np.allclose(two[0].center, good.center) and np.allclose(two[1].center, plain)
+
+
 @pytest.mark.parametrize("bad", ["zeros", "nan", "inf"])
 def test_observe_bad_depth_gives_nothing(bad):
     depth = {"zeros": np.zeros((10, 10)), "nan": np.full((10, 10), np.nan), "inf": np.full((10, 10), np.inf)}[bad]
