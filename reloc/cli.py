@@ -1,7 +1,7 @@
 """``reloc``: the VideoReloc relocalizer's command line.
 
-Its subcommands (map, run, eval, experiment, check) arrive with the reloc issues; for now it only
-reports its version, so that the console script exists and installs.
+Command groups register themselves (``register_cli``) from the module of their pipeline stage.
+User errors (missing files, malformed maps or configs) print one line and exit with status 2.
 """
 
 from __future__ import annotations
@@ -9,15 +9,37 @@ from __future__ import annotations
 import argparse
 import sys
 
+from synth.errors import UserError
+
 from . import __version__
 
 
-def main(argv=None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    from . import bench, mapping, units
+
     p = argparse.ArgumentParser(prog="reloc", description="VideoReloc: relocalization against a map of class-labelled boxes.")
     p.add_argument("--version", action="version", version=f"reloc {__version__}")
-    p.parse_args(argv)
-    p.print_help()
-    return 0
+    sub = p.add_subparsers(dest="group")
+    mapping.register_cli(sub)
+    units.register_cli(sub)
+    bench.register_cli(sub)
+    return p
+
+
+def main(argv=None) -> int:
+    p = build_parser()
+    args = p.parse_args(argv)
+    if not getattr(args, "fn", None):
+        p.print_help()
+        return 0
+    try:
+        return int(args.fn(args) or 0)
+    except UserError as e:
+        print(f"reloc: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("reloc: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

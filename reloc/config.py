@@ -185,3 +185,26 @@ class Config:
                     raise ValueError(f"{source}: {section}.{name}: expected an integer, got {v!r}")
                 cfg = cfg.replace(f"{section}.{name}", type(cur)(v) if not isinstance(cur, tuple) else v)
         return cfg
+
+
+def load_config(path) -> Config:
+    """A YAML/JSON file of overrides (``registration: {center_match_m: 0.4}``) on the paper's defaults."""
+    from pathlib import Path
+
+    import yaml
+
+    from synth.errors import UserError
+
+    p = Path(path)
+    if not p.is_file():
+        raise UserError(f"{p}: config file not found")
+    try:
+        d = yaml.safe_load(p.read_text())
+    except yaml.YAMLError as e:
+        raise UserError(f"{p}: not valid YAML ({' '.join(str(e).split())[:160]})") from None
+    if d is not None and not isinstance(d, dict):
+        raise UserError(f"{p}: expected a mapping of sections (map, odometry, clips, registration, ...)")
+    try:
+        return Config.from_dict(d, source=str(p))
+    except (ValueError, KeyError, TypeError) as e:
+        raise UserError(str(e).strip("'\"")) from None

@@ -170,3 +170,45 @@ class DetectorSpec:
     corruption: Corruption = field(default_factory=Corruption)
     model: str | None = None
     class_map: str | None = None
+
+
+def build_detector(spec: DetectorSpec, classes: dict[int, str], vocabulary=None) -> Detector:
+    """The detector a spec names: ``oracle`` (tour label images, with its corruption) or ``onnx``."""
+    if spec.kind == "oracle":
+        return OracleDetector(classes, vocabulary=vocabulary, corruption=spec.corruption)
+    if spec.kind == "onnx":
+        from synth.errors import UserError
+
+        if not spec.model:
+            raise UserError("--detector onnx needs --model FILE.onnx")
+        from .detection_onnx import OnnxDetector
+
+        return OnnxDetector(spec.model, class_map=spec.class_map, vocabulary=vocabulary)
+    from synth.errors import UserError
+
+    raise UserError(f"unknown detector {spec.kind!r} (expected oracle or onnx)")
+
+
+def add_detector_arguments(p) -> None:
+    """The detector options shared by reloc's commands."""
+    g = p.add_argument_group("detector")
+    g.add_argument("--detector", choices=("oracle", "onnx"), default="oracle",
+                   help="oracle: the tour's rendered labels (default); onnx: a YOLO-style segmentation model")
+    g.add_argument("--model", help="ONNX model file (with --detector onnx)")
+    g.add_argument("--class-map", help="YAML/JSON mapping model class -> toolkit class (with --detector onnx)")
+    g.add_argument("--miss-rate", type=float, default=0.0, help="oracle corruption: probability of missing an instance")
+    g.add_argument("--confusion-rate", type=float, default=0.0, help="oracle corruption: probability of a wrong map class")
+    g.add_argument("--mask-px", type=int, default=0, help="oracle corruption: erode/dilate masks by up to N pixels")
+    g.add_argument("--spurious", type=float, default=0.0, help="oracle corruption: mean invented detections per frame")
+    g.add_argument("--detector-seed", type=int, default=0, help="oracle corruption seed")
+
+
+def detector_spec_from_args(args) -> DetectorSpec:
+    from synth.errors import UserError
+
+    try:
+        c = Corruption(miss_rate=args.miss_rate, confusion_rate=args.confusion_rate, mask_px=args.mask_px,
+                       spurious_per_frame=args.spurious, seed=args.detector_seed)
+    except ValueError as e:
+        raise UserError(str(e)) from None
+    return DetectorSpec(kind=args.detector, corruption=c, model=args.model, class_map=args.class_map)

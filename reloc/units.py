@@ -140,3 +140,58 @@ def format_units(rep: dict) -> str:
     lines.append("")
     lines.append("Recall (%) over all frames, measured when each unit closes; frames of unplaced units fail.")
     return "\n".join(lines)
+
+
+def _lengths(text: str) -> tuple[int, ...]:
+    from synth.errors import UserError
+
+    try:
+        vals = tuple(int(x) for x in text.split(","))
+    except ValueError:
+        raise UserError(f"--lengths must be comma-separated frame counts like 1,30,100,250, got {text!r}") from None
+    if not vals or any(v < 1 for v in vals):
+        raise UserError(f"--lengths: every unit needs at least one frame, got {text!r}")
+    return vals
+
+
+def cmd_units(args) -> int:
+    import json
+
+    from synth.dataset import Tour
+
+    from .config import Config, load_config
+    from .detection import build_detector, detector_spec_from_args
+    from .io import write_json_atomic
+
+    tour = Tour(args.tour)
+    bmap = BoxMap.load(args.map)
+    cfg = load_config(args.config) if args.config else Config()
+    det = build_detector(detector_spec_from_args(args), tour.class_names(), vocabulary=bmap.class_set)
+    rep = run_units(tour, bmap, lengths=_lengths(args.lengths), detector=det, poses=args.poses, cfg=cfg,
+                    frames=args.frames, one_frame_stride=args.one_frame_stride, seed=args.seed,
+                    progress=not args.quiet)
+    if args.out:
+        write_json_atomic(args.out, rep)
+    print(json.dumps(rep, indent=2) if args.json else format_units(rep))
+    return 0
+
+
+def register_cli(subparsers) -> None:
+    from .detection import add_detector_arguments
+
+    p = subparsers.add_parser("units", help="the paper's Table I: independent 1/30/100/250-frame units, recall per length")
+    p.add_argument("--map", required=True, help="map file (videoreloc-boxes/1 JSON)")
+    p.add_argument("--tour", required=True, help="rendered tour directory")
+    p.add_argument("--lengths", default=",".join(map(str, DEFAULT_LENGTHS)), help="unit lengths in frames (default 1,30,100,250)")
+    p.add_argument("--poses", choices=("odometry", "gt"), default="odometry",
+                   help="within-unit poses: RGB-D odometry (default) or the tour's ground truth")
+    p.add_argument("--frames", type=int, help="only the first N frames of the tour")
+    p.add_argument("--one-frame-stride", type=int, default=1,
+                   help="evaluate one-frame units on every k-th frame only (the expensive row)")
+    p.add_argument("--config", help="YAML overrides of the paper's thresholds")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", action="store_true", help="print JSON instead of the table")
+    p.add_argument("--out", help="also write the JSON report here")
+    p.add_argument("--quiet", action="store_true")
+    add_detector_arguments(p)
+    p.set_defaults(fn=cmd_units)

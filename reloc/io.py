@@ -1,0 +1,20 @@
+"""Atomic file writing for reloc's outputs: a reader never sees a half-written file."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+
+def write_text_atomic(path, text: str) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+    return path
+
+
+def write_json_atomic(path, data, indent: int | None = 2) -> Path:
+    return write_text_atomic(path, json.dumps(data, indent=indent) + "\n")
