@@ -91,7 +91,8 @@ def cmd_frontend(args) -> int:
 def cmd_odometry(args) -> int:
     from . import bench_odometry
 
-    return bench_odometry.main([args.tour, "--frames", str(args.frames)] + (["--json"] if args.json else []))
+    argv = [args.tour, "--frames", str(args.frames), "--widths", args.widths, "--strides", args.strides]
+    return bench_odometry.main(argv + (["--json", args.json] if args.json else []))
 
 
 def register_cli(subparsers) -> None:
@@ -109,7 +110,9 @@ def register_cli(subparsers) -> None:
     a = sub.add_parser("odometry", help="odometry speed against drift per metre for resolutions and strides")
     a.add_argument("tour")
     a.add_argument("--frames", type=int, default=900)
-    a.add_argument("--json", action="store_true")
+    a.add_argument("--widths", default="640,320,160,80", help="odometry image widths to compare")
+    a.add_argument("--strides", default="1,2,3", help="frame strides to compare")
+    a.add_argument("--json", metavar="FILE", help="also write the rows to this JSON file")
     a.set_defaults(fn=cmd_odometry)
 
 

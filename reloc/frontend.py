@@ -34,7 +34,7 @@ STAGES = ("io", "odometry", "detection", "observation", "registration", "refinem
 @dataclass
 class PoseEvent:
     index: int
-    pose: np.ndarray  # camera -> chain coordinates
+    pose: np.ndarray | None  # camera -> chain coordinates; None: no usable depth, in no clip
     new_chain: bool = False  # this frame starts a new chain (first frame, or after a break)
     reason: str = ""  # why the previous chain ended
 
@@ -62,6 +62,27 @@ class GroundTruthPoses:
 
     def flush(self) -> list[PoseEvent]:
         return []
+
+
+class OdometryPoses:
+    """Within-clip poses from RGB-D odometry (:class:`reloc.odometry.OdometryChain`)."""
+
+    name = "odometry"
+
+    def __init__(self, K, width: int, height: int, config=None):
+        from .odometry import OdometryChain
+
+        self.chain = OdometryChain(K, width, height, config)
+        self.use_rgb = self.chain.config.method == "hybrid"
+
+    def _events(self, poses) -> list[PoseEvent]:
+        return [PoseEvent(c.frame_index, c.V, new_chain=c.new_clip, reason=c.reason) for c in poses]
+
+    def add(self, frame: FrameData, gt_pose=None) -> list[PoseEvent]:
+        return self._events(self.chain.add(frame.index, frame.depth, frame.rgb if self.use_rgb else None))
+
+    def flush(self) -> list[PoseEvent]:
+        return self._events(self.chain.flush())
 
 
 class StaticPoses:
@@ -124,6 +145,7 @@ class FrontEnd:
         self._clip_start_pose: np.ndarray | None = None
         self._last: FrameData | None = None
         self._next_id = 0
+        self.unposed: list[int] = []  # frames without a pose (no usable depth)
 
     # -- streaming -------------------------------------------------------------------------------
 
@@ -159,6 +181,11 @@ class FrontEnd:
         out = []
         frame = self._pending.pop(ev.index, None)
         if frame is None:  # the pose stream reported a frame we never saw: ignore it
+            return out
+        if ev.pose is None:  # no usable depth: the open clip ends, the frame belongs to none
+            if self._clip is not None and len(self._clip):
+                out.append(self._close(f"gap: {ev.reason}" if ev.reason else "gap: no usable depth"))
+            self.unposed.append(ev.index)
             return out
         if ev.new_chain:
             if self._clip is not None and len(self._clip):

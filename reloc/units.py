@@ -32,7 +32,7 @@ def make_pose_stream(kind: str, tour, cfg: Config) -> PoseStream:
     if kind == "gt":
         return GroundTruthPoses()
     if kind == "odometry":
-        from .odometry import OdometryPoses
+        from .frontend import OdometryPoses
 
         return OdometryPoses(tour.K, tour.intrinsics.width, tour.intrinsics.height, cfg.odometry)
     raise ValueError(f"unknown pose source {kind!r} (expected odometry or gt)")

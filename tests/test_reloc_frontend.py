@@ -158,3 +158,49 @@ def test_gt_pose_stream_gives_identity_at_clip_start(tours):
     expect = np.linalg.inv(tour.pose(r.clip.start)) @ tour.pose(i)
     dt, dr = pose_distance(r.clip.V[i], expect)
     assert dt < 1e-9 and math.degrees(dr) < 1e-6
+
+
+def run_frontend_odometry(tour, bmap, mutate=None, frames=None):
+    from reloc.frontend import OdometryPoses
+
+    det = OracleDetector(tour.class_names(), vocabulary=bmap.class_set)
+    cfg = Config()
+    fe = FrontEnd(bmap, tour.K, det, OdometryPoses(tour.K, W, H, cfg.odometry), config=cfg)
+    results = []
+    for i in list(tour.frame_indices)[:frames]:
+        f = tour.frame(int(i), rgb=False)
+        fd = FrameData(int(i), f.depth, tour.K, None, f.instance, f.semantic)
+        results += fe.add(mutate(fd) if mutate else fd)
+    return fe, results + fe.finish()
+
+
+def test_frontend_with_odometry_places_clips(tours):
+    tour, bmap = tours["apt_0"], tours["map"]
+    fe, results = run_frontend_odometry(tour, bmap)
+    est = {}
+    for r in results:
+        assert r.placement.ok, r.placement.reason
+        est.update(r.frame_poses())
+    s = summarize(est, {int(i): tour.pose(int(i)) for i in tour.frame_indices})
+    assert s["coverage"] == 1.0 and s["recall_1m_10deg"] >= 0.95, s
+    assert fe.timings["odometry"] > 0
+
+
+def test_depth_gap_ends_the_clip_and_loses_nothing_else(tours):
+    tour, bmap = tours["apt_0"], tours["map"]
+    dead = set(range(140, 150))
+
+    def mutate(fd):
+        if fd.index in dead:
+            fd.depth = np.zeros_like(fd.depth)
+        return fd
+
+    fe, results = run_frontend_odometry(tour, bmap, mutate=mutate)
+    assert sorted(fe.unposed) == sorted(dead)
+    ends = [r for r in results if r.clip.end == 139]
+    assert ends and ends[0].clip.end_reason.startswith("gap")
+    assert any(r.clip.start == 150 for r in results)
+    frames = sorted(i for r in results for i in r.clip.frames)
+    assert frames == [int(i) for i in tour.frame_indices if int(i) not in dead]
+    assert len({r.chain for r in results}) >= 2  # the gap broke the odometry chain
+    assert not fe._pending  # nothing left waiting
