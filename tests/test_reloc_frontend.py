@@ -204,3 +204,63 @@ def test_depth_gap_ends_the_clip_and_loses_nothing_else(tours):
     assert frames == [int(i) for i in tour.frame_indices if int(i) not in dead]
     assert len({r.chain for r in results}) >= 2  # the gap broke the odometry chain
     assert not fe._pending  # nothing left waiting
+
+
+def _cli(argv, capsys):
+    from reloc.cli import main
+
+    code = main(argv)
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_cli_units_json_and_table(tours, tmp_path, capsys):
+    tour, bmap = tours["apt_0"], tours["map"]
+    out = tmp_path / "units.json"
+    code, stdout, err = _cli(["units", "--map", bmap.source, "--tour", str(tour.root), "--lengths", "30,100",
+                              "--frames", "200", "--json", "--quiet", "--out", str(out)], capsys)
+    assert code == 0, err
+    rep = json.loads(stdout)
+    assert [r["unit"] for r in rep["units"]] == [30, 100] and rep["frames"] == 200 and rep["poses"] == "odometry"
+    assert json.loads(out.read_text()) == rep
+    for r in rep["units"]:
+        assert 0.0 <= r["recall_25cm_5deg"] <= r["recall_1m_10deg"] <= 1.0
+    code, stdout, _ = _cli(["units", "--map", bmap.source, "--tour", str(tour.root), "--lengths", "100",
+                            "--frames", "100", "--poses", "gt", "--quiet", "--miss-rate", "0.1"], capsys)
+    assert code == 0 and "| 100-frame clip |" in stdout
+
+
+def test_cli_bench_frontend_prints_stages(tours, capsys):
+    tour, bmap = tours["apt_0"], tours["map"]
+    code, stdout, err = _cli(["bench", "frontend", "--tour", str(tour.root), "--map", bmap.source, "--frames", "110",
+                              "--repeat", "1", "--json"], capsys)
+    assert code == 0, err
+    rep = json.loads(stdout)
+    assert set(rep["ms_per_frame"]) == {"io", "odometry", "detection", "observation", "registration", "refinement"}
+    assert rep["fps_without_io"] > 0 and rep["clips"] >= 1
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["units", "--map", "/nonexistent/map.json", "--tour", "TOUR"], "map file not found"),
+    (["units", "--map", "MAP", "--tour", "/nonexistent/tour"], "tour directory not found"),
+    (["units", "--map", "MAP", "--tour", "TOUR", "--lengths", "1,x"], "--lengths"),
+    (["units", "--map", "MAP", "--tour", "TOUR", "--miss-rate", "2"], "miss_rate"),
+    (["units", "--map", "MAP", "--tour", "TOUR", "--config", "CFG"], "registration.center_match: unknown setting"),
+    (["units", "--map", "MAP", "--tour", "TOUR", "--detector", "onnx"], "--model"),
+])
+def test_cli_bad_input_is_one_line_exit_2(tours, tmp_path, capsys, argv, message):
+    cfg = tmp_path / "cfg.yaml"
+    cfg.write_text("registration:\n  center_match: 0.4\n")
+    argv = [str(cfg) if a == "CFG" else tours["map"].source if a == "MAP" else str(tours["apt_0"].root) if a == "TOUR"
+            else a for a in argv]
+    code, _, err = _cli(argv, capsys)
+    assert code == 2
+    assert message in err and len(err.strip().splitlines()) == 1
+
+
+def test_cli_malformed_config_yaml(tours, tmp_path, capsys):
+    cfg = tmp_path / "cfg.yaml"
+    cfg.write_text("registration: [1, 2\n")
+    code, _, err = _cli(["units", "--map", tours["map"].source, "--tour", str(tours["apt_0"].root), "--config", str(cfg)],
+                        capsys)
+    assert code == 2 and str(cfg) in err and "YAML" in err
