@@ -56,6 +56,8 @@ from typing import NamedTuple
 import numpy as np
 
 from .config import OdometryConfig
+from .geometry import exp_so3 as _exp_so3
+from .geometry import log_so3 as _log_so3
 
 # ours: a level's Gauss-Newton loop stops once an update moves less than this
 _CONVERGED_TRANSLATION_M = 1e-5
@@ -66,30 +68,7 @@ _MAX_UPDATE_ROTATION_DEG = 10.0
 
 
 # ---------------------------------------------------------------------------------------------
-# small SE(3) helpers
-
-
-def _exp_so3(w: np.ndarray) -> np.ndarray:
-    th = float(np.linalg.norm(w))
-    K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-    if th < 1e-12:
-        return np.eye(3) + K
-    K /= th
-    return np.eye(3) + math.sin(th) * K + (1.0 - math.cos(th)) * (K @ K)
-
-
-def _log_so3(R: np.ndarray) -> np.ndarray:
-    c = max(-1.0, min(1.0, (float(np.trace(R)) - 1.0) / 2.0))
-    th = math.acos(c)
-    v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-    if th < 1e-9:
-        return v / 2.0
-    if th > math.pi - 1e-6:
-        A = (R + np.eye(3)) / 2.0
-        k = int(np.argmax(np.diag(A)))
-        axis = A[:, k] / math.sqrt(max(A[k, k], 1e-12))
-        return axis / np.linalg.norm(axis) * th
-    return v * (th / (2.0 * math.sin(th)))
+# small SE(3) helpers (the rotation maps themselves are reloc.geometry's)
 
 
 def rotation_deg(T: np.ndarray) -> float:
