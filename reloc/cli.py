@@ -15,13 +15,15 @@ from . import __version__
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from . import bench, mapping, units
+    from . import bench, eval as eval_, mapping, run, units
 
     p = argparse.ArgumentParser(prog="reloc", description="VideoReloc: relocalization against a map of class-labelled boxes.")
     p.add_argument("--version", action="version", version=f"reloc {__version__}")
     sub = p.add_subparsers(dest="group")
     mapping.register_cli(sub)
     units.register_cli(sub)
+    run.register_cli(sub)
+    eval_.register_cli(sub)
     bench.register_cli(sub)
     return p
 

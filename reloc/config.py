@@ -149,6 +149,31 @@ class RefinementConfig:
 
 
 @dataclass(frozen=True)
+class BackendConfig:
+    # Sec. III-F tracking: the boundary odometry's prediction is accepted when the new clip's
+    # surface support (kappa, Eq. 2) reaches this (ours: the same 60 % the anchor route uses to
+    # call a graph placement weak)
+    tracking: bool = True
+    track_min_kappa: float = 0.6
+    # run-level decision: placement-consistent sub-runs agree within 0.5 m and 10 degrees;
+    # replacements are box-refined under a 0.5 m / 5 degree prior
+    run_level: bool = True
+    subrun_translation_m: float = 0.5
+    subrun_rotation_deg: float = 10.0
+    revision_prior_translation_m: float = 0.5
+    revision_prior_rotation_deg: float = 5.0
+    # clip-rigid pose graph: object-graph (absolute) constraints weigh 20, demoted to 1 when
+    # inconsistent; Gauss-Seidel relaxation with chordal rotation averaging and Geman-McClure
+    absolute_weight: float = 20.0
+    demoted_weight: float = 1.0
+    relative_weight: float = 20.0  # ours: boundary odometry is as trusted as a consistent placement
+    gm_scale: float = 0.5  # ours: Geman-McClure scale of the residual (m + rad)
+    graph_iterations: int = 30  # ours
+    # causal evaluation: "at run starts, it uses per-frame localization when available"
+    frame_localization: bool = True
+
+
+@dataclass(frozen=True)
 class Config:
     map: MapConfig = field(default_factory=MapConfig)
     odometry: OdometryConfig = field(default_factory=OdometryConfig)
@@ -157,6 +182,7 @@ class Config:
     clips: ClipConfig = field(default_factory=ClipConfig)
     registration: RegistrationConfig = field(default_factory=RegistrationConfig)
     refinement: RefinementConfig = field(default_factory=RefinementConfig)
+    backend: BackendConfig = field(default_factory=BackendConfig)
 
     def replace(self, dotted: str, value: Any) -> "Config":
         section, _, name = dotted.partition(".")

@@ -126,7 +126,9 @@ class ClipResult:
 class FrontEnd:
     def __init__(self, bmap: BoxMap, K: np.ndarray, detector: Detector, poses: PoseStream,
                  config: Config | None = None, seed: int = 0, localize: bool = True,
-                 yaw_prior: Callable[[Clip], float | None] | None = None):
+                 yaw_prior: Callable[[Clip], float | None] | None = None,
+                 predict: Callable[[int, np.ndarray], np.ndarray | None] | None = None,
+                 on_frame: Callable[[PoseEvent, "Clip | None", int], None] | None = None):
         self.map = bmap
         self.K = np.asarray(K, float)
         self.detector = detector
@@ -136,6 +138,8 @@ class FrontEnd:
         self.rng = np.random.default_rng(seed)
         self.localize = localize
         self.yaw_prior = yaw_prior
+        self.predict = predict  # (chain, camera-to-chain pose of the clip's first frame) -> S_pred
+        self.on_frame = on_frame  # called for every frame once it has a pose (or has none)
         self.timings = {s: 0.0 for s in STAGES}
         self.frames_in = 0
         self._pending: dict[int, FrameData] = {}
@@ -186,6 +190,8 @@ class FrontEnd:
             if self._clip is not None and len(self._clip):
                 out.append(self._close(f"gap: {ev.reason}" if ev.reason else "gap: no usable depth"))
             self.unposed.append(ev.index)
+            if self.on_frame:
+                self.on_frame(ev, None, self._chain)
             return out
         if ev.new_chain:
             if self._clip is not None and len(self._clip):
@@ -205,6 +211,8 @@ class FrontEnd:
         if (n - 1) % self.cfg.observation.stride == 0 or checkpoint:
             self._observe(clip, frame)
         self._last = frame
+        if self.on_frame:
+            self.on_frame(ev, clip, self._chain)
         if checkpoint:
             path = clip.path_length()
             t = time.perf_counter()
@@ -241,8 +249,11 @@ class FrontEnd:
         self.timings["observation"] += time.perf_counter() - t
         if self.localize:
             prior = self.yaw_prior(clip) if self.yaw_prior else None
+            pred = None
+            if self.predict is not None and self.cfg.backend.tracking:
+                pred = self.predict(self._chain, self._chain_pose[clip.start])
             placement = localize_clip(nodes, clip.frame_observations(), clip.V, self.map, self.cfg, self.rng,
-                                      yaw_prior=prior)
+                                      yaw_prior=prior, prediction=pred)
         else:
             placement = Placement(None, reason="localization off", nodes=len(nodes))
         tm = placement.timings

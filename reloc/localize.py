@@ -43,7 +43,11 @@ class Placement:
 
 def localize_clip(nodes: list[Node], frame_obs: dict[int, list[Observation]], V: dict[int, np.ndarray],
                   bmap: BoxMap, cfg: Config, rng: np.random.Generator, yaw_prior: float | None = None,
-                  anchors: bool = True) -> Placement:
+                  anchors: bool = True, prediction: np.ndarray | None = None) -> Placement:
+    """Place one clip. ``prediction`` (tracking, Sec. III-F): the previous clip's placement carried
+    over by boundary odometry; accepted and refined when the clip's box-surface support reaches
+    ``backend.track_min_kappa``, otherwise the clip is localized afresh with the prediction's yaw
+    restricting the orientation fallback."""
     reg, ref = cfg.registration, cfg.refinement
     tm: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -61,6 +65,22 @@ def localize_clip(nodes: list[Node], frame_obs: dict[int, list[Observation]], V:
     scorer = SurfaceScorer(bmap, [n.cls for n in nodes], [n.samples for n in nodes])
     gate = gravity.gate_deg(ref)
     info: dict = {"gravity_planes": gravity.n_planes}
+    if prediction is not None:
+        rho, _ = scorer.rho(prediction[None])
+        k_pred = float(kappa(rho, reg.kappa_tau_m)[0])
+        info["tracking_kappa"] = round(k_pred, 3)
+        if k_pred >= cfg.backend.track_min_kappa:
+            t1 = time.perf_counter()
+            S, rinfo = orientation_aware(prediction, nodes, bmap, ref, reg, gravity)
+            tm["refinement"] = time.perf_counter() - t1
+            rho, _ = scorer.rho(S[None])
+            info["refinement"] = rinfo
+            return Placement(S=S, source="tracking", kappa=float(kappa(rho, reg.kappa_tau_m)[0]), nodes=n_nodes,
+                             gravity=gravity.source, info=info, timings=tm)
+        if yaw_prior is None:
+            from .geometry import yaw_of
+
+            yaw_prior = yaw_of(prediction[:3, :3])
 
     S_g = graph_candidate(nodes, bmap, reg, rng)
     tm["graph"] = time.perf_counter() - t0

@@ -1,0 +1,74 @@
+"""``reloc eval``: recall and errors of a ``reloc run`` output against a tour's ground truth.
+
+For each trajectory (causal, closure, and any budget_B), over ALL ground-truth frames: recall at
+1 m/10 deg and 0.25 m/5 deg (a frame without a pose is a failure), median position and rotation
+error over the returned poses, and pose coverage.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from synth.camera import read_tum
+from synth.errors import UserError
+
+from .evaluation import summarize
+from .io import write_json_atomic
+
+TRAJECTORIES = ("causal", "closure")
+
+
+def evaluate_run(out_dir, tour) -> dict:
+    out = Path(out_dir)
+    if not out.is_dir():
+        raise UserError(f"{out}: run output directory not found")
+    gt = {int(i): T for i, T in zip(tour.frame_indices, tour.poses)}
+    names = list(TRAJECTORIES) + sorted(p.stem for p in out.glob("budget_*.txt"))
+    rep: dict = {"run": str(out), "gt": str(tour.root), "frames": len(gt)}
+    for name in names:
+        path = out / f"{name}.txt"
+        if not path.is_file():
+            raise UserError(f"{path}: trajectory file not found (is {out} a reloc run output?)")
+        frames, poses = read_tum(path, fps=tour.fps)
+        est = {int(i): T for i, T in zip(frames, poses)}
+        extra = sorted(set(est) - set(gt))
+        s = summarize(est, gt)
+        s.pop("frames", None)
+        if extra:
+            s["frames_not_in_gt"] = len(extra)
+        rep[name] = s
+    return rep
+
+
+def format_eval(rep: dict) -> str:
+    lines = [f"{rep['run']} against {rep['gt']} ({rep['frames']} frames)", "",
+             "| output | 1 m/10 deg | 0.25 m/5 deg | median pos (m) | median rot (deg) | coverage |",
+             "|---|---|---|---|---|---|"]
+    for k, v in rep.items():
+        if not isinstance(v, dict):
+            continue
+        med = (f"{v['median_pos_m']:.3f} | {v['median_rot_deg']:.2f}" if v["coverage"] > 0 else "- | -")
+        lines.append(f"| {k} | {100 * v['recall_1m_10deg']:.1f} | {100 * v['recall_25cm_5deg']:.1f} | {med} | "
+                     f"{100 * v['coverage']:.1f} |")
+    return "\n".join(lines)
+
+
+def cmd_eval(args) -> int:
+    from synth.dataset import Tour
+
+    tour = Tour(args.gt)
+    rep = evaluate_run(args.out_dir, tour)
+    if args.save:
+        write_json_atomic(args.save, rep)
+    print(json.dumps(rep, indent=2) if args.json else format_eval(rep))
+    return 0
+
+
+def register_cli(subparsers) -> None:
+    p = subparsers.add_parser("eval", help="recall at 1 m/10 deg and 0.25 m/5 deg of a reloc run output")
+    p.add_argument("out_dir", metavar="OUT", help="a reloc run output directory")
+    p.add_argument("--gt", required=True, metavar="TOUR_DIR", help="the tour with the ground-truth poses")
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--save", metavar="FILE.json", help="also write the JSON here")
+    p.set_defaults(fn=cmd_eval)
