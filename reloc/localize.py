@@ -104,7 +104,7 @@ def localize_clip(nodes: list[Node], frame_obs: dict[int, list[Observation]], V:
     # gravity gate
     passed = [c for c in cands if tilt_deg(c.S[:3, :3], gravity.u) <= gate]
     if len(passed) < len(cands):
-        info["gravity_rejected"] = [c.source for c in cands if c not in passed]
+        info["gravity_rejected"] = [c.source for c in cands if all(c is not p for p in passed)]
     passed = score_candidates(passed, nodes, bmap, reg, scorer)
     best = passed[0] if passed else None
     if best is None:

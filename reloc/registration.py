@@ -29,7 +29,7 @@ from .observations import Observation
 from .surface import SurfaceScorer, kappa, median_rho
 
 
-@dataclass
+@dataclass(eq=False)  # compared by identity: fields hold arrays
 class Candidate:
     S: np.ndarray
     source: str  # graph | anchors | fallback | tracking | ...
@@ -43,7 +43,7 @@ class Candidate:
         return (self.kappa, -self.median_rho)
 
 
-@dataclass
+@dataclass(eq=False)
 class Anchor:
     frame: int
     W: np.ndarray  # camera -> map

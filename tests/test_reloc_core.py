@@ -309,6 +309,27 @@ def _frame_observations(m, W_true, ids, rng, frame):
     return out
 
 
+def test_candidates_compare_by_identity():
+    from reloc.registration import Candidate
+
+    a, b = Candidate(S=np.eye(4), source="graph"), Candidate(S=np.eye(4), source="anchors")
+    assert a in [a, b] and b not in [a] and [a, b].index(b) == 1  # no "truth value of an array" error
+
+
+def test_gravity_gate_rejects_a_tilted_candidate_without_crashing():
+    from reloc.localize import localize_clip
+
+    m = room_map(n_objects=30, seed=5)
+    rng = np.random.default_rng(2)
+    cam = G.make_T(np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]]), [0, 0, 0])
+    tilt = G.make_T(G.exp_so3([math.radians(70), 0, 0]), [0, 0, 0])
+    S_true = yaw_T(0.3, [0.5, 0.5, 0.0]) @ tilt  # the clip frame is tilted, its camera claims to be level
+    nodes = nodes_from_map(m, S_true, rng, ids=list(m.object_nodes[:12]))
+    p = localize_clip(nodes, {}, {0: cam}, m, Config(), rng)
+    assert p.info["gravity_rejected"] == ["graph"] and p.S is None
+    assert "gravity gate" in p.reason and "no wall normals" in p.reason
+
+
 def test_anchors_give_consensus_and_veto_wrong_graph_placement():
     m = room_map(n_objects=30, seed=6)
     rng = np.random.default_rng(9)
