@@ -31,9 +31,11 @@ import numpy as np
 
 from .config import Config
 from .frontend import ClipResult
-from .geometry import inv_T, make_T, pose_distance, rotation_mean
+from .geometry import inv_T, make_T, pose_distance, rotation_between, rotation_mean
 from .map import BoxMap
-from .refinement import estimate_gravity, level, manhattan_correction, orientation_aware, wall_normals
+from .refinement import (Z, estimate_gravity, level, manhattan_correction, orientation_aware, wall_normals,
+                         wall_yaws)
+from .registration import fallback_candidates
 from .surface import SurfaceScorer
 
 
@@ -119,7 +121,18 @@ class Backend:
         return int((rho[0] < self.cfg.registration.kappa_tau_m).sum())
 
     def _support(self, clips: list[ClipState], G: np.ndarray) -> int:
-        return sum(self._passes(d, G @ d.C) for d in clips)
+        return int(self._support_many(clips, [G])[0])
+
+    def _support_many(self, clips: list[ClipState], Gs) -> np.ndarray:
+        """Summed per-instance passes of Eq. 2 over ``clips`` for each hypothesis (one batch per clip)."""
+        Gs = np.asarray(Gs, float).reshape(-1, 4, 4)
+        total = np.zeros(len(Gs), dtype=np.int64)
+        for d in clips:
+            if d.scorer is None:
+                continue
+            rho, _ = d.scorer.rho(Gs @ d.C)
+            total += (rho < self.cfg.registration.kappa_tau_m).sum(axis=1)
+        return total
 
     def _refine_under_prior(self, st: ClipState, S0: np.ndarray) -> np.ndarray:
         if not st.res.nodes:
@@ -139,8 +152,23 @@ class Backend:
         if not placed:
             return
         Gs = [c.front @ inv_T(c.C) for c in placed]
-        scores = [self._support(run, G) for G in Gs]
-        best = int(np.argmax(scores))
+        # hypotheses: every clip placement's G_c, plus the gravity/wall-derived orientation
+        # variants of each clip (levelled, four Manhattan yaws, translation from center votes)
+        # (near-duplicates, e.g. the clips of one consistent sub-run, are scored once)
+        hyps: list[tuple[np.ndarray, int | None]] = []
+
+        def offer(G, k):
+            if not any(_close(G, H, b.subrun_translation_m / 4, b.subrun_rotation_deg / 4) for H, _ in hyps):
+                hyps.append((G, k))
+
+        for k, G in enumerate(Gs):
+            offer(G, k)
+        for k, c in enumerate(placed):
+            for S in self._cue_variants(c):
+                offer(S @ inv_T(c.C), None)
+        scores = self._support_many(run, [G for G, _ in hyps])
+        h_best = int(np.argmax(scores))
+        G_star, best = hyps[h_best]
         # placement-consistent sub-runs over the placed clips, in run order
         subs: list[list[int]] = [[0]]
         for k in range(1, len(placed)):
@@ -149,13 +177,22 @@ class Backend:
             else:
                 subs.append([k])
         sub_of = {k: s for s, ks in enumerate(subs) for k in ks}
-        trusted = {sub_of[best]}
+        if best is not None:  # a clip placement won: its sub-run seeds the trusted set
+            trusted = {sub_of[best]}
+            center = sub_of[best]
+        else:  # a cue-derived winner: any sub-run of at least two clips that agrees with it
+            trusted = {s for s, ks in enumerate(subs) if len(ks) >= 2
+                       and _close(Gs[ks[0]], G_star, b.subrun_translation_m, b.subrun_rotation_deg)}
+            center = min(trusted) if trusted else 0
         # visit the other sub-runs nearest-first (in run order distance to the trusted ones)
-        order = sorted((s for s in range(len(subs)) if s not in trusted), key=lambda s: abs(s - sub_of[best]))
+        order = sorted((s for s in range(len(subs)) if s not in trusted), key=lambda s: abs(s - center))
         for s in order:
-            near = min(trusted, key=lambda t: abs(t - s))
-            ref_k = subs[near][-1] if near < s else subs[near][0]
-            G_prop = Gs[ref_k]
+            if trusted:
+                near = min(trusted, key=lambda t: abs(t - s))
+                ref_k = subs[near][-1] if near < s else subs[near][0]
+                G_prop = Gs[ref_k]
+            else:  # nothing seeded: the cue-derived hypothesis itself is propagated
+                G_prop = G_star
             members = [placed[k] for k in subs[s]]
             if _close(Gs[subs[s][0]], G_prop, b.subrun_translation_m, b.subrun_rotation_deg):
                 trusted.add(s)  # it agrees with propagation: nothing to decide
@@ -171,6 +208,20 @@ class Backend:
                 st.source = "run-level"
                 st.info["revised_from"] = st.front_source
         self._propagate_unplaced(run)
+
+    def _cue_variants(self, st: ClipState) -> list[np.ndarray]:
+        """Gravity/wall-derived placements of one clip (computed once: they depend on its nodes only)."""
+        if "cue_variants" not in st.info:
+            out = []
+            nodes = st.res.nodes
+            if nodes:
+                grav = estimate_gravity(nodes, st.res.clip.V)
+                R_level = rotation_between(grav.u, Z)
+                yaws = wall_yaws(R_level, wall_normals(nodes))
+                if len(yaws) >= self.cfg.refinement.manhattan_min_normals:
+                    out = [c.S for c in fallback_candidates(nodes, self.map, self.cfg.registration, R_level, yaws)]
+            st.info["cue_variants"] = out
+        return st.info["cue_variants"]
 
     def _propagate_unplaced(self, run: list[ClipState]) -> None:
         """Clips the front-end could not place take the nearest placed clip's run hypothesis."""
