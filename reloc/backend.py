@@ -158,7 +158,7 @@ class Backend:
         hyps: list[tuple[np.ndarray, int | None]] = []
 
         def offer(G, k):
-            if not any(_close(G, H, b.subrun_translation_m / 4, b.subrun_rotation_deg / 4) for H, _ in hyps):
+            if not any(_close(G, H, b.subrun_translation_m, b.subrun_rotation_deg) for H, _ in hyps):
                 hyps.append((G, k))
 
         for k, G in enumerate(Gs):
@@ -219,7 +219,8 @@ class Backend:
                 R_level = rotation_between(grav.u, Z)
                 yaws = wall_yaws(R_level, wall_normals(nodes))
                 if len(yaws) >= self.cfg.refinement.manhattan_min_normals:
-                    out = [c.S for c in fallback_candidates(nodes, self.map, self.cfg.registration, R_level, yaws)]
+                    # the clip's best-supported of the four Manhattan yaws (bounded work per clip)
+                    out = [c.S for c in fallback_candidates(nodes, self.map, self.cfg.registration, R_level, yaws)[:1]]
             st.info["cue_variants"] = out
         return st.info["cue_variants"]
 
