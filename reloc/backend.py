@@ -76,13 +76,8 @@ class Backend:
 
     def predict(self, chain: int, C_new: np.ndarray) -> np.ndarray | None:
         """S_pred of a new clip of run ``chain`` whose first frame has chain pose ``C_new``."""
-        run = self.runs.get(chain)
-        if not run:
-            return None
-        last = next((c for c in reversed(run) if c.S is not None), None)
-        if last is None:
-            return None
-        return last.S @ inv_T(last.C) @ C_new
+        g = self.run_to_map(chain)
+        return None if g is None else g[0] @ C_new
 
     def run_to_map(self, chain: int) -> tuple[np.ndarray, ClipState] | None:
         """G = S_c C_c^-1 of the run's latest placed clip (the causal propagation)."""

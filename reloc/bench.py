@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import statistics
-import sys
 import time
 
 from .config import Config
@@ -115,6 +114,3 @@ def register_cli(subparsers) -> None:
     a.add_argument("--json", metavar="FILE", help="also write the rows to this JSON file")
     a.set_defaults(fn=cmd_odometry)
 
-
-if __name__ == "__main__":
-    sys.exit(0)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from synth.errors import UserError
+from synth.errors import run_command
 
 from . import __version__
 
@@ -34,14 +34,7 @@ def main(argv=None) -> int:
     if not getattr(args, "fn", None):
         p.print_help()
         return 0
-    try:
-        return int(args.fn(args) or 0)
-    except UserError as e:
-        print(f"reloc: error: {e}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("reloc: interrupted", file=sys.stderr)
-        return 130
+    return run_command("reloc", args.fn, args)
 
 
 if __name__ == "__main__":

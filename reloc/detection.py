@@ -23,6 +23,8 @@ import cv2
 import numpy as np
 from scipy.ndimage import find_objects
 
+from synth.errors import UserError
+
 STRUCTURE_CLASSES = ("wall", "floor", "ceiling")
 
 
@@ -177,15 +179,11 @@ def build_detector(spec: DetectorSpec, classes: dict[int, str], vocabulary=None)
     if spec.kind == "oracle":
         return OracleDetector(classes, vocabulary=vocabulary, corruption=spec.corruption)
     if spec.kind == "onnx":
-        from synth.errors import UserError
-
         if not spec.model:
             raise UserError("--detector onnx needs --model FILE.onnx")
         from .detection_onnx import OnnxDetector
 
         return OnnxDetector(spec.model, class_map=spec.class_map, vocabulary=vocabulary)
-    from synth.errors import UserError
-
     raise UserError(f"unknown detector {spec.kind!r} (expected oracle or onnx)")
 
 
@@ -204,8 +202,6 @@ def add_detector_arguments(p) -> None:
 
 
 def detector_spec_from_args(args) -> DetectorSpec:
-    from synth.errors import UserError
-
     try:
         c = Corruption(miss_rate=args.miss_rate, confusion_rate=args.confusion_rate, mask_px=args.mask_px,
                        spurious_per_frame=args.spurious, seed=args.detector_seed)

@@ -216,15 +216,16 @@ class FrontEnd:
         if checkpoint:
             path = clip.path_length()
             t = time.perf_counter()
-            n_nodes = len(fuse(clip.clip_observations(), self.cfg.observation)) if self.cfg.clips.adaptive else 0
+            nodes = fuse(clip.clip_observations(), self.cfg.observation) if self.cfg.clips.adaptive else None
             self.timings["observation"] += time.perf_counter() - t
-            if self.policy.should_close(n, n_nodes, path):
-                out.append(self._close("closed" if n < self.cfg.clips.max_frames else "max length"))
+            if self.policy.should_close(n, len(nodes or ()), path):
+                out.append(self._close("closed" if n < self.cfg.clips.max_frames else "max length", nodes))
         return out
 
-    def _observe(self, clip: Clip, frame: FrameData) -> None:
+    def _observe(self, clip: Clip, frame: FrameData) -> bool:
+        """Detect and observe a frame once; True when new observations were added."""
         if frame.index in clip.observed_frames:
-            return
+            return False
         t = time.perf_counter()
         dets = self.detector.detect(frame)
         # a detector that also gives 3D boxes (Map-Det3D-like) offers them as better centers
@@ -238,15 +239,19 @@ class FrontEnd:
         self.timings["observation"] += t3 - t2
         clip.observations += obs
         clip.observed_frames.add(frame.index)
+        return True
 
-    def _close(self, reason: str) -> ClipResult:
+    def _close(self, reason: str, nodes: list[Node] | None = None) -> ClipResult:
+        """Close the open clip; ``nodes``: its fusion at this checkpoint, if already computed."""
         clip = self._clip
         clip.end_reason = reason
         if self._last is not None and self._last.index == clip.end:
-            self._observe(clip, self._last)  # the clip's last frame is always observed
-        t = time.perf_counter()
-        nodes = fuse(clip.clip_observations(), self.cfg.observation)
-        self.timings["observation"] += time.perf_counter() - t
+            if self._observe(clip, self._last):  # the clip's last frame is always observed
+                nodes = None
+        if nodes is None:
+            t = time.perf_counter()
+            nodes = fuse(clip.clip_observations(), self.cfg.observation)
+            self.timings["observation"] += time.perf_counter() - t
         if self.localize:
             prior = self.yaw_prior(clip) if self.yaw_prior else None
             pred = None

@@ -7,7 +7,6 @@ cannot be placed gets ``Placement.S = None`` and a one-line ``reason``.
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 
@@ -15,7 +14,7 @@ import numpy as np
 
 from .clips import Node
 from .config import Config
-from .geometry import rotation_between
+from .geometry import rotation_between, yaw_of
 from .map import BoxMap
 from .observations import Observation
 from .refinement import Z, estimate_gravity, orientation_aware, tilt_deg, wall_normals, wall_yaws
@@ -78,8 +77,6 @@ def localize_clip(nodes: list[Node], frame_obs: dict[int, list[Observation]], V:
             return Placement(S=S, source="tracking", kappa=float(kappa(rho, reg.kappa_tau_m)[0]), nodes=n_nodes,
                              gravity=gravity.source, info=info, timings=tm)
         if yaw_prior is None:
-            from .geometry import yaw_of
-
             yaw_prior = yaw_of(prediction[:3, :3])
 
     S_g = graph_candidate(nodes, bmap, reg, rng)
@@ -130,7 +127,3 @@ def localize_clip(nodes: list[Node], frame_obs: dict[int, list[Observation]], V:
     info["kappa_before_refinement"] = round(best.kappa, 3)
     return Placement(S=S, source=best.source, kappa=k, matches=best.matches, nodes=n_nodes,
                      gravity=gravity.source, info=info, timings=tm)
-
-
-def yaw_difference_deg(a: float, b: float) -> float:
-    return abs(math.degrees((a - b + math.pi) % (2 * math.pi) - math.pi))

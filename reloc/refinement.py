@@ -23,7 +23,7 @@ import numpy as np
 
 from .clips import Node
 from .config import RefinementConfig, RegistrationConfig
-from .geometry import exp_so3, inv_T, log_so3, make_T, rigid_fit, rot_z, rotation_between
+from .geometry import exp_so3, log_so3, make_T, rigid_fit, rot_z, rotation_between
 from .map import BoxMap, circular_mad_mod, circular_median_mod
 from .surface import SurfaceScorer
 
@@ -240,7 +240,3 @@ def orientation_aware(S0: np.ndarray, nodes: list[Node], bmap: BoxMap, cfg: Refi
     if info["manhattan"]["accepted"]:
         S, info["refine2"] = refine(S2, nodes, bmap, cfg, reg, gravity, scorer)
     return S, info
-
-
-__all__ = ["Gravity", "estimate_gravity", "tilt_deg", "level", "manhattan_correction", "refine",
-           "orientation_aware", "wall_normals", "wall_yaws", "camera_up", "inv_T"]

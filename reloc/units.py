@@ -68,7 +68,6 @@ def run_units(tour, bmap: BoxMap, lengths=DEFAULT_LENGTHS, detector: Detector | 
     placed: dict[int, list[int]] = {L: [0, 0] for L in lengths}
     io_t = odo_t = 0.0
     needs_rgb = getattr(detector, "name", "") != "oracle"
-    it = idx
     bar = None
     if progress:
         from tqdm import tqdm
@@ -84,7 +83,7 @@ def run_units(tour, bmap: BoxMap, lengths=DEFAULT_LENGTHS, detector: Detector | 
 
     one_frames = set(idx[:: max(1, one_frame_stride)])
     t_start = time.perf_counter()
-    for i in it:
+    for i in idx:
         t = time.perf_counter()
         fd = read_frame(tour, i, detector, rgb=needs_rgb)
         io_t += time.perf_counter() - t

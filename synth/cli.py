@@ -11,7 +11,7 @@ import sys
 from collections import Counter
 from pathlib import Path
 
-from .errors import UserError
+from .errors import UserError, run_command
 
 
 def _print_json(obj) -> None:
@@ -309,14 +309,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    try:
-        return args.fn(args)
-    except UserError as e:
-        print(f"synth: error: {e}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("synth: interrupted", file=sys.stderr)
-        return 130
+    return run_command("synth", args.fn, args)
 
 
 if __name__ == "__main__":

@@ -24,3 +24,17 @@ class SceneFormatError(UserError):
 
 class UnknownNameError(UserError):
     """A layout, class, asset or preset name that does not exist."""
+
+
+def run_command(prog: str, fn, args) -> int:
+    """Run a CLI command function: a UserError prints one line and exits 2, Ctrl-C exits 130."""
+    import sys
+
+    try:
+        return int(fn(args) or 0)
+    except UserError as e:
+        print(f"{prog}: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"{prog}: interrupted", file=sys.stderr)
+        return 130
