@@ -262,6 +262,12 @@ class Tour:
                 return all(c in names for c in fr.RGB_CHANNELS)
         return self.meta.get("lighting") is not None
 
+    @property
+    def rgb_every(self) -> int:
+        """RGB is rendered on frames 0, k, 2k, ... (a render job's ``rgb_every``; 1: every frame)."""
+        k = (self.meta.get("settings") or {}).get("rgb_every")
+        return int(k) if isinstance(k, int) and k > 0 else 1
+
     def objects(self) -> dict:
         """objects.json (videoreloc-boxes/1), read on first use."""
         if self._objects is None:
@@ -605,10 +611,11 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
     want = {fr.DEPTH_CHANNEL, fr.INSTANCE_CHANNEL, fr.SEMANTIC_CHANNEL}
     if expect_rgb is None:
         expect_rgb = any(set(fr.RGB_CHANNELS) <= c for c in frame_channels.values())
-    if expect_rgb:
-        want |= set(fr.RGB_CHANNELS)
+    every = tour.rgb_every
     for idx, names in sorted(frame_channels.items()):
         lack = sorted(want - names)
+        if expect_rgb and idx % every == 0:
+            lack = sorted((want | set(fr.RGB_CHANNELS)) - names)
         if lack:
             rep["missing_channels"].append({"frame": idx, "missing": lack})
     if expect_rgb is False and any(set(fr.RGB_CHANNELS) <= c for c in frame_channels.values()):

@@ -7,7 +7,15 @@ tour into chunks of frames:
 
 - ``geometry`` chunks, one set per layout + path, shared by every lighting (Blender);
 - ``rgb`` chunks, per tour, which take depth and ids from the geometry chunks (Blender);
+- ``copy`` chunks, which copy geometry frames into a tour without rendering RGB: every frame of a
+  geometry-only tour, and the frames between RGB frames of a design with ``rgb_every: k``;
 - ``fast`` chunks, per tour, for the fast Open3D renderer (geometry only).
+
+With ``geometry: fast`` a Blender job renders its geometry cache with the fast Open3D renderer
+(about 100x faster than a Cycles geometry pass; the depth and ids agree, see the renderer
+cross-check tests) and only RGB with Blender. A design's ``rgb_every: k`` renders RGB on frames
+0, k, 2k, ... only; every frame still has depth and ids (long tours for odometry and clips,
+RGB where an appearance method or a detector needs it).
 
 The job state file ``OUT/job_state.json`` records each chunk's state (pending, running, done,
 failed with its error and attempts). The frames on disk are the truth about what is done: a chunk
@@ -32,9 +40,9 @@ from .render_settings import DEVICES, quality
 from .scene import read_yaml
 
 STATE_FILE = "job_state.json"
-SPEC_KEYS = {"name", "description", "out", "renderer", "quality", "size", "hfov_deg", "seed", "device", "chunk_size",
-             "retries", "previews", "designs"}
-DESIGN_KEYS = {"layouts", "lightings", "path"}
+SPEC_KEYS = {"name", "description", "out", "renderer", "geometry", "quality", "size", "hfov_deg", "seed", "device",
+             "chunk_size", "retries", "previews", "designs"}
+DESIGN_KEYS = {"layouts", "lightings", "path", "rgb_every"}
 PATH_KEYS = {"name", "frames"}
 
 
@@ -44,6 +52,7 @@ class Design:
     lightings: list[str] | None  # None: geometry only
     path: str
     frames: int | None
+    rgb_every: int = 1  # RGB on frames 0, k, 2k, ...; depth and ids on every frame
 
 
 @dataclass
@@ -52,6 +61,7 @@ class JobSpec:
     out: str
     designs: list[Design]
     renderer: str = "blender"
+    geometry: str = "blender"  # renderer of the geometry cache of Blender jobs: blender | fast
     quality: str = "preview"
     width: int = 640
     height: int = 480
@@ -96,6 +106,11 @@ def parse_spec(doc, source: str) -> JobSpec:
     renderer = doc.get("renderer", "blender")
     if renderer not in ("blender", "fast"):
         _fail(source, "renderer", f"expected blender or fast, got {renderer!r}")
+    geometry = doc.get("geometry", "blender" if renderer == "blender" else "fast")
+    if geometry not in ("blender", "fast"):
+        _fail(source, "geometry", f"expected blender or fast, got {geometry!r}")
+    if renderer == "fast" and geometry != "fast":
+        _fail(source, "geometry", "the fast renderer makes its own geometry: leave geometry out")
     q = doc.get("quality", "preview")
     try:
         quality(q)
@@ -145,9 +160,13 @@ def parse_spec(doc, source: str) -> JobSpec:
         if unknown:
             _fail(source, f"{f}.path.{unknown[0]}", "unknown key; allowed: name, frames")
         frames = None if p.get("frames") is None else _pos_int(p["frames"], source, f + ".path.frames")
-        designs.append(Design(layouts, lightings, str(p["name"]), frames))
+        rgb_every = _pos_int(d.get("rgb_every", 1), source, f + ".rgb_every")
+        if rgb_every > 1 and lightings is None:
+            _fail(source, f + ".rgb_every", "a geometry-only design renders no RGB: leave rgb_every out")
+        designs.append(Design(layouts, lightings, str(p["name"]), frames, rgb_every))
     return JobSpec(
-        name=str(doc["name"]), out=str(doc["out"]), designs=designs, renderer=renderer, quality=q, width=w, height=h,
+        name=str(doc["name"]), out=str(doc["out"]), designs=designs, renderer=renderer, geometry=geometry, quality=q,
+        width=w, height=h,
         hfov_deg=float(hfov), seed=seed, device=device,
         chunk_size=_pos_int(doc.get("chunk_size", 50), source, "chunk_size"), retries=retries,
         previews=bool(doc.get("previews", False)), description=str(doc.get("description", "")), source=source,
@@ -214,6 +233,9 @@ def expand(spec: JobSpec, out: Path | None = None) -> Plan:
                               frames=d.frames, seed=spec.seed, device=spec.device, previews=spec.previews,
                               chunk_size=spec.chunk_size, geometry_cache=str(out / "_geometry"))
                 p = prepare(ts, create=False)
+                if spec.renderer == "blender" and spec.geometry == "fast":  # never mixed with a Cycles cache
+                    p.geometry_dir = p.geometry_dir.with_name(p.geometry_dir.name + "__fast")
+                p.extra["rgb_every"] = d.rgb_every if lighting is not None else None
                 plan.tours[name] = p
                 ids = p.frame_ids
                 groups = [ids[k : k + spec.chunk_size] for k in range(0, len(ids), spec.chunk_size)]
@@ -224,27 +246,33 @@ def expand(spec: JobSpec, out: Path | None = None) -> Plan:
                 gkey = p.geometry_dir.name
                 if gkey not in seen_geo:
                     seen_geo[gkey] = []
+                    gkind = "fast" if spec.geometry == "fast" else "geometry"
                     for k, g in enumerate(groups):
-                        c = Chunk(f"geometry/{gkey}/{k:04d}", "geometry", name, g, _job(p, "geometry", g), str(p.geometry_dir))
+                        c = Chunk(f"geometry/{gkey}/{k:04d}", gkind, name, g, _job(p, gkind, g, p.geometry_dir),
+                                  str(p.geometry_dir))
                         seen_geo[gkey].append(c)
                         plan.chunks.append(c)
-                if lighting is None:
-                    for k, g in enumerate(groups):
-                        plan.chunks.append(Chunk(f"copy/{name}/{k:04d}", "copy", name, g, _job(p, "copy", g),
-                                                 str(p.out / "frames"), needs=seen_geo[gkey][k].id))
-                else:
-                    for k, g in enumerate(groups):
-                        plan.chunks.append(Chunk(f"rgb/{name}/{k:04d}", "rgb", name, g, _job(p, "rgb", g),
-                                                 str(p.out / "frames"), needs=seen_geo[gkey][k].id))
+                every = d.rgb_every if lighting is not None else 0
+                for k, g in enumerate(groups):
+                    need = seen_geo[gkey][k].id
+                    rgb = [i for i in g if every and i % every == 0]
+                    copy = [i for i in g if not (every and i % every == 0)]
+                    if rgb:
+                        plan.chunks.append(Chunk(f"rgb/{name}/{k:04d}", "rgb", name, rgb, _job(p, "rgb", rgb),
+                                                 str(p.out / "frames"), needs=need))
+                    if copy:
+                        plan.chunks.append(Chunk(f"copy/{name}/{k:04d}", "copy", name, copy, _job(p, "copy", copy),
+                                                 str(p.out / "frames"), needs=need))
     return plan
 
 
-def _job(p, kind: str, frames: list[int]) -> dict:
+def _job(p, kind: str, frames: list[int], out_dir: Path | None = None) -> dict:
     from .tour import _job as tour_job
 
     if kind in ("fast", "copy"):
+        out_dir = out_dir or p.out / "frames"
         return {"pass": kind, "layout": str(p.layout_file.resolve()), "poses": str((p.out / "poses.txt").resolve()),
-                "fps": p.path_fps, "frames": frames, "intrinsics": p.intr.to_dict(), "out_dir": str((p.out / "frames").resolve()),
+                "fps": p.path_fps, "frames": frames, "intrinsics": p.intr.to_dict(), "out_dir": str(out_dir.resolve()),
                 "geometry_dir": str(p.geometry_dir.resolve()) if p.geometry_dir else None}
     j = tour_job(p, kind, frames, p.geometry_dir if kind == "geometry" else p.out / "frames", (p.out / "poses.txt"))
     for k in ("layout", "poses", "out_dir", "geometry_dir", "previews_dir"):
@@ -556,11 +584,12 @@ def tour_meta(p, spec: JobSpec, info: dict) -> dict:
         "lighting": p.lighting_name,
         "path": p.path_name,
         "renderer": spec.renderer,
+        "geometry_renderer": spec.geometry,
         "seed": spec.seed,
         "job": spec.name,
         "settings": {"quality": spec.quality, "quality_settings": quality(spec.quality) if p.lighting_name else None,
                      "width": spec.width, "height": spec.height, "hfov_deg": spec.hfov_deg, "device": spec.device,
-                     "chunk_size": spec.chunk_size, "previews": spec.previews},
+                     "chunk_size": spec.chunk_size, "previews": spec.previews, "rgb_every": p.extra.get("rgb_every")},
         "frames": [p.frame_ids[0], p.frame_ids[-1]],
         "n_frames": len(p.frame_ids),
         # relative to the tour, so a job folder can be moved and reruns write the same file
@@ -598,9 +627,10 @@ def calibrate(plan: Plan, frames: int = 1) -> dict:
         base = {"layout": str(p.layout_file.resolve()), "poses": str(tmp / "poses.txt"), "fps": p.path_fps, "frames": idx,
                 "intrinsics": p.intr.to_dict(), "quality": spec.quality, "seed": spec.seed, "device": spec.device,
                 "geometry_dir": str(tmp / "geom"), "previews_dir": None, "threads": 0}
-        kinds = ["fast"] if spec.renderer == "fast" else ["geometry"] + (["rgb"] if any(t.lighting_name for t in plan.tours.values()) else [])
+        geo = "fast" if spec.geometry == "fast" else "geometry"
+        kinds = [geo] + (["rgb"] if spec.renderer == "blender" and any(t.lighting_name for t in plan.tours.values()) else [])
         for kind in kinds:
-            job = {**base, "pass": kind, "out_dir": str(tmp / ("geom" if kind == "geometry" else kind)),
+            job = {**base, "pass": kind, "out_dir": str(tmp / ("geom" if kind == geo else kind)),
                    "lighting": next((t.spec.lighting for t in plan.tours.values() if t.lighting_name), None)}
             times = []
             rc, err, _ = run_chunk_process(kind, job, str(tmp / f"{kind}.json"), str(tmp / f"{kind}.log"),

@@ -54,6 +54,27 @@ def test_plan_shares_geometry_between_lightings(tmp_path):
     assert not (tmp_path / "o").exists()  # planning writes nothing
 
 
+def test_fast_geometry_and_rgb_every_split_chunks(tmp_path):
+    spec = write_spec(tmp_path, geometry="fast", chunk_size=4, designs=[
+        {"layouts": ["apt_0"], "lightings": ["day", "night"], "path": {"name": "query", "frames": 10}, "rgb_every": 3},
+        {"layouts": ["apt_0"], "lightings": ["day"], "path": {"name": "mapping", "frames": 8}}])
+    plan = jobs.expand(jobs.load_spec(spec), out=tmp_path / "o")
+    geo = [c for c in plan.chunks if c.kind == "fast"]
+    assert not [c for c in plan.chunks if c.kind == "geometry"]
+    assert all(Path(c.out_dir).name.endswith("__fast") for c in geo)  # never mixed with a Cycles cache
+    for lighting in ("day", "night"):
+        name = f"apt_0__{lighting}__query"
+        rgb = sorted(i for c in plan.chunks if c.tour == name and c.kind == "rgb" for i in c.frames)
+        copy = sorted(i for c in plan.chunks if c.tour == name and c.kind == "copy" for i in c.frames)
+        assert rgb == [0, 3, 6, 9] and copy == [1, 2, 4, 5, 7, 8]
+    mapping = [c for c in plan.chunks if c.tour == "apt_0__day__mapping"]
+    assert {c.kind for c in mapping} == {"fast", "rgb"}  # rgb_every defaults to 1: RGB on every frame
+    by_id = {c.id: c for c in plan.chunks}
+    for c in plan.chunks:  # each copy/rgb chunk waits for the geometry chunk that holds its frames
+        if c.needs:
+            assert set(c.frames) <= set(by_id[c.needs].frames)
+
+
 @pytest.mark.parametrize(
     "changes, message",
     [
@@ -68,6 +89,9 @@ def test_plan_shares_geometry_between_lightings(tmp_path):
         ({"size": [64, -48]}, "size: expected a positive integer"),
         ({"quality": "ultra"}, "unknown quality preset 'ultra'"),
         ({"designs": []}, "designs: expected a non-empty list"),
+        ({"geometry": "cycles"}, "geometry: expected blender or fast"),
+        ({"designs": [{"layouts": ["apt_0"], "lightings": ["day"], "path": "query", "rgb_every": 0}]}, "designs[0].rgb_every: expected a positive integer"),
+        ({"designs": [{"layouts": ["apt_0"], "path": "query", "rgb_every": 2}]}, "designs[0].rgb_every: a geometry-only design renders no RGB"),
     ],
 )
 def test_bad_specs_one_line_exit_2_nothing_written(tmp_path, capsys, changes, message):
@@ -176,6 +200,31 @@ def test_ray_backend_on_loopback_renders_the_smoke_spec(tmp_path):
     s = jobs.run_job(jobs.load_spec(SMOKE), out, backend="ray", progress=False)
     assert s["failed"] == {} and s["frames_rendered_now"] == 36
     _assert_same_job(ref, out)
+
+
+@pytest.mark.blender
+def test_fast_geometry_with_sparse_rgb_renders_a_checked_tour(tmp_path):
+    """Depth and ids of every frame from the fast renderer, Cycles RGB on every 3rd frame only."""
+    from synth.dataset import check_tour
+    from synth.fast_render import FastRenderer
+    from synth.scene import load_layout
+    from synth.tour import resolve_layout_path
+
+    spec = write_spec(tmp_path, geometry="fast", chunk_size=4, designs=[
+        {"layouts": ["apt_0"], "lightings": ["night"], "path": {"name": "query", "frames": 7}, "rgb_every": 3}])
+    s = jobs.run_job(jobs.load_spec(spec), tmp_path / "o", progress=False)
+    assert s["failed"] == {}
+    tour = Tour(tmp_path / "o" / "apt_0__night__query")
+    assert tour.rgb_every == 3
+    renderer = FastRenderer(load_layout(resolve_layout_path("apt_0")))
+    for i in tour.frame_indices:
+        f = tour.frame(int(i))
+        assert (f.rgb is not None) == (i % 3 == 0)
+        depth, inst, _ = renderer.render(tour.pose(int(i)), tour.intrinsics)
+        np.testing.assert_array_equal(f.depth, depth)  # the fast renderer's own output, every frame
+        np.testing.assert_array_equal(f.instance, inst)
+    rep = check_tour(tour.root, progress=False)
+    assert not rep["missing_channels"], rep["missing_channels"]
 
 
 def test_dry_run_prints_plan_and_estimate_writes_nothing(tmp_path, capsys):
