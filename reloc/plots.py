@@ -1,0 +1,439 @@
+"""Figures of an experiment (paper Fig. 3): per-tour trajectory plots and recall bars.
+
+``tour_figure`` draws one query tour with a column per method row. The top panel of a column is
+a top-down view (world x/y, Z up) of the map boxes (objects light grey, walls darker; floors and
+ceilings left out), the ground-truth camera path as a thin grey line and the estimated camera
+positions coloured continuously by position error (``error_colors``: green at 0 m, yellow at
+0.5 m, red at 1 m and beyond). The lower panel shows the rolling medians (``rolling_median``) of
+the position error (m) and the rotation error (deg) against the frame index on one log axis, with
+the 1 m and 10 deg thresholds dashed; the column title gives the recall at 1 m/10 deg over ALL
+ground-truth frames (a frame without a pose is a failure).
+
+``recall_bars`` draws the recall at 1 m/10 deg of every table row per lighting (left) and for
+unchanged against rearranged layouts (right), from ``results.json``'s factors.
+
+``plot_experiment`` reads an experiment results directory (the ``videoreloc-experiment/1``
+schema) and writes ``plots/tour_<tour>.png`` for every tour and ``plots/recall_bars.png``.
+
+Headless: matplotlib's Agg canvas, no pyplot. PNGs are written atomically.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.cm import ScalarMappable
+from matplotlib.collections import PolyCollection
+from matplotlib.colors import LinearSegmentedColormap, Normalize
+from matplotlib.figure import Figure
+from matplotlib.patches import Patch
+
+from synth.camera import read_tum
+from synth.errors import SceneFormatError, UserError
+from synth.preview import save_figure
+
+from .evaluation import pose_errors
+
+__all__ = [
+    "ERROR_CMAP", "ERROR_MAX_M", "POS_THRESHOLD_M", "ROT_THRESHOLD_DEG", "ROLLING_WINDOW", "DPI",
+    "error_colors", "rolling_median", "per_frame", "recall_1m_10deg", "box_corners",
+    "tour_figure", "recall_bars", "plot_experiment", "tour_png_name",
+]
+
+POS_THRESHOLD_M = 1.0
+ROT_THRESHOLD_DEG = 10.0
+ERROR_MAX_M = 1.0  # the colour scale: 0 m green, 0.5 m yellow, >= 1 m red
+ROLLING_WINDOW = 31  # frames
+DPI = 100
+LIGHTINGS = ("day", "evening", "night")
+CHANGES = ("unchanged", "rearranged")
+
+ERROR_CMAP = LinearSegmentedColormap.from_list(
+    "reloc_error", [(0.0, (0.0, 0.70, 0.0)), (0.5, (1.0, 0.88, 0.0)), (1.0, (0.85, 0.0, 0.0))]
+)
+OBJECT_FACE, OBJECT_EDGE = (0.86, 0.86, 0.86), (0.62, 0.62, 0.62)
+WALL_FACE, WALL_EDGE = (0.42, 0.42, 0.42), (0.30, 0.30, 0.30)
+GT_COLOR = (0.45, 0.45, 0.45)
+POS_COLOR, ROT_COLOR = "#1f77b4", "#d62728"
+ERR_FLOOR = 1e-3  # log axis: errors below this are drawn at it
+
+
+# --------------------------------------------------------------------------------------------
+# numbers
+
+
+def error_colors(pos_err) -> np.ndarray:
+    """RGBA (N, 4) for position errors in metres: green 0 m, yellow 0.5 m, red >= 1 m (clipped).
+
+    NaN (no error known) gets grey."""
+    e = np.asarray(pos_err, dtype=float).reshape(-1)
+    out = ERROR_CMAP(np.clip(np.nan_to_num(e, nan=0.0) / ERROR_MAX_M, 0.0, 1.0))
+    out[~np.isfinite(e)] = (0.6, 0.6, 0.6, 1.0)
+    out[np.isposinf(e)] = ERROR_CMAP(1.0)
+    return out
+
+
+def per_frame(all_frames, frames, values) -> np.ndarray:
+    """Values placed on the ``all_frames`` axis (ground-truth frame indices): NaN where a frame has none."""
+    all_frames = np.asarray(all_frames, dtype=np.int64)
+    out = np.full(len(all_frames), np.nan)
+    if len(frames):
+        pos = {int(f): k for k, f in enumerate(all_frames)}
+        idx = np.array([pos.get(int(f), -1) for f in frames], dtype=np.int64)
+        ok = idx >= 0
+        out[idx[ok]] = np.asarray(values, dtype=float)[ok]
+    return out
+
+
+def rolling_median(values, window: int = ROLLING_WINDOW) -> np.ndarray:
+    """Centred rolling median over ``window`` samples, ignoring NaN (frames without an estimate).
+
+    The window is truncated at both ends; a window without any finite value gives NaN."""
+    v = np.asarray(values, dtype=float).reshape(-1)
+    n = len(v)
+    if n == 0:
+        return v.copy()
+    window = max(1, int(window))
+    half = window // 2
+    padded = np.concatenate([np.full(half, np.nan), v, np.full(window - 1 - half, np.nan)])
+    win = np.lib.stride_tricks.sliding_window_view(padded, window)  # (n, window); row k centred on k
+    out = np.full(n, np.nan)
+    has = np.isfinite(win).any(axis=1)
+    if has.any():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            out[has] = np.nanmedian(win[has], axis=1)
+    return out
+
+
+def recall_1m_10deg(pos, rot, n_frames: int) -> float:
+    """Fraction of ALL ``n_frames`` ground-truth frames within 1 m and 10 deg (missing poses fail)."""
+    if n_frames <= 0:
+        return 0.0
+    ok = (np.asarray(pos) <= POS_THRESHOLD_M) & (np.asarray(rot) <= ROT_THRESHOLD_DEG)
+    return float(ok.sum()) / n_frames
+
+
+def box_corners(centers, sizes, yaws) -> np.ndarray:
+    """(N, 4, 2) footprint corners (x, y) of gravity-aligned boxes rotated by yaw about +Z."""
+    c = np.asarray(centers, float).reshape(-1, 3)[:, :2]
+    h = np.asarray(sizes, float).reshape(-1, 3)[:, :2] / 2.0
+    y = np.asarray(yaws, float).reshape(-1)
+    local = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])  # (4, 2)
+    pts = local[None] * h[:, None, :]  # (N, 4, 2)
+    cs, sn = np.cos(y)[:, None], np.sin(y)[:, None]
+    x = pts[..., 0] * cs - pts[..., 1] * sn
+    yy = pts[..., 0] * sn + pts[..., 1] * cs
+    return np.stack([x, yy], axis=-1) + c[:, None, :]
+
+
+# --------------------------------------------------------------------------------------------
+# drawing
+
+
+def _draw_map(ax, bmap) -> np.ndarray | None:
+    """Object and wall footprints; returns all drawn corners (M, 2) for the view limits."""
+    if bmap is None or len(bmap) == 0:
+        return None
+    kinds = np.array(bmap.kinds)
+    corners = box_corners(bmap.centers, bmap.sizes, bmap.yaws)
+    drawn = []
+    for kind, face, edge, z in (("object", OBJECT_FACE, OBJECT_EDGE, 1), ("wall", WALL_FACE, WALL_EDGE, 2)):
+        sel = kinds == kind
+        if sel.any():
+            ax.add_collection(PolyCollection(corners[sel], facecolors=[face], edgecolors=[edge], linewidths=0.5,
+                                             zorder=z))
+            drawn.append(corners[sel].reshape(-1, 2))
+    return np.concatenate(drawn) if drawn else None
+
+
+def _gt_arrays(gt: dict) -> tuple[np.ndarray, np.ndarray]:
+    frames = np.array(sorted(int(i) for i in gt), dtype=np.int64)
+    P = np.array([np.asarray(gt[int(i)])[:3, 3] for i in frames]).reshape(-1, 3)
+    return frames, P
+
+
+def _no_poses(ax, text="no poses"):
+    ax.text(0.5, 0.5, text, transform=ax.transAxes, ha="center", va="center", fontsize=12, color="0.3",
+            bbox={"boxstyle": "round,pad=0.3", "fc": "white", "ec": "0.6", "alpha": 0.9}, zorder=10)
+
+
+def _view_limits(bmap, gt_P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Top-down view limits from the drawn map boxes and the ground-truth path, with a margin."""
+    pts = []
+    if bmap is not None and len(bmap):
+        sel = np.array([k in ("object", "wall") for k in bmap.kinds])
+        if sel.any():
+            pts.append(box_corners(bmap.centers[sel], bmap.sizes[sel], bmap.yaws[sel]).reshape(-1, 2))
+    if len(gt_P):
+        pts.append(gt_P[:, :2])
+    if not pts:
+        return np.array([-1.0, -1.0]), np.array([1.0, 1.0])
+    allp = np.concatenate(pts)
+    return allp.min(axis=0) - 0.4, allp.max(axis=0) + 0.4
+
+
+def tour_figure(bmap, gt: dict, estimates: dict, out_png, title: str = "", window: int = ROLLING_WINDOW,
+                dpi: float = DPI) -> Path:
+    """One figure for a query tour: a column per method (label -> {frame: 4x4 camera-to-world}).
+
+    ``bmap`` is a ``reloc.map.BoxMap`` (or None: no map drawn); ``gt`` maps frame -> 4x4 ground
+    truth. A label whose estimates are empty or None shows "no poses". Estimated positions outside
+    the view (map and ground-truth path) are clipped and counted in the panel. Returns the PNG path."""
+    from matplotlib.ticker import LogLocator, NullLocator
+
+    labels = list(estimates) or ["(no methods)"]
+    ncol = len(labels)
+    gt_frames, gt_P = _gt_arrays(gt)
+    n_gt = len(gt_frames)
+    lo, hi = _view_limits(bmap, gt_P)
+    ext = np.maximum(hi - lo, 1e-6)
+
+    # layout in inches: the top panels get the view's aspect, so little space is wasted
+    col_w = 4.0
+    top_h = float(np.clip(col_w * ext[1] / ext[0], 2.0, 6.0))
+    bot_h, left, gap, right = 1.7, 0.85, 0.55, 1.05  # right: room for the colour bar
+    head = 0.55 + (0.4 if title else 0.0)  # column titles (two lines) + figure title
+    mid, foot = 0.75, 0.8  # foot: the frame axis label and the legend of the error curves
+    W = left + ncol * col_w + (ncol - 1) * gap + right
+    H = head + top_h + mid + bot_h + foot
+    fig = Figure(figsize=(W, H), dpi=dpi)
+    FigureCanvasAgg(fig)
+    gs = fig.add_gridspec(2, ncol, height_ratios=[top_h, bot_h], left=left / W, right=1 - right / W,
+                          top=1 - head / H, bottom=foot / H, wspace=gap / col_w, hspace=mid / ((top_h + bot_h) / 2))
+    major = LogLocator(base=10.0, numticks=8)
+    for c, label in enumerate(labels):
+        ax = fig.add_subplot(gs[0, c])
+        axb = fig.add_subplot(gs[1, c])
+        ax.set_xlim(lo[0], hi[0])
+        ax.set_ylim(lo[1], hi[1])
+        ax.set_aspect("equal", adjustable="box")
+        _draw_map(ax, bmap)
+        if n_gt:
+            ax.plot(gt_P[:, 0], gt_P[:, 1], color=GT_COLOR, lw=0.8, zorder=3)
+        est = estimates.get(label) or {}
+        frames, pos, rot = pose_errors(est, gt) if est else (np.empty(0, np.int64), np.empty(0), np.empty(0))
+        r = recall_1m_10deg(pos, rot, n_gt)
+        if len(frames):
+            E = np.array([np.asarray(est[int(i)])[:3, 3] for i in frames])
+            order = np.argsort(pos, kind="stable")  # worst drawn last, on top
+            ax.scatter(E[order, 0], E[order, 1], c=error_colors(pos[order]), s=7, linewidths=0, zorder=4)
+            out_view = int((((E[:, :2] < lo) | (E[:, :2] > hi)).any(axis=1)).sum())
+            if out_view:
+                ax.text(0.01, 0.01, f"{out_view} poses outside the view", transform=ax.transAxes, fontsize=7,
+                        ha="left", va="bottom", color="0.25", zorder=10)
+        else:
+            _no_poses(ax)
+        ax.set_title(f"{label}\nrecall 1 m/10\u00b0: {100 * r:.1f}%  ({len(frames)}/{n_gt} posed)", fontsize=9)
+        ax.set_xlabel("x (m)", fontsize=8, labelpad=1)
+        if c == 0:
+            ax.set_ylabel("y (m)", fontsize=8, labelpad=1)
+        ax.tick_params(labelsize=7)
+
+        # lower panel: rolling medians of both errors on one log axis, thresholds dashed
+        axb.set_yscale("log")
+        axb.yaxis.set_major_locator(major)
+        axb.yaxis.set_minor_locator(NullLocator())  # minor log ticks are most of the drawing time
+        axb.set_ylim(ERR_FLOOR * 0.8, 200.0)
+        axb.axhline(POS_THRESHOLD_M, color=POS_COLOR, ls="--", lw=0.9, alpha=0.8)
+        axb.axhline(ROT_THRESHOLD_DEG, color=ROT_COLOR, ls="--", lw=0.9, alpha=0.8)
+        if len(frames):
+            x = gt_frames.astype(float)
+            mp = rolling_median(per_frame(gt_frames, frames, pos), window)
+            mr = rolling_median(per_frame(gt_frames, frames, rot), window)
+            axb.plot(x, np.maximum(mp, ERR_FLOOR), color=POS_COLOR, lw=1.1, label="position (m), 1 m dashed")
+            axb.plot(x, np.maximum(mr, ERR_FLOOR), color=ROT_COLOR, lw=1.1, label="rotation (deg), 10\u00b0 dashed")
+        else:
+            _no_poses(axb)
+        if n_gt:
+            axb.set_xlim(float(gt_frames[0]), float(max(gt_frames[-1], gt_frames[0] + 1)))
+        axb.set_xlabel("frame", fontsize=8, labelpad=1)
+        if c == 0:
+            axb.set_ylabel(f"error, rolling median\nof {window} frames", fontsize=8)
+        axb.tick_params(labelsize=7)
+        axb.grid(True, which="major", axis="y", lw=0.4, alpha=0.5)
+
+    from matplotlib.lines import Line2D
+
+    fig.legend(handles=[Line2D([], [], color=POS_COLOR, lw=1.1, label="position error (m)"),
+                        Line2D([], [], color=POS_COLOR, lw=0.9, ls="--", label="1 m"),
+                        Line2D([], [], color=ROT_COLOR, lw=1.1, label="rotation error (deg)"),
+                        Line2D([], [], color=ROT_COLOR, lw=0.9, ls="--", label="10\u00b0")],
+               loc="lower center", ncol=4, fontsize=8, frameon=False, bbox_to_anchor=(0.5, 0.02 / H))
+
+    # one colour bar, to the right of the top row
+    y0, y1 = foot + bot_h + mid, H - head
+    cax = fig.add_axes(((W - right + 0.25) / W, (y0 + 0.1 * (y1 - y0)) / H, 0.14 / W, 0.8 * (y1 - y0) / H))
+    cb = fig.colorbar(ScalarMappable(norm=Normalize(0.0, ERROR_MAX_M), cmap=ERROR_CMAP), cax=cax, extend="max")
+    cb.set_label("position error (m)", fontsize=8)
+    cb.set_ticks([0.0, 0.25, 0.5, 0.75, 1.0])
+    cb.ax.tick_params(labelsize=7)
+    if title:
+        fig.suptitle(title, fontsize=11, y=1 - 0.12 / H, va="top")
+    return save_figure(fig, out_png, dpi)
+
+
+def _factor(results: dict, row: dict, key: str) -> float | None:
+    try:
+        v = results["methods"][row["method"]]["modes"][row["mode"]]["factors"].get(key)
+    except (KeyError, TypeError, AttributeError):
+        return None
+    if v is None or isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        return None
+    return float(v)
+
+
+def row_label(row: dict) -> str:
+    label = str(row.get("label") or row.get("key") or f"{row.get('method')}.{row.get('mode')}")
+    return label + (" \u2020" if row.get("dagger") and "\u2020" not in label else "")
+
+
+def recall_bars(results: dict, out_png, dpi: float = DPI) -> Path:
+    """Grouped bars of recall at 1 m/10 deg per row: lightings (left), unchanged vs rearranged (right)."""
+    import matplotlib
+
+    rows = list(results.get("rows") or [])
+    groups_l = [g for g in LIGHTINGS if any(_factor(results, r, g) is not None for r in rows)]
+    groups_r = [g for g in CHANGES if any(_factor(results, r, g) is not None for r in rows)]
+    nrow = max(1, len(rows))
+    wl, wr = max(1, len(groups_l)), max(1, len(groups_r))
+    legend_h = 0.25 * ((len(rows) + 1) // 2) + 0.2
+    fig_h = 4.2 + legend_h
+    fig = Figure(figsize=(float(np.clip(2.5 + 0.32 * nrow * (wl + wr), 7.0, 16.0)), fig_h), dpi=dpi)
+    FigureCanvasAgg(fig)
+    gs = fig.add_gridspec(1, 2, width_ratios=[wl, wr], left=0.07, right=0.98, top=0.88,
+                          bottom=(legend_h + 0.45) / fig_h, wspace=0.15)
+    palette = matplotlib.colormaps["tab10"].colors
+    bar_w = 0.8 / nrow
+    styles = [{"color": palette[j % len(palette)], "hatch": "//" if row.get("dagger") else None,
+               "edgecolor": "0.25" if row.get("dagger") else "white"} for j, row in enumerate(rows)]
+    for k, (groups, title) in enumerate(((groups_l, "lighting"), (groups_r, "layout change"))):
+        ax = fig.add_subplot(gs[0, k])
+        ax.set_ylim(0, 1.12)
+        ticks = np.linspace(0, 1, 6)
+        ax.set_yticks(ticks)
+        ax.set_yticklabels([f"{int(round(100 * t))}%" if k == 0 else "" for t in ticks], fontsize=8)
+        ax.grid(True, axis="y", lw=0.4, alpha=0.5)
+        ax.set_axisbelow(True)
+        ax.set_title(f"by {title}", fontsize=10)
+        if not groups or not rows:
+            ax.set_xticks([])
+            ax.text(0.5, 0.5, "not in this design", transform=ax.transAxes, ha="center", va="center", color="0.4")
+            continue
+        x = np.arange(len(groups), dtype=float)
+        small = nrow > 4
+        for j, row in enumerate(rows):
+            pts = [(xi + (j - (nrow - 1) / 2) * bar_w, v)
+                   for xi, v in zip(x, (_factor(results, row, g) for g in groups)) if v is not None]
+            if not pts:
+                continue
+            xs, ys = zip(*pts)
+            ax.bar(xs, ys, width=bar_w * 0.92, linewidth=0.5, **styles[j])
+            for xb, yb in pts:
+                ax.text(xb, yb + 0.01, f"{100 * yb:.0f}%", ha="center", va="bottom", fontsize=6 if small else 7,
+                        rotation=90 if small else 0)
+        ax.set_xticks(x)
+        ax.set_xticklabels(groups, fontsize=9)
+        ax.set_xlim(-0.5, len(groups) - 0.5)
+    if rows:
+        handles = [Patch(facecolor=st["color"], hatch=st["hatch"], edgecolor=st["edgecolor"], label=row_label(r))
+                   for st, r in zip(styles, rows)]
+        fig.legend(handles=handles, loc="lower center", ncol=2, fontsize=8, frameon=False,
+                   bbox_to_anchor=(0.5, 0.02 / fig_h))
+    name = results.get("name")
+    fig.suptitle("Recall at 1 m/10\u00b0" + (f": {name}" if name else ""), fontsize=11)
+    return save_figure(fig, out_png, dpi)
+
+
+# --------------------------------------------------------------------------------------------
+# an experiment directory
+
+
+def tour_png_name(tour: str) -> str:
+    return "tour_" + re.sub(r"[^A-Za-z0-9._-]+", "_", str(tour)) + ".png"
+
+
+def _resolve(results_dir: Path, p) -> Path:
+    p = Path(p)
+    if p.is_absolute():
+        return p
+    for cand in (results_dir / p, results_dir.parent / p, Path.cwd() / p):
+        if cand.exists():
+            return cand
+    return results_dir / p
+
+
+def _load_results(results_dir: Path) -> dict:
+    path = results_dir / "results.json"
+    if not path.is_file():
+        raise UserError(f"{path}: results file not found (is {results_dir} an experiment results directory?)")
+    try:
+        return json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise SceneFormatError(path, None, f"not valid JSON ({e})") from None
+
+
+def _trajectory_file(results_dir: Path, results: dict, row: dict, tour: str) -> Path:
+    try:
+        f = results["methods"][row["method"]]["modes"][row["mode"]]["tours"][tour].get("file")
+    except (KeyError, TypeError, AttributeError):
+        f = None
+    return results_dir / (f or f"runs/{row['method']}/{tour}/{row['mode']}.txt")
+
+
+def plot_experiment(results_dir) -> list[Path]:
+    """Write ``plots/tour_<tour>.png`` per tour and ``plots/recall_bars.png``; returns the paths written.
+
+    A missing trajectory file is a column without poses; a tour whose ground truth cannot be read
+    is skipped with a message on stderr; a missing map leaves the boxes out."""
+    from synth.dataset import Tour
+
+    from .map import BoxMap
+
+    results_dir = Path(results_dir)
+    results = _load_results(results_dir)
+    plots = results_dir / "plots"
+    bmap = None
+    if results.get("map"):
+        try:
+            bmap = BoxMap.load(_resolve(results_dir, results["map"]))
+        except (UserError, SceneFormatError) as e:
+            print(f"reloc plots: map not drawn: {e}", file=sys.stderr)
+    rows = list(results.get("rows") or [])
+    written: list[Path] = []
+    for tname, tinfo in (results.get("tours") or {}).items():
+        try:
+            tour = Tour(_resolve(results_dir, tinfo["dir"]))
+        except (UserError, SceneFormatError, KeyError, TypeError) as e:
+            print(f"reloc plots: tour {tname} skipped: ground truth not readable ({e})", file=sys.stderr)
+            continue
+        fps = float(tinfo.get("fps") or tour.fps)
+        gt = {int(i): T for i, T in zip(tour.frame_indices, tour.poses)}
+        estimates: dict[str, dict] = {}
+        for row in rows:
+            label = row_label(row)
+            if label in estimates:
+                label = f"{label} [{row.get('key')}]"
+            path = _trajectory_file(results_dir, results, row, tname)
+            est: dict = {}
+            if path.is_file():
+                try:
+                    frames, poses = read_tum(path, fps=fps)
+                    est = {int(i): T for i, T in zip(frames, poses)}
+                except SceneFormatError as e:
+                    print(f"reloc plots: {e}", file=sys.stderr)
+            estimates[label] = est
+        bits = [str(tinfo.get(k)) for k in ("layout", "lighting") if tinfo.get(k) is not None]
+        if "rearranged" in tinfo:
+            bits.append("rearranged" if tinfo.get("rearranged") else "unchanged")
+        title = f"{tname}" + (f"  ({', '.join(bits)}; {len(gt)} frames)" if bits else f"  ({len(gt)} frames)")
+        written.append(tour_figure(bmap, gt, estimates, plots / tour_png_name(tname), title=title))
+    written.append(recall_bars(results, plots / "recall_bars.png"))
+    return written

@@ -1,0 +1,324 @@
+"""Experiment figures (reloc/plots.py) and the experiment report (reloc/report.py).
+
+The tests build a small fake results directory that follows the videoreloc-experiment/1 schema:
+a box map, one query tour directory (camera.json, poses.txt, meta.json; no frames: the plots do
+not read them), TUM trajectories with known errors and markdown tables.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+
+import numpy as np
+import pytest
+
+import reloc.plots as plots
+from reloc.plots import box_corners, error_colors, per_frame, plot_experiment, rolling_median, tour_png_name
+from reloc.report import markdown_to_html, split_row, table_to_html, write_report
+from synth import camera as cam
+
+FPS = 30.0
+N = 240
+TOUR = "apt_t__day__query"
+TOUR2 = "apt_t__night__rearranged"
+MISSING = set(range(100, 160))  # frames without an estimate in the closure trajectory
+OFFSET = np.array([0.3, 0.0, 0.0])  # closure estimate = ground truth shifted 0.3 m in x
+
+
+def gt_poses(n=N):
+    return [cam.pose_from_ypr((1.0 + 3.0 * i / n, 1.0 + 1.5 * math.sin(i / 30), 1.4), yaw=0.02 * i)
+            for i in range(n)]
+
+
+def make_tour(root, n=N):
+    root.mkdir(parents=True)
+    intr = cam.Intrinsics.from_fov(64, 48, 75.0)
+    (root / "camera.json").write_text(json.dumps({**intr.to_dict(), "fps": FPS, **cam.CAMERA_DOC}))
+    cam.write_tum(root / "poses.txt", gt_poses(n), fps=FPS)
+    (root / "meta.json").write_text(json.dumps({"layout": "apt_t", "lighting": "day", "frames": [0, n - 1]}))
+
+
+def map_doc():
+    def box(i, cls, kind, c, s, yaw=0.0):
+        return {"id": i, "class": cls, "kind": kind, "center": c, "size": s, "yaw": yaw, "movable": kind == "object"}
+
+    boxes = [box(1, "sofa", "object", [2.0, 3.0, 0.4], [1.8, 0.8, 0.8], 0.3),
+             box(2, "table", "object", [4.0, 1.0, 0.4], [1.0, 0.6, 0.8]),
+             box(3, "chair", "object", [3.0, 2.0, 0.45], [0.5, 0.5, 0.9], 1.0),
+             box(1000, "wall", "wall", [0.0, 2.5, 1.3], [0.1, 5.0, 2.6]),
+             box(1001, "wall", "wall", [6.0, 2.5, 1.3], [0.1, 5.0, 2.6]),
+             box(1002, "wall", "wall", [3.0, 0.0, 1.3], [6.0, 0.1, 2.6]),
+             box(1003, "wall", "wall", [3.0, 5.0, 1.3], [6.0, 0.1, 2.6]),
+             box(2000, "floor", "floor", [3.0, 2.5, -0.05], [6.0, 5.0, 0.1]),
+             box(3000, "ceiling", "ceiling", [3.0, 2.5, 2.65], [6.0, 5.0, 0.1])]
+    return {"format": "videoreloc-boxes/1", "layout": "apt_t", "classes": {}, "boxes": boxes}
+
+
+MAIN_MD = """| method | recall 1 m/10° | median pos (m) |
+|---|---:|---:|
+| VideoReloc, with clip closure | 75.0% | 0.30 |
+| Appearance (SIFT + PnP), per frame | 0.0% | — |
+| Appearance <clip-rigid> † | 12.5% | 1.20 |
+"""
+FACTORS_MD = """| method | day | night | unchanged | rearranged |
+|---|---:|---:|---:|---:|
+| VideoReloc, with clip closure | 75.0% | — | 75.0% | — |
+| Appearance (SIFT + PnP), per frame | 0.0% | — | 0.0% | — |
+"""
+
+
+@pytest.fixture
+def results_dir(tmp_path):
+    rd = tmp_path / "results"
+    (rd / "maps").mkdir(parents=True)
+    (rd / "maps" / "videoreloc_map.json").write_text(json.dumps(map_doc()))
+    tour_dir = tmp_path / "tours" / TOUR
+    make_tour(tour_dir)
+    gt = gt_poses()
+    est_frames = [i for i in range(N) if i not in MISSING]
+    est = []
+    for i in est_frames:
+        T = gt[i].copy()
+        T[:3, 3] += OFFSET
+        est.append(T)
+    cam.write_tum(rd / "runs" / "videoreloc" / TOUR / "closure.txt", est, fps=FPS, frames=est_frames)
+    # appearance.causal: no trajectory file at all
+    tables = rd / "tables"
+    tables.mkdir()
+    (tables / "main.md").write_text(MAIN_MD)
+    (tables / "factors.md").write_text(FACTORS_MD)
+    rec = (N - len(MISSING)) / N
+    results = {
+        "format": "videoreloc-experiment/1", "name": "test<exp>", "spec": "render_jobs/test.yaml",
+        "map": str(rd / "maps" / "videoreloc_map.json"),
+        "tours": {TOUR: {"dir": str(tour_dir), "layout": "apt_t", "lighting": "day", "rearranged": False,
+                         "frames": N, "fps": FPS}},
+        "rows": [
+            {"key": "appearance.causal", "method": "appearance", "mode": "causal",
+             "label": "Appearance (SIFT + PnP), per frame", "dagger": False},
+            {"key": "videoreloc.closure", "method": "videoreloc", "mode": "closure",
+             "label": "VideoReloc, with clip closure", "dagger": False},
+        ],
+        "methods": {
+            "appearance": {"label": "Appearance", "map_bytes": 123456, "primary": "causal", "modes": {"causal": {
+                "tours": {TOUR: {"recall_1m_10deg": 0.0, "coverage": 0.0, "frames": N,
+                                 "file": f"runs/appearance/{TOUR}/causal.txt"}},
+                "factors": {"day": 0.0, "evening": None, "unchanged": 0.0, "rearranged": None}}}},
+            "videoreloc": {"label": "VideoReloc", "map_bytes": 2048, "primary": "closure", "modes": {"closure": {
+                "tours": {TOUR: {"recall_1m_10deg": rec, "coverage": rec, "frames": N,
+                                 "file": f"runs/videoreloc/{TOUR}/closure.txt"}},
+                "factors": {"day": rec, "unchanged": rec}}}},
+        },
+        "seconds": {"render": None, "map": 12.3, "videoreloc": 180.0, "appearance": 4.5},
+        "failed": {"appearance/apt_t__day__query": "RuntimeError: <boom>"},
+    }
+    (rd / "results.json").write_text(json.dumps(results, indent=1))
+    return rd
+
+
+def png_size(path):
+    data = path.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n", f"{path} is not a PNG"
+    assert data[12:16] == b"IHDR"
+    return struct.unpack(">II", data[16:24])
+
+
+@pytest.fixture
+def captured(monkeypatch):
+    """The figures plots.py saves, by file name (saved for real as well)."""
+    figs = {}
+    real = plots.save_figure
+
+    def spy(fig, out, dpi):
+        figs[out.name] = fig
+        return real(fig, out, dpi)
+
+    monkeypatch.setattr(plots, "save_figure", spy)
+    return figs
+
+
+def all_texts(fig):
+    out = [t.get_text() for t in fig.texts]
+    for ax in fig.axes:
+        out += [t.get_text() for t in ax.texts] + [ax.get_title()]
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# numbers
+
+
+def test_error_colors_green_yellow_red():
+    c = error_colors([0.0, 0.5, 1.0, 2.0, 50.0, np.nan, np.inf])
+    assert c.shape == (7, 4)
+    r, g, b = c[0, :3]
+    assert g > 0.6 and r < 0.1 and b < 0.1  # green
+    r, g, b = c[1, :3]
+    assert r > 0.9 and g > 0.8 and b < 0.1  # yellow
+    for k in (2, 3, 4, 6):  # red, clipped beyond 1 m
+        r, g, b = c[k, :3]
+        assert r > 0.8 and g < 0.1 and b < 0.1
+        np.testing.assert_allclose(c[k], c[2])
+    np.testing.assert_allclose(c[5, :3], 0.6)  # unknown: grey
+    # continuous: 0.25 m lies between green and yellow
+    mid = error_colors([0.25])[0]
+    assert c[0, 0] < mid[0] < c[1, 0]
+
+
+def test_rolling_median_matches_direct_computation_with_nan_windows():
+    rng = np.random.default_rng(0)
+    v = rng.lognormal(size=200)
+    v[rng.random(200) < 0.3] = np.nan
+    v[60:120] = np.nan  # longer than the window: some windows have no value at all
+    for w in (1, 5, 31, 32):
+        got = rolling_median(v, w)
+        half = w // 2
+        want = np.full(len(v), np.nan)
+        for k in range(len(v)):
+            seg = v[max(0, k - half): k - half + w]
+            seg = seg[np.isfinite(seg)]
+            if len(seg):
+                want[k] = np.median(seg)
+        np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
+        np.testing.assert_allclose(got[~np.isnan(got)], want[~np.isnan(want)])
+    assert np.isnan(rolling_median(v, 31)[90])
+    assert rolling_median(np.array([]), 31).shape == (0,)
+
+
+def test_per_frame_places_values_and_ignores_unknown_frames():
+    out = per_frame([10, 11, 12, 13], [11, 13, 99], [1.0, 3.0, 7.0])
+    np.testing.assert_array_equal(np.isnan(out), [True, False, True, False])
+    assert out[1] == 1.0 and out[3] == 3.0
+
+
+def test_box_corners_rotate_about_z():
+    c = box_corners([[1.0, 2.0, 0.5]], [[2.0, 1.0, 1.0]], [math.pi / 2])[0]
+    lo, hi = c.min(axis=0), c.max(axis=0)
+    np.testing.assert_allclose(hi - lo, [1.0, 2.0], atol=1e-12)  # extents swapped
+    np.testing.assert_allclose(c.mean(axis=0), [1.0, 2.0], atol=1e-12)
+
+
+# ---------------------------------------------------------------------------------------------
+# figures
+
+
+def test_plot_experiment_writes_valid_pngs(results_dir, captured):
+    paths = plot_experiment(results_dir)
+    names = [p.name for p in paths]
+    assert names == [tour_png_name(TOUR), "recall_bars.png"]
+    for p in paths:
+        assert p.parent == results_dir / "plots"
+        w, h = png_size(p)
+        assert 500 <= w <= 3000 and 300 <= h <= 2000, (p.name, w, h)
+    assert not [p for p in (results_dir / "plots").iterdir() if p.name.startswith(".")]  # no temporary files
+
+    texts = all_texts(captured[tour_png_name(TOUR)])
+    # the missing trajectory is a column without poses, recall 0
+    assert any("no poses" in t for t in texts)
+    assert any("Appearance" in t and "0.0%" in t and f"(0/{N} posed)" in t for t in texts)
+    # the closure column: every posed frame is within 0.3 m, so recall = posed / all frames
+    posed = N - len(MISSING)
+    assert any("VideoReloc" in t and f"{100 * posed / N:.1f}%" in t and f"({posed}/{N} posed)" in t for t in texts)
+
+    bars = all_texts(captured["recall_bars.png"])
+    assert f"{100 * posed / N:.0f}%" in bars and "0%" in bars
+    # the design has day and unchanged only: no evening/night or rearranged groups
+    ticks = [t.get_text() for ax in captured["recall_bars.png"].axes for t in ax.get_xticklabels()]
+    assert "day" in ticks and "unchanged" in ticks
+    assert "evening" not in ticks and "night" not in ticks and "rearranged" not in ticks
+
+
+def test_points_are_coloured_by_their_position_error(results_dir, captured):
+    plot_experiment(results_dir)
+    fig = captured[tour_png_name(TOUR)]
+    cols = [c for ax in fig.axes for c in ax.collections if c.__class__.__name__ == "PathCollection"]
+    assert len(cols) == 1  # one scatter: the closure column; the missing one draws none
+    fc = cols[0].get_facecolors()
+    assert len(fc) == N - len(MISSING)
+    np.testing.assert_allclose(fc, error_colors(np.full(len(fc), 0.3)))
+
+
+def test_missing_tour_is_skipped_and_missing_map_tolerated(results_dir, capsys):
+    res = json.loads((results_dir / "results.json").read_text())
+    res["tours"][TOUR2] = {"dir": str(results_dir / "nope"), "layout": "apt_t", "lighting": "night",
+                           "rearranged": True, "frames": 10, "fps": FPS}
+    res["map"] = str(results_dir / "maps" / "missing.json")
+    (results_dir / "results.json").write_text(json.dumps(res))
+    paths = plot_experiment(results_dir)
+    assert [p.name for p in paths] == [tour_png_name(TOUR), "recall_bars.png"]
+    err = capsys.readouterr().err
+    assert TOUR2 in err and "missing.json" in err
+
+
+def test_tour_figure_with_empty_estimates_and_no_map(tmp_path):
+    gt = {i: T for i, T in enumerate(gt_poses(50))}
+    out = plots.tour_figure(None, gt, {"nothing": {}}, tmp_path / "t.png", title="x")
+    assert png_size(out)[0] > 300
+
+
+# ---------------------------------------------------------------------------------------------
+# report
+
+
+def test_split_row_and_table_to_html():
+    assert split_row("| a | b \\| c |  d|") == ["a", "b | c", "d"]
+    h = table_to_html(["| name | value |", "|:---|---:|", "| <x> | 1 |", "| y |"])
+    assert "<thead><tr><th style=\"text-align:left\">name</th><th style=\"text-align:right\">value</th></tr></thead>" in h
+    assert "<td style=\"text-align:left\">&lt;x&gt;</td><td style=\"text-align:right\">1</td>" in h
+    assert "<tr><td style=\"text-align:left\">y</td><td style=\"text-align:right\"></td></tr>" in h  # padded
+    assert "<x>" not in h
+    # no separator line: all body rows
+    h2 = table_to_html(["| a | b |", "| c | d |"])
+    assert "<th" not in h2 and h2.count("<tr>") == 2
+
+
+def test_markdown_to_html_escapes_and_converts():
+    h = markdown_to_html("# T <1>\n\nsome <b>bold</b> & **strong** `a<b`\n\n- one\n- two\n\n"
+                         "![cap <x>](plots/a.png)\n\n| a |\n|---|\n| <i> |\n")
+    assert "<h1>T &lt;1&gt;</h1>" in h
+    assert "some &lt;b&gt;bold&lt;/b&gt; &amp; <strong>strong</strong> <code>a&lt;b</code>" in h
+    assert "<ul>\n<li>one</li>\n<li>two</li>\n</ul>" in h
+    assert '<img src="plots/a.png" alt="cap &lt;x&gt;">' in h
+    assert "<td>&lt;i&gt;</td>" in h and "<b>" not in h and "<i>" not in h
+
+
+def test_report_gathers_tables_plots_and_timings(results_dir):
+    plot_experiment(results_dir)
+    html_path, md_path = write_report(results_dir)
+    assert (html_path, md_path) == (results_dir / "report.html", results_dir / "report.md")
+    md, h = md_path.read_text(), html_path.read_text()
+    assert md.startswith("# VideoReloc experiment report: test<exp>")
+    assert "<title>VideoReloc experiment report: test&lt;exp&gt;</title>" in h
+    # every table row, verbatim in the markdown, as cells in the HTML; main before factors
+    for text in (MAIN_MD, FACTORS_MD):
+        for line in text.strip().splitlines():
+            assert line in md
+    assert md.index("Main results") < md.index("Lighting and rearrangement factors")
+    assert "<td>VideoReloc, with clip closure</td>" in h
+    assert "<td>Appearance &lt;clip-rigid&gt; †</td>" in h and "<clip-rigid>" not in h
+    # every plot, by relative path; recall bars before the tour figures
+    pngs = sorted(p.name for p in (results_dir / "plots").glob("*.png"))
+    assert pngs
+    for name in pngs:
+        assert f"](plots/{name})" in md
+        assert f'<img src="plots/{name}"' in h
+    assert md.index("plots/recall_bars.png") < md.index(f"plots/{tour_png_name(TOUR)}")
+    # protocol and timings
+    assert "a frame without a returned pose is a failure" in md and "\u2020" in md
+    assert "| videoreloc | 180.0 (3.0 min) |" in md and "| render | \u2014 |" in md
+    assert "<td>map</td><td>12.3</td>" in h
+    assert "## Failed runs" in md and "<li><code>appearance/apt_t__day__query</code>: RuntimeError: &lt;boom&gt;</li>" in h
+    assert "<script" not in h and h.count("<table>") >= 5  # tours, methods, 2 tables, timings
+    assert not [p for p in results_dir.iterdir() if p.name.startswith(".")]
+
+
+def test_report_without_plots_or_tables(tmp_path):
+    rd = tmp_path / "r"
+    rd.mkdir()
+    (rd / "results.json").write_text(json.dumps({"format": "videoreloc-experiment/1", "name": "bare"}))
+    html_path, md_path = write_report(rd)
+    md = md_path.read_text()
+    assert "No tables were found" in md and "No plots were found" in md
+    assert "<h1>VideoReloc experiment report: bare</h1>" in html_path.read_text()
