@@ -10,7 +10,9 @@ Outputs, in ``--out``:
 * ``budget_B.txt`` with ``--budget B``: delayed-output replay, frozen at the latest processed
   frame b with ``0 <= b - i <= B``;
 * ``frames.json``: per frame, its clip, run and where each pose came from;
-* ``clips.json``: per clip, frames, end reason, placement source, kappa, the reason when unplaced.
+* ``clips.json``: per clip, frames, end reason, placement source, kappa, the reason when unplaced;
+* ``clip_poses.npz``: the clip partition and within-clip odometry (``frames``, ``clip``, ``V``:
+  frame i's pose in its clip's frame), which the clip-rigid controls reuse (paper Table IV, dagger).
 
 TUM lines (camera-to-world, OpenCV axes) exist only for frames that have an estimate; a missing
 frame is a failure for ``reloc eval``. Files are written atomically at the end.
@@ -235,10 +237,43 @@ def write_outputs(r: Relocalizer, out, tour, idx, seconds: float, poses: str) ->
     elif not r.closure:
         reasons = sorted({c["reason"] for c in clips if c["reason"]})
         summary["note"] = "no clip was placed: " + "; ".join(reasons[:3])
+    write_clip_poses(out / CLIP_POSES, r.backend.clips)
     write_json_atomic(out / "frames.json", frames, indent=None)
     write_json_atomic(out / "clips.json", clips)
     write_json_atomic(out / "run.json", summary)
     return summary
+
+
+CLIP_POSES = "clip_poses.npz"
+
+
+def write_clip_poses(path: Path, clips) -> None:
+    fr, cl, V = [], [], []
+    for st in clips:
+        c = st.res.clip
+        for i in c.frames:
+            if i in c.V:
+                fr.append(i)
+                cl.append(c.id)
+                V.append(c.V[i])
+    tmp = path.with_name(f".{path.name}.tmp.npz")
+    np.savez_compressed(tmp, frames=np.asarray(fr, np.int64), clip=np.asarray(cl, np.int64),
+                        V=np.asarray(V, np.float64).reshape(-1, 4, 4))
+    tmp.replace(path)
+
+
+def load_clip_poses(run_dir) -> dict[int, dict[int, np.ndarray]]:
+    """clip id -> {frame: V_i} from a ``reloc run`` output (the clip partition and odometry)."""
+    from synth.errors import UserError
+
+    path = Path(run_dir) / CLIP_POSES
+    if not path.is_file():
+        raise UserError(f"{path}: not found (the clip-rigid controls need a VideoReloc run of this tour)")
+    with np.load(path) as z:
+        out: dict[int, dict[int, np.ndarray]] = {}
+        for i, c, V in zip(z["frames"].tolist(), z["clip"].tolist(), z["V"]):
+            out.setdefault(int(c), {})[int(i)] = V
+    return out
 
 
 def cmd_run(args) -> int:

@@ -51,7 +51,9 @@ def read_frame(tour, i: int, detector: Detector, rgb: bool) -> FrameData:
 
 def run_units(tour, bmap: BoxMap, lengths=DEFAULT_LENGTHS, detector: Detector | None = None,
               poses: str = "odometry", cfg: Config | None = None, frames: int | None = None,
-              one_frame_stride: int = 1, seed: int = 0, progress: bool = True) -> dict:
+              one_frame_stride: int = 1, seed: int = 0, progress: bool = True, estimates: dict | None = None) -> dict:
+    """Recall of each unit length over the tour; ``estimates`` (a dict), when given, receives
+    {length: {frame: pose}} of the placed units."""
     cfg = cfg or Config()
     detector = detector or default_detector(tour, bmap)
     idx = [int(i) for i in tour.frame_indices]
@@ -103,6 +105,8 @@ def run_units(tour, bmap: BoxMap, lengths=DEFAULT_LENGTHS, detector: Detector | 
         collect(L, fe.finish(tail if L > 1 else None))
     if bar is not None:
         bar.close()
+    if estimates is not None:
+        estimates.update(est)
     rows = []
     for L in lengths:
         g = {i: gt[i] for i in (sorted(one_frames) if L == 1 else idx)}
