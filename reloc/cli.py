@@ -15,7 +15,7 @@ from . import __version__
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from . import bench, eval as eval_, mapping, run, units
+    from . import bench, checks, eval as eval_, experiment, mapping, run, units
 
     p = argparse.ArgumentParser(prog="reloc", description="VideoReloc: relocalization against a map of class-labelled boxes.")
     p.add_argument("--version", action="version", version=f"reloc {__version__}")
@@ -25,6 +25,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.register_cli(sub)
     eval_.register_cli(sub)
     bench.register_cli(sub)
+    experiment.register_cli(sub)
+    checks.register_cli(sub)
     return p
 
 

@@ -1,0 +1,623 @@
+"""``reloc experiment SPEC.yaml``: VideoReloc and the baselines over a rendered controlled-change design.
+
+An experiment spec names the render job whose tours it reads (``render: demo.yaml``), the mapping
+tour, the query path, the unchanged layout, the methods and the optional tables::
+
+    name: demo
+    render: demo.yaml                  # render job spec, relative to this file
+    out: out/demo/experiment           # results folder
+    mapping: {layout: apt_0, lighting: day, path: mapping}
+    query: query                       # every layout x lighting tour of this path is a query tour
+    unchanged: apt_0                   # the reference layout for Delta_R and kept
+    map: build                         # VideoReloc's box map: build (from the mapping tour) | ground-truth
+    methods: [videoreloc, fpfh_icp, appearance, one_frame]
+    tables: [units, ablation]          # optional: Table I and Table III (main and factors are always made)
+    one_frame_stride: 15               # one-frame units on every k-th frame (one registration each)
+    detector: {miss_rate: 0.1}         # optional oracle corruption (reloc.detection.Corruption)
+    config: {}                         # VideoReloc threshold overrides (reloc/config.py sections)
+    appearance: {}                     # AppearanceConfig overrides
+    fpfh_icp: {}                       # FpfhConfig overrides
+    workers: 2
+
+Methods and the rows they give (``key`` = method.mode, used by ``reloc check``):
+
+* ``videoreloc``: ``videoreloc.causal`` and ``videoreloc.closure`` (paper Sec. IV-A);
+* ``appearance``: ORB (or SIFT) + retrieval + PnP-RANSAC per frame (``appearance.causal``; only frames
+  with RGB are localized and evaluated) and its clip-rigid variant (``appearance.closure``);
+* ``fpfh_icp``: clip-rigid FPFH + RANSAC + ICP against a 5 cm point map (``fpfh_icp.closure``);
+* ``one_frame``: the one-frame object-based unit (``one_frame.causal``; every k-th frame).
+
+The clip-rigid controls reuse VideoReloc's clip partition and within-clip odometry
+(``clip_poses.npz`` of its run), as the paper's dagger rows do.
+
+Resumable: every (method, tour) result and every map is written atomically and marked done with
+the key of its inputs; a rerun does only what is missing or changed. Results, tables, plots and
+the report go to ``out`` (layout in ``results.json``, see :mod:`reloc.tables`).
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import dataclasses
+import hashlib
+import json
+import math
+import multiprocessing as mp
+import os
+import sys
+import time
+from pathlib import Path
+
+from synth.errors import SceneFormatError, UserError
+
+from .io import write_json_atomic
+
+SPEC_KEYS = {"name", "description", "render", "tours", "out", "mapping", "query", "unchanged", "map", "methods",
+             "tables", "one_frame_stride", "detector", "config", "appearance", "fpfh_icp", "workers", "seed"}
+METHODS = ("videoreloc", "fpfh_icp", "appearance", "one_frame")
+TABLES = ("units", "ablation")
+DONE = "done.json"
+
+# (method, mode, label, dagger): the table rows in the paper's order (per frame, clip-rigid, ours)
+ROWS = (
+    ("appearance", "causal", "Appearance ({feature} + PnP), per frame", False),
+    ("one_frame", "causal", "One-frame object unit", False),
+    ("fpfh_icp", "closure", "FPFH-ICP", True),
+    ("appearance", "closure", "Appearance ({feature} + PnP)", True),
+    ("videoreloc", "causal", "VideoReloc, causal", False),
+    ("videoreloc", "closure", "VideoReloc, with clip closure", False),
+)
+PRIMARY = {"videoreloc": "closure", "fpfh_icp": "closure", "appearance": "causal", "one_frame": "causal"}
+LABELS = {"videoreloc": "VideoReloc", "fpfh_icp": "FPFH-ICP", "appearance": "Appearance ({feature} + PnP)",
+          "one_frame": "One-frame object unit"}
+
+# Table III: (orientation-aware, run-level, adaptive); empty = point-to-point, none, fixed 100 frames
+ABLATIONS = ((False, False, False), (True, False, False), (True, True, False), (True, False, True), (True, True, True))
+UNIT_LENGTHS = (1, 30, 100, 250)
+
+
+@dataclasses.dataclass
+class ExperimentSpec:
+    name: str
+    source: Path
+    render: Path
+    tours_root: Path
+    out: Path
+    mapping: dict
+    query: str
+    unchanged: str
+    map: str = "build"
+    methods: tuple = METHODS
+    tables: tuple = ()
+    one_frame_stride: int = 15
+    detector: dict = dataclasses.field(default_factory=dict)
+    config: dict = dataclasses.field(default_factory=dict)
+    appearance: dict = dataclasses.field(default_factory=dict)
+    fpfh_icp: dict = dataclasses.field(default_factory=dict)
+    workers: int = 2
+    seed: int = 0
+    description: str = ""
+
+
+def _fail(src, field, msg):
+    raise SceneFormatError(src, field, msg)
+
+
+def _mapping_of(v, src, field) -> dict:
+    if v is None:
+        return {}
+    if not isinstance(v, dict):
+        _fail(src, field, f"expected a mapping, got {v!r}")
+    return dict(v)
+
+
+def _check_overrides(cls, d: dict, src, field) -> None:
+    known = {f.name for f in dataclasses.fields(cls)}
+    for k in d:
+        if k not in known:
+            _fail(src, f"{field}.{k}", f"unknown setting; allowed: {', '.join(sorted(known))}")
+
+
+def load_experiment(path) -> ExperimentSpec:
+    """Read and validate an experiment spec; every error names the file and the key."""
+    from synth.scene import read_yaml
+
+    from .config import Config
+    from .detection import Corruption
+
+    src = Path(path)
+    if not src.is_file():
+        raise UserError(f"{src}: experiment spec not found")
+    doc = read_yaml(src)
+    if not isinstance(doc, dict):
+        _fail(src, None, "expected a mapping at the top level")
+    unknown = sorted(map(str, set(doc) - SPEC_KEYS))
+    if unknown:
+        _fail(src, unknown[0], f"unknown key; allowed: {', '.join(sorted(SPEC_KEYS))}")
+    for k in ("name", "render", "out", "mapping", "query", "unchanged"):
+        if doc.get(k) in (None, ""):
+            _fail(src, k, "missing")
+    render = (src.parent / str(doc["render"])).resolve()
+    if not render.is_file():
+        _fail(src, "render", f"render job spec {render} not found")
+    from synth.jobs import load_spec
+
+    job = load_spec(render)
+    mapping = _mapping_of(doc["mapping"], src, "mapping")
+    for k in ("layout", "lighting", "path"):
+        if not isinstance(mapping.get(k), str):
+            _fail(src, f"mapping.{k}", "expected a name")
+    methods = doc.get("methods", list(METHODS))
+    if isinstance(methods, str):
+        methods = [methods]
+    if not isinstance(methods, list) or not methods:
+        _fail(src, "methods", f"expected a non-empty list of {', '.join(METHODS)}")
+    for i, m in enumerate(methods):
+        if m not in METHODS:
+            _fail(src, f"methods[{i}]", f"unknown method {m!r}; known: {', '.join(METHODS)}")
+    if "videoreloc" not in methods and {"fpfh_icp", "appearance"} & set(methods):
+        _fail(src, "methods", "the clip-rigid controls reuse VideoReloc's clips: add videoreloc")
+    tables = doc.get("tables") or []
+    if not isinstance(tables, list) or any(t not in TABLES for t in tables):
+        _fail(src, "tables", f"expected a list of {', '.join(TABLES)} (main and factors are always made), got {tables!r}")
+    if "ablation" in tables and "videoreloc" not in methods:
+        _fail(src, "tables", "the ablation table needs the videoreloc method")
+    if doc.get("map", "build") not in ("build", "ground-truth"):
+        _fail(src, "map", f"expected build or ground-truth, got {doc.get('map')!r}")
+    for k in ("one_frame_stride", "workers"):
+        v = doc.get(k, 1)
+        if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
+            _fail(src, k, f"expected a positive integer, got {v!r}")
+    det = _mapping_of(doc.get("detector"), src, "detector")
+    _check_overrides(Corruption, det, src, "detector")
+    try:
+        Corruption(**det)
+    except (TypeError, ValueError) as e:
+        _fail(src, "detector", str(e))
+    cfg = _mapping_of(doc.get("config"), src, "config")
+    try:
+        Config.from_dict(cfg, source=str(src))
+    except (ValueError, TypeError) as e:
+        raise UserError(str(e) if str(src) in str(e) else f"{src}: config: {e}") from None
+    app = _mapping_of(doc.get("appearance"), src, "appearance")
+    fp = _mapping_of(doc.get("fpfh_icp"), src, "fpfh_icp")
+    if app:
+        from .appearance import AppearanceConfig
+
+        _check_overrides(AppearanceConfig, app, src, "appearance")
+    if fp:
+        from .fpfh_icp import FpfhConfig
+
+        _check_overrides(FpfhConfig, fp, src, "fpfh_icp")
+    tours_root = Path(doc["tours"]) if doc.get("tours") else Path(job.out)
+    return ExperimentSpec(
+        name=str(doc["name"]), source=src, render=render, tours_root=tours_root, out=Path(doc["out"]),
+        mapping=mapping, query=str(doc["query"]), unchanged=str(doc["unchanged"]), map=doc.get("map", "build"),
+        methods=tuple(methods), tables=tuple(tables), one_frame_stride=int(doc.get("one_frame_stride", 15)),
+        detector=det, config=cfg, appearance=app, fpfh_icp=fp, workers=int(doc.get("workers", 2)),
+        seed=int(doc.get("seed", 0)), description=str(doc.get("description", "")),
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# the design on disk
+
+
+def design_tours(spec: ExperimentSpec) -> tuple[dict, dict]:
+    """(query tours {name: info}, mapping tour info) from the render spec; checks they are rendered."""
+    from synth.dataset import Tour
+    from synth.jobs import expand, load_spec, tour_name
+
+    plan = expand(load_spec(spec.render), out=spec.tours_root)
+    missing = []
+
+    def info(name, p) -> dict | None:
+        d = spec.tours_root / name
+        if not (d / "meta.json").is_file() or not (d / "poses.txt").is_file():
+            missing.append(name)
+            return None
+        meta = json.loads((d / "meta.json").read_text())
+        if meta.get("complete") is False:
+            missing.append(name + " (incomplete)")
+            return None
+        t = Tour(d)
+        return {"dir": str(d.resolve()), "layout": p.layout_name, "lighting": p.lighting_name, "path": p.path_name,
+                "rearranged": p.layout_name != spec.unchanged, "frames": len(t), "fps": t.fps,
+                "rgb_every": t.rgb_every}
+
+    m = spec.mapping
+    mname = tour_name(m["layout"], m["lighting"], m["path"])
+    if mname not in plan.tours:
+        _fail(spec.source, "mapping", f"{spec.render.name} has no tour {mname}")
+    queries = {n: p for n, p in plan.tours.items() if p.path_name == spec.query and n != mname}
+    if not queries:
+        _fail(spec.source, "query", f"{spec.render.name} has no tours of path {spec.query!r}")
+    if spec.unchanged not in {p.layout_name for p in queries.values()}:
+        _fail(spec.source, "unchanged", f"layout {spec.unchanged!r} has no query tour in {spec.render.name}")
+    out = {n: info(n, p) for n, p in queries.items()}
+    mapping = info(mname, plan.tours[mname])
+    if missing:
+        raise UserError(f"{spec.tours_root}: {len(missing)} tour(s) not rendered: {', '.join(missing[:4])}"
+                        f"{' ...' if len(missing) > 4 else ''}; run: synth render {spec.render} --resume")
+    return out, mapping
+
+
+# ---------------------------------------------------------------------------------------------
+# tasks (run in worker processes)
+
+
+def _key(*parts) -> str:
+    return hashlib.sha1(json.dumps(parts, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def _file_key(path) -> str:
+    """What a result depends on in a file: its content (a rebuilt identical map changes nothing)."""
+    h = hashlib.sha1()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()[:16]
+
+
+def is_done(d: Path, key: str) -> bool:
+    try:
+        return json.loads((d / DONE).read_text()).get("key") == key
+    except (OSError, ValueError):
+        return False
+
+
+def _mark_done(d: Path, key: str, seconds: float, extra: dict | None = None) -> None:
+    write_json_atomic(d / DONE, {"key": key, "seconds": round(seconds, 2), **(extra or {})})
+
+
+def _config(spec_config: dict, variant=None):
+    from .config import Config
+
+    cfg = Config.from_dict(spec_config)
+    if variant is not None:
+        orient, run_level, adaptive = variant
+        if not orient:
+            cfg = cfg.replace("refinement.orientation_aware", False)
+        if not run_level:
+            cfg = cfg.replace("backend.run_level", False)
+        if not adaptive:
+            cfg = cfg.replace("clips.adaptive", False).replace("clips.start_frames", 100)
+    return cfg
+
+
+def _detector(det: dict, tour, bmap):
+    from .detection import Corruption, DetectorSpec, build_detector
+
+    return build_detector(DetectorSpec(corruption=Corruption(**det)), tour.class_names(), vocabulary=bmap.class_set)
+
+
+def ablation_name(variant) -> str:
+    return "ablation_" + "".join("1" if v else "0" for v in variant)
+
+
+_CACHE: dict = {}
+
+
+def _load(kind: str, path: str):
+    k = (kind, path, os.stat(path).st_mtime_ns)
+    if k not in _CACHE:
+        if kind == "boxes":
+            from .map import BoxMap
+
+            _CACHE[k] = BoxMap.load(path)
+        elif kind == "appearance":
+            from .appearance import AppearanceMap
+
+            _CACHE[k] = AppearanceMap.load(path)
+        else:
+            from .fpfh_icp import PointMap
+
+            _CACHE[k] = PointMap.load(path)
+    return _CACHE[k]
+
+
+def run_map_task(task: dict) -> dict:
+    """Build one map (box map, FPFH point map or appearance keyframe map) from the mapping tour."""
+    from synth.dataset import Tour
+
+    t0 = time.perf_counter()
+    out = Path(task["file"])
+    tour = Tour(task["tour"])
+    if task["kind"] == "boxes":
+        from .mapping import build_map, dumps_map, map_from_scene, write_atomic
+
+        if task["source"] == "ground-truth":
+            doc = map_from_scene(tour.meta.get("layout_file") or tour.meta["layout"])
+        else:
+            doc, report = build_map(tour.root, progress=False)
+            if not doc["boxes"]:
+                raise UserError(report["warnings"][0] if report["warnings"] else f"{tour.root}: no boxes built")
+        write_atomic(out, dumps_map(doc))
+    elif task["kind"] == "appearance":
+        from .appearance import AppearanceConfig, AppearanceMap
+
+        AppearanceMap.build(tour, cfg=AppearanceConfig(**task["options"])).save(out)
+    else:
+        from .fpfh_icp import FpfhConfig, PointMap
+
+        PointMap.build(tour, cfg=FpfhConfig(**task["options"])).save(out)
+    s = time.perf_counter() - t0
+    write_json_atomic(out.with_name(out.name + ".done.json"), {"key": task["key"], "seconds": round(s, 2)})
+    return {"kind": task["kind"], "seconds": s}
+
+
+def run_tour_task(task: dict) -> dict:
+    """One method on one query tour; writes its trajectories into ``task['dir']`` and marks it done."""
+    from synth.dataset import Tour
+
+    from .run import load_clip_poses, relocalize
+
+    t0 = time.perf_counter()
+    d = Path(task["dir"])
+    d.mkdir(parents=True, exist_ok=True)
+    tour = Tour(task["tour"])
+    method = task["method"]
+    extra: dict = {}
+    if method == "videoreloc" or method.startswith("ablation_"):
+        bmap = _load("boxes", task["map"])
+        variant = tuple(c == "1" for c in method.split("_")[1]) if method.startswith("ablation_") else None
+        cfg = _config(task["config"], variant)
+        s = relocalize(tour, bmap, d, cfg=cfg, detector=_detector(task["detector"], tour, bmap), seed=task["seed"],
+                       progress=False)
+        extra = {"fps": s["fps"], "clips": s["clips"]}
+    elif method == "fpfh_icp":
+        from .fpfh_icp import FpfhConfig, run_fpfh_icp
+
+        s = run_fpfh_icp(tour, _load("fpfh", task["fpfh_map"]), load_clip_poses(task["clips"]), d,
+                         cfg=FpfhConfig(**task["options"]), progress=False)
+        extra = {k: s[k] for k in ("clips", "registered") if k in s}
+    elif method == "appearance":
+        from .appearance import AppearanceConfig, run_appearance
+
+        s = run_appearance(tour, _load("appearance", task["appearance_map"]), d,
+                           clip_poses=load_clip_poses(task["clips"]), cfg=AppearanceConfig(**task["options"]),
+                           progress=False)
+    elif method == "one_frame":
+        from synth.camera import write_tum
+
+        from .units import run_units
+
+        bmap = _load("boxes", task["map"])
+        lengths = tuple(task["lengths"])
+        est: dict = {}
+        rep = run_units(tour, bmap, lengths=lengths, detector=_detector(task["detector"], tour, bmap),
+                        cfg=_config(task["config"]), one_frame_stride=task["stride"], seed=task["seed"],
+                        progress=False, estimates=est)
+        one = est.get(1, {})
+        fr = sorted(one)
+        write_tum(d / "causal.txt", [one[i] for i in fr], fps=tour.fps, frames=fr,
+                  header=f"one-frame object units on every {task['stride']}th frame of {tour.root}")
+        write_json_atomic(d / "units.json", rep)
+    else:
+        raise ValueError(f"unknown method {method!r}")
+    seconds = time.perf_counter() - t0
+    _mark_done(d, task["key"], seconds, extra)
+    return {"method": method, "tour": task["tour_name"], "seconds": seconds}
+
+
+# ---------------------------------------------------------------------------------------------
+# the experiment
+
+
+def _pool(workers: int):
+    if workers <= 1:
+        return None
+    # spawn: Open3D and OpenCV keep thread pools that a fork would copy mid-state
+    return cf.ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"))
+
+
+class _Runner:
+    """Runs tasks in a process pool (or inline), with dependencies and a progress bar."""
+
+    def __init__(self, workers: int, progress: bool, total: int, desc: str):
+        from tqdm import tqdm
+
+        self.pool = _pool(workers)
+        self.bar = tqdm(total=total, desc=desc, unit="task", file=sys.stderr, disable=not progress)
+        self.failed: dict[str, str] = {}
+        self.seconds: dict[str, float] = {}
+
+    def run(self, tasks: list[tuple[str, callable, dict, list[str]]]) -> None:
+        """tasks: (id, function, argument, ids it waits for). A task whose dependency failed is skipped."""
+        waiting = list(tasks)
+        done: set[str] = set()
+        running: dict = {}
+
+        def ready():
+            nonlocal waiting
+            keep = []
+            for t in waiting:
+                if any(x in self.failed for x in t[3]):
+                    self.failed[t[0]] = "skipped: " + next(x for x in t[3] if x in self.failed) + " failed"
+                    self.bar.update(1)
+                elif all(x in done for x in t[3]):
+                    yield t
+                else:
+                    keep.append(t)
+            waiting = keep
+
+        while waiting or running:
+            for tid, fn, arg, _ in list(ready()):
+                if self.pool is None:
+                    self._finish(tid, lambda: fn(arg), done)
+                else:
+                    running[self.pool.submit(fn, arg)] = tid
+            if not running:
+                continue
+            finished, _ = cf.wait(running, return_when=cf.FIRST_COMPLETED)
+            for f in finished:
+                self._finish(running.pop(f), f.result, done)
+
+    def _finish(self, tid, get, done) -> None:
+        try:
+            r = get()
+            self.seconds[tid] = r["seconds"]
+            done.add(tid)
+        except (Exception, cf.process.BrokenProcessPool) as e:  # one failure must not lose the others
+            msg = str(e) if isinstance(e, UserError) else f"{type(e).__name__}: {e}"
+            self.failed[tid] = msg.splitlines()[0] if msg else type(e).__name__
+        self.bar.update(1)
+
+    def close(self) -> None:
+        self.bar.close()
+        if self.pool is not None:
+            self.pool.shutdown()
+
+
+def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int | None = None,
+                   progress: bool = True, plots: bool = True) -> dict:
+    """Maps, every method on every query tour, evaluation, tables, plots and the report."""
+    from . import tables
+
+    t_start = time.time()
+    out = Path(out or spec.out)
+    workers = workers or spec.workers
+    queries, mapping = design_tours(spec)
+    out.mkdir(parents=True, exist_ok=True)
+    maps_dir = out / "maps"
+    maps_dir.mkdir(exist_ok=True)
+
+    # 1. maps from the mapping tour
+    map_tasks = []
+    files = {"boxes": maps_dir / "videoreloc_map.json"}
+    if "fpfh_icp" in spec.methods:
+        files["fpfh"] = maps_dir / "fpfh_map.npz"
+    if "appearance" in spec.methods:
+        files["appearance"] = maps_dir / "appearance_map.npz"
+    options = {"boxes": {}, "fpfh": spec.fpfh_icp, "appearance": spec.appearance}
+    for kind, f in files.items():
+        key = _key(kind, _file_key(Path(mapping["dir"]) / "poses.txt"), mapping, spec.map if kind == "boxes" else None,
+                   options[kind])
+        try:
+            done = json.loads(f.with_name(f.name + ".done.json").read_text()).get("key") == key and f.is_file()
+        except (OSError, ValueError):
+            done = False
+        if not done:
+            map_tasks.append((f"map/{kind}", run_map_task, {"kind": kind, "file": str(f), "tour": mapping["dir"],
+                                                             "source": spec.map, "options": options[kind], "key": key}, []))
+    runner = _Runner(workers, progress, len(map_tasks), f"{spec.name}: maps")
+    try:
+        runner.run(map_tasks)
+    finally:
+        runner.close()
+    if runner.failed:
+        raise UserError("map building failed: " + "; ".join(f"{k}: {v}" for k, v in runner.failed.items()))
+    map_seconds = dict(runner.seconds)
+
+    # 2. every method on every query tour
+    map_keys = {k: _file_key(f) for k, f in files.items()}
+    tour_keys = {n: _file_key(Path(t["dir"]) / "poses.txt") + _file_key(Path(t["dir"]) / "meta.json")
+                 + json.dumps(t, sort_keys=True) for n, t in queries.items()}
+    tasks = []
+    common = {"map": str(files["boxes"]), "config": spec.config, "detector": spec.detector, "seed": spec.seed}
+    methods = list(spec.methods)
+    variants = [v for v in ABLATIONS if v != (True, True, True)] if "ablation" in spec.tables else []
+    for name, t in queries.items():
+        vr_dir = out / "runs" / "videoreloc" / name
+
+        def add(method, deps, uses="boxes", **kw) -> str:
+            d = out / "runs" / method / name
+            arg = {**common, "method": method, "tour": t["dir"], "tour_name": name, "dir": str(d), **kw}
+            arg["key"] = _key(arg, map_keys[uses], tour_keys[name])
+            if not is_done(d, arg["key"]):
+                tasks.append((f"{method}/{name}", run_tour_task, arg, [x for x in deps if x in scheduled]))
+                scheduled.add(f"{method}/{name}")
+            return arg["key"]
+
+        scheduled: set[str] = set()
+        # the controls reuse VideoReloc's clips: their key holds VideoReloc's, so they rerun with it
+        vr_key = add("videoreloc", []) if "videoreloc" in methods else None
+        vr_dep = [f"videoreloc/{name}"]
+        if "fpfh_icp" in methods:
+            add("fpfh_icp", vr_dep, uses="fpfh", fpfh_map=str(files["fpfh"]), clips=str(vr_dir), options=spec.fpfh_icp,
+                vr=vr_key)
+        if "appearance" in methods:
+            add("appearance", vr_dep, uses="appearance", appearance_map=str(files["appearance"]), clips=str(vr_dir),
+                options=spec.appearance, vr=vr_key)
+        if "one_frame" in methods or "units" in spec.tables:
+            add("one_frame", [], stride=spec.one_frame_stride,
+                lengths=list(UNIT_LENGTHS if "units" in spec.tables else (1,)))
+        for v in variants:
+            add(ablation_name(v), [])
+    runner = _Runner(workers, progress, len(tasks), f"{spec.name}: runs")
+    try:
+        runner.run(tasks)
+    finally:
+        runner.close()
+    run_seconds = dict(runner.seconds)
+
+    # 3. evaluation, tables, plots, report
+    results = tables.evaluate_experiment(spec, out, queries, files, methods, variants)
+    results["seconds"] = _seconds(out, queries, methods, variants, maps_dir, files)
+    results["seconds"]["this_run_wall"] = round(time.time() - t_start, 1)
+    results["failed"] = runner.failed
+    write_json_atomic(out / "results.json", results)
+    tables.write_tables(results, out)
+    if plots:
+        from .plots import plot_experiment
+        from .report import write_report
+
+        plot_experiment(out)
+        write_report(out)
+    results["_ran"] = {"maps": map_seconds, "runs": run_seconds}
+    return results
+
+
+def _seconds(out: Path, queries: dict, methods: list, variants: list, maps_dir: Path, files: dict) -> dict:
+    """Compute time of each method summed over tours (from the done markers), and of each map."""
+    s: dict = {}
+    for kind, f in files.items():
+        try:
+            s[f"map_{kind}"] = json.loads(f.with_name(f.name + ".done.json").read_text())["seconds"]
+        except (OSError, ValueError, KeyError):
+            s[f"map_{kind}"] = None
+    for m in list(methods) + [ablation_name(v) for v in variants]:
+        tot = 0.0
+        for name in queries:
+            try:
+                tot += json.loads((out / "runs" / m / name / DONE).read_text())["seconds"]
+            except (OSError, ValueError, KeyError):
+                tot = math.nan
+        s[m] = None if math.isnan(tot) else round(tot, 1)
+    return s
+
+
+# ---------------------------------------------------------------------------------------------
+# CLI
+
+
+def cmd_experiment(args) -> int:
+    from . import tables
+
+    spec = load_experiment(args.spec)
+    if args.tours:
+        spec.tours_root = Path(args.tours)
+    r = run_experiment(spec, out=Path(args.out) if args.out else None, workers=args.workers,
+                       progress=not args.quiet, plots=not args.no_plots)
+    out = Path(args.out or spec.out)
+    print(tables.format_all(out))
+    ran = r["_ran"]
+    print(f"\n{len(ran['runs'])} runs and {len(ran['maps'])} maps computed now "
+          f"({r['seconds']['this_run_wall']:.0f} s wall); results, tables"
+          f"{', plots and report' if not args.no_plots else ''} in {out}")
+    if r["failed"]:
+        for k, v in r["failed"].items():
+            print(f"failed: {k}: {v}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def register_cli(subparsers) -> None:
+    p = subparsers.add_parser("experiment", help="VideoReloc and the baselines over a rendered design: tables, plots, report")
+    p.add_argument("spec", metavar="SPEC.yaml", help="experiment spec (see reloc/experiment.py)")
+    p.add_argument("--out", help="results folder (default: the spec's out)")
+    p.add_argument("--tours", help="folder of the rendered tours (default: the render spec's out)")
+    p.add_argument("--workers", type=int, help="processes at a time (default: the spec's workers)")
+    p.add_argument("--no-plots", action="store_true", help="tables only")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(fn=cmd_experiment)

@@ -1,0 +1,313 @@
+"""reloc experiment, tables and checks: spec validation, the factor arithmetic, the check language,
+and (with Blender) a whole tiny design end to end, rerun and resumed."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from reloc import tables
+from reloc.cli import main as reloc_main
+from reloc.experiment import load_experiment
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+# ---------------------------------------------------------------------------------------------
+# factors and evaluation frames, against hand-computed values
+
+
+def _tours():
+    t = {}
+    for layout in ("apt_0", "apt_1", "apt_3"):
+        for light in ("day", "evening", "night"):
+            t[f"{layout}__{light}__query"] = {"layout": layout, "lighting": light}
+    return t
+
+
+def test_factors_match_hand_computation():
+    tours = _tours()
+    recall = {"apt_0": {"day": 0.9, "evening": 0.8, "night": 0.7},
+              "apt_1": {"day": 0.6, "evening": 0.5, "night": 0.3},
+              "apt_3": {"day": 0.3, "evening": 0.2, "night": 0.2}}
+    per = {n: {"recall_1m_10deg": recall[t["layout"]][t["lighting"]]} for n, t in tours.items()}
+    f = tables.factors(per, tours, "apt_0")
+    assert f["day"] == pytest.approx((0.9 + 0.6 + 0.3) / 3)
+    assert f["night"] == pytest.approx((0.7 + 0.3 + 0.2) / 3)
+    assert f["delta_L"] == pytest.approx(1.2 / 3 - 1.8 / 3)
+    assert f["unchanged"] == pytest.approx(0.8)
+    assert f["rearranged"] == pytest.approx((0.6 + 0.5 + 0.3 + 0.3 + 0.2 + 0.2) / 6)
+    assert f["delta_R"] == pytest.approx(0.35 - 0.8)
+    assert f["kept"] == pytest.approx(0.35 / 0.8)
+    # a design without evening tours and without an unchanged layout: those factors are None
+    no_eve = {n: t for n, t in tours.items() if t["lighting"] != "evening" and t["layout"] != "apt_0"}
+    g = tables.factors({n: per[n] for n in no_eve}, no_eve, "apt_0")
+    assert g["evening"] is None and g["unchanged"] is None and g["kept"] is None and g["delta_R"] is None
+    assert g["delta_L"] == pytest.approx((0.3 + 0.2) / 2 - (0.6 + 0.3) / 2)
+
+
+def test_evaluation_frames_of_per_frame_methods():
+    frames = list(range(20))
+    assert tables.evaluation_frames("appearance", "causal", frames, 5, 7) == [0, 5, 10, 15]
+    assert tables.evaluation_frames("appearance", "closure", frames, 5, 7) == frames  # clip-rigid: every frame
+    assert tables.evaluation_frames("one_frame", "causal", frames, 5, 7) == [0, 7, 14]
+    assert tables.evaluation_frames("videoreloc", "causal", frames, 5, 7) == frames
+
+
+# ---------------------------------------------------------------------------------------------
+# reloc check
+
+
+def _results(tmp_path) -> Path:
+    """A results folder with two methods, values chosen by hand."""
+    def mode(recall, day, night, unchanged, rearranged):
+        return {"all": {"recall_1m_10deg": recall, "recall_25cm_5deg": recall / 2, "median_pos_m": 0.1,
+                        "median_rot_deg": 1.0, "coverage": 1.0, "frames": 100},
+                "factors": {"day": day, "evening": None, "night": night, "delta_L": night - day,
+                            "unchanged": unchanged, "rearranged": rearranged, "delta_R": rearranged - unchanged,
+                            "kept": rearranged / unchanged},
+                "tours": {"apt_1__night__query": {"recall_1m_10deg": 0.5, "coverage": 0.9}}}
+
+    res = {"format": tables.FORMAT, "methods": {
+        "videoreloc": {"primary": "closure", "map_bytes": 20000,
+                       "modes": {"closure": mode(0.9, 0.9, 0.89, 0.95, 0.8), "causal": mode(0.8, 0.8, 0.8, 0.9, 0.7)}},
+        "appearance": {"primary": "causal", "map_bytes": 2_000_000,
+                       "modes": {"causal": mode(0.5, 0.6, 0.4, 0.7, 0.4)}}}}
+    d = tmp_path / "res"
+    d.mkdir()
+    (d / "results.json").write_text(json.dumps(res))
+    return d
+
+
+def _write_checks(tmp_path, items) -> Path:
+    p = tmp_path / "checks.yaml"
+    p.write_text(yaml.safe_dump({"checks": items}))
+    return p
+
+
+def test_checks_pass_fail_and_exit_status(tmp_path, capsys):
+    res = _results(tmp_path)
+    good = _write_checks(tmp_path, [
+        "videoreloc.closure.recall_1m_10deg >= 0.85",
+        "videoreloc.delta_L >= -0.03",  # primary cutoff (closure): 0.89 - 0.9
+        "videoreloc.kept >= 0.75",  # 0.8 / 0.95
+        {"check": "videoreloc.closure.recall_1m_10deg > appearance.causal.recall_1m_10deg", "name": "beats appearance"},
+        "appearance.delta_L < 0",
+        "videoreloc.closure.apt_1__night__query.coverage >= 0.9",
+        "videoreloc.map_bytes < 150000",
+    ])
+    assert reloc_main(["check", str(good), str(res)]) == 0
+    out = capsys.readouterr().out
+    assert "7 passed, 0 failed" in out and "beats appearance" in out
+    bad = _write_checks(tmp_path, ["videoreloc.causal.kept >= 0.8",  # 0.7 / 0.9 = 0.78
+                                   "videoreloc.closure.evening >= 0.5",  # no evening tours: no value
+                                   "videoreloc.closure.recall_1m_10deg >= 0.85"])
+    assert reloc_main(["check", str(bad), str(res), "--json"]) == 1
+    rows = json.loads(capsys.readouterr().out)
+    assert [r["passed"] for r in rows] == [False, False, True]
+    assert rows[0]["value"] == pytest.approx(0.7 / 0.9) and rows[1]["why"] == "no value"
+
+
+@pytest.mark.parametrize("items, message", [
+    (["videoreloc.closure.recal_1m_10deg >= 0.85"], "did you mean videoreloc.closure.recall_1m_10deg"),
+    (["videoreloc.kept >= fast"], "unknown metric 'fast'"),
+    (["videoreloc.kept => 0.75"], "cannot parse"),
+    ([{"name": "x"}], "checks[0]: expected {check:"),
+    ([3], "checks[0]: expected an assertion"),
+    ([], "non-empty list"),
+])
+def test_malformed_checks_exit_2(tmp_path, capsys, items, message):
+    res = _results(tmp_path)
+    assert reloc_main(["check", str(_write_checks(tmp_path, items)), str(res)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("reloc: error:") and message in err and len(err.splitlines()) == 1, err
+
+
+def test_check_file_or_results_missing_exit_2(tmp_path, capsys):
+    res = _results(tmp_path)
+    assert reloc_main(["check", str(tmp_path / "none.yaml"), str(res)]) == 2
+    p = _write_checks(tmp_path, ["videoreloc.kept >= 0.75"])
+    assert reloc_main(["check", str(p), str(tmp_path)]) == 2
+    assert "results.json: not found" in capsys.readouterr().err
+    (tmp_path / "broken.yaml").write_text("checks: [\n")
+    assert reloc_main(["check", str(tmp_path / "broken.yaml"), str(res)]) == 2
+
+
+# ---------------------------------------------------------------------------------------------
+# experiment spec validation
+
+
+def _spec(tmp_path, **changes) -> Path:
+    doc = yaml.safe_load((REPO / "render_jobs" / "demo_experiment.yaml").read_text())
+    doc["render"] = str(REPO / "render_jobs" / "demo.yaml")
+    doc["out"] = str(tmp_path / "exp")
+    doc["tours"] = str(tmp_path / "tours")
+    doc.update(changes)
+    for k in [k for k, v in changes.items() if v is None]:
+        del doc[k]
+    p = tmp_path / "exp.yaml"
+    p.write_text(yaml.safe_dump(doc))
+    return p
+
+
+def test_shipped_experiment_spec_validates():
+    s = load_experiment(REPO / "render_jobs" / "demo_experiment.yaml")
+    assert s.methods == ("videoreloc", "fpfh_icp", "appearance", "one_frame") and s.unchanged == "apt_0"
+    assert s.render == (REPO / "render_jobs" / "demo.yaml").resolve()
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"colour": 1}, "colour: unknown key"),
+    ({"render": "nowhere.yaml"}, "render: render job spec"),
+    ({"methods": ["videoreloc", "hloc"]}, "methods[1]: unknown method 'hloc'"),
+    ({"methods": ["fpfh_icp"]}, "reuse VideoReloc's clips: add videoreloc"),
+    ({"tables": ["units", "bogus"]}, "tables: expected a list of units, ablation"),
+    ({"detector": {"miss_rate": 2.0}}, "detector: corruption.miss_rate"),
+    ({"detector": {"miss": 0.1}}, "detector.miss: unknown setting"),
+    ({"config": {"clips": {"nope": 1}}}, "clips.nope: unknown setting"),
+    ({"one_frame_stride": 0}, "one_frame_stride: expected a positive integer"),
+    ({"unchanged": None}, "unchanged: missing"),
+    ({"map": "magic"}, "map: expected build or ground-truth"),
+])
+def test_bad_experiment_specs_are_one_line_exit_2(tmp_path, capsys, changes, message):
+    assert reloc_main(["experiment", str(_spec(tmp_path, **changes)), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("reloc: error:") and message in err and len(err.splitlines()) == 1, err
+    assert not (tmp_path / "exp").exists()
+
+
+def test_unrendered_design_names_the_missing_tours_and_the_command(tmp_path, capsys):
+    assert reloc_main(["experiment", str(_spec(tmp_path)), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "10 tour(s) not rendered" in err and "synth render" in err and "--resume" in err
+    assert not (tmp_path / "exp").exists()
+
+
+def test_wrong_names_in_the_design(tmp_path, capsys):
+    assert reloc_main(["experiment", str(_spec(tmp_path, unchanged="apt_2")), "--quiet"]) == 2
+    assert "unchanged: layout 'apt_2' has no query tour" in capsys.readouterr().err
+    assert reloc_main(["experiment", str(_spec(tmp_path, query="walk")), "--quiet"]) == 2
+    assert "query: demo.yaml has no tours of path 'walk'" in capsys.readouterr().err
+    assert reloc_main(["experiment", str(_spec(tmp_path, mapping={"layout": "apt_1", "lighting": "day",
+                                                                  "path": "mapping"})), "--quiet"]) == 2
+    assert "has no tour apt_1__day__mapping" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------------------------------
+# a whole tiny design, end to end (Blender renders a few RGB frames; geometry from the fast renderer)
+
+
+@pytest.fixture(scope="module")
+def tiny_design(tmp_path_factory):
+    from synth.jobs import load_spec, run_job
+
+    root = tmp_path_factory.mktemp("design")
+    render = {"name": "tiny", "out": str(root / "tours"), "renderer": "blender", "geometry": "fast",
+              "quality": "preview", "size": [128, 96], "chunk_size": 600, "designs": [
+                  {"layouts": ["apt_0", "apt_1"], "lightings": ["day", "night"], "path": {"name": "query", "frames": 450},
+                   "rgb_every": 150},
+                  {"layouts": ["apt_0"], "lightings": ["day"], "path": {"name": "mapping", "frames": 1800},
+                   "rgb_every": 120}]}
+    (root / "render.yaml").write_text(yaml.safe_dump(render))
+    s = run_job(load_spec(root / "render.yaml"), progress=False)
+    assert s["failed"] == {}
+    exp = {"name": "tiny", "render": "render.yaml", "out": str(root / "exp"), "query": "query", "unchanged": "apt_0",
+           "mapping": {"layout": "apt_0", "lighting": "day", "path": "mapping"}, "map": "ground-truth",
+           "methods": ["videoreloc", "fpfh_icp", "appearance", "one_frame"], "one_frame_stride": 50, "workers": 2}
+    (root / "exp.yaml").write_text(yaml.safe_dump(exp))
+    return root
+
+
+def _tum_recall(path: Path, gt_path: Path, frames: list[int]) -> float:
+    """Recall at 1 m/10 deg from TUM files, parsed and compared independently of reloc.evaluation."""
+    from scipy.spatial.transform import Rotation
+
+    def read(p):
+        out = {}
+        for line in p.read_text().splitlines():
+            if line.startswith("#") or not line.strip():
+                continue
+            v = [float(x) for x in line.split()]
+            out[int(round(v[0] * 30.0))] = (np.array(v[1:4]), Rotation.from_quat(v[4:8]))
+        return out
+
+    est, gt = read(path), read(gt_path)
+    ok = 0
+    for i in frames:
+        if i in est:
+            dp = np.linalg.norm(est[i][0] - gt[i][0])
+            dr = np.degrees((gt[i][1].inv() * est[i][1]).magnitude())
+            ok += dp <= 1.0 and dr <= 10.0
+    return ok / len(frames)
+
+
+@pytest.mark.blender
+@pytest.mark.slow
+def test_experiment_end_to_end_rerun_and_resume(tiny_design, capsys):
+    root = tiny_design
+    exp = root / "exp"
+    assert reloc_main(["experiment", str(root / "exp.yaml"), "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    res = json.loads((exp / "results.json").read_text())
+    assert [r["key"] for r in res["rows"]] == ["appearance.causal", "one_frame.causal", "fpfh_icp.closure",
+                                               "appearance.closure", "videoreloc.causal", "videoreloc.closure"]
+    assert len(res["tours"]) == 4 and res["failed"] == {}
+    # figures agree with an independent reading of the trajectory files
+    for name, t in res["tours"].items():
+        gt = Path(t["dir"]) / "poses.txt"
+        all_frames = list(range(450))
+        for key, frames in (("videoreloc.closure", all_frames), ("videoreloc.causal", all_frames),
+                            ("fpfh_icp.closure", all_frames), ("appearance.causal", [0, 150, 300]),
+                            ("one_frame.causal", list(range(0, 450, 50)))):
+            m, mode = key.split(".")
+            got = res["methods"][m]["modes"][mode]["tours"][name]
+            assert got["frames"] == len(frames)
+            assert got["recall_1m_10deg"] == pytest.approx(_tum_recall(exp / got["file"], gt, frames)), (key, name)
+    # the unchanged tours: VideoReloc with clip closure localizes nearly everything
+    vr = res["methods"]["videoreloc"]["modes"]["closure"]
+    assert vr["tours"]["apt_0__day__query"]["recall_1m_10deg"] > 0.8
+    f = vr["factors"]
+    assert f["delta_L"] == pytest.approx(f["night"] - f["day"]) and f["evening"] is None
+    assert f["kept"] == pytest.approx(f["rearranged"] / f["unchanged"])
+    # tables, plots and the report exist and carry the rows
+    main = (exp / "tables" / "main.md").read_text()
+    for r in res["rows"]:
+        assert r["label"] in main and r["label"] in printed
+    assert json.loads((exp / "tables" / "factors.json").read_text())[0]["key"] == "appearance.causal"
+    report = (exp / "report.html").read_text()
+    pngs = sorted((exp / "plots").glob("*.png"))
+    assert len(pngs) == 5 and all(p.name in report for p in pngs)
+    # the clip-rigid controls used VideoReloc's clips: same partition
+    from reloc.run import load_clip_poses
+
+    clips = load_clip_poses(exp / "runs" / "videoreloc" / "apt_1__night__query")
+    fp = json.loads((exp / "runs" / "fpfh_icp" / "apt_1__night__query" / "clips.json").read_text())
+    assert len(fp) == len(clips)
+    # a rerun computes nothing and changes no result
+    before = {p: p.stat().st_mtime_ns for p in (exp / "runs").rglob("*.txt")}
+    assert reloc_main(["experiment", str(root / "exp.yaml"), "--quiet", "--no-plots"]) == 0
+    assert "0 runs and 0 maps computed now" in capsys.readouterr().out
+    assert {p: p.stat().st_mtime_ns for p in (exp / "runs").rglob("*.txt")} == before
+    # a killed run (no done marker) is redone alone, to the same result
+    (exp / "runs" / "appearance" / "apt_1__day__query" / "done.json").unlink()
+    assert reloc_main(["experiment", str(root / "exp.yaml"), "--quiet", "--no-plots"]) == 0
+    assert "1 runs and 0 maps computed now" in capsys.readouterr().out
+    assert json.loads((exp / "results.json").read_text())["methods"] == res["methods"]
+    # a changed setting reruns exactly what depends on it
+    spec = yaml.safe_load((root / "exp.yaml").read_text())
+    (root / "exp2.yaml").write_text(yaml.safe_dump({**spec, "appearance": {"top_k": 4}}))
+    assert reloc_main(["experiment", str(root / "exp2.yaml"), "--quiet", "--no-plots"]) == 0
+    assert "4 runs and 1 maps computed now" in capsys.readouterr().out
+    (root / "exp3.yaml").write_text(yaml.safe_dump({**spec, "appearance": {"top_k": 4},
+                                                    "config": {"registration": {"center_match_m": 0.45}}}))
+    assert reloc_main(["experiment", str(root / "exp3.yaml"), "--quiet", "--no-plots"]) == 0
+    assert "16 runs and 0 maps computed now" in capsys.readouterr().out  # VideoReloc, its controls, one-frame
+    # checks on the real results
+    p = root / "checks.yaml"
+    p.write_text(yaml.safe_dump({"checks": ["videoreloc.closure.apt_0__day__query.recall_1m_10deg >= 0.8",
+                                            "videoreloc.delta_L >= -0.03", "fpfh_icp.map_bytes > videoreloc.map_bytes"]}))
+    assert reloc_main(["check", str(p), str(exp)]) == 0
