@@ -22,6 +22,8 @@ setup: $(VENV)/.installed
 demo: setup
 	$(VENV)/bin/synth scene build --out $(OUT)/scenes
 	$(VENV)/bin/synth render render_jobs/demo.yaml --out $(OUT)/demo --workers 2 $(if $(wildcard $(OUT)/demo/job_state.json),--resume,)
+	$(VENV)/bin/reloc experiment render_jobs/demo_experiment.yaml --tours $(OUT)/demo --out $(OUT)/demo/experiment
+	$(VENV)/bin/reloc check render_jobs/demo_checks.yaml $(OUT)/demo/experiment
 
 test: setup
 	$(VENV)/bin/python -m pytest $(PYTEST_ARGS)

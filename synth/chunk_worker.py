@@ -1,7 +1,7 @@
 """Chunks that need no Blender: ``python -m synth.chunk_worker JOB.json``.
 
 ``fast``: render depth, instance and semantic with the Open3D renderer (``synth.fast_render``).
-``copy``: copy shared geometry frames (the Blender geometry cache) into a geometry-only tour.
+``copy``: copy shared geometry frames (the geometry cache) into a tour (hard links where possible).
 Frames already on disk are skipped; progress goes to stdout as JSON lines, like the Blender worker.
 """
 
@@ -32,7 +32,10 @@ def run(job: dict) -> int:
             t0 = time.time()
             dst = out / fr.frame_name(i)
             tmp = fr.tmp_name(dst)
-            shutil.copyfile(src / fr.frame_name(i), tmp)
+            try:  # a hard link: the same bytes, no second copy on disk
+                os.link(src / fr.frame_name(i), tmp)
+            except OSError:  # another file system, or links not supported
+                shutil.copyfile(src / fr.frame_name(i), tmp)
             os.replace(tmp, dst)
             _emit(event="frame", frame=i, seconds=round(time.time() - t0, 4))
         return 0
