@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import sys
 import time
 from dataclasses import asdict, dataclass, fields
@@ -35,6 +34,8 @@ import cv2
 import numpy as np
 
 from synth.errors import UserError
+
+from .io import save_npz_atomic
 
 FORMAT = "videoreloc-appearance/1"
 
@@ -277,16 +278,10 @@ class AppearanceMap:
         """Write the map to one ``.npz`` file, atomically (temporary name, then rename)."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npz")
         meta = {"format": FORMAT, "config": asdict(self.cfg), "size": list(self.size), "build": self.build_info}
-        try:
-            np.savez_compressed(tmp, meta=np.array(json.dumps(meta)), K=self.K, kf_frames=self.kf_frames,
-                                kf_poses=self.kf_poses, offsets=self.offsets, xy=self.xy, xyz=self.xyz,
-                                desc=self.desc, vocab=self.vocab, idf=self.idf, bow=self.bow)
-            os.replace(tmp, path)
-        finally:
-            if tmp.exists():
-                tmp.unlink()
+        save_npz_atomic(path, meta=np.array(json.dumps(meta)), K=self.K, kf_frames=self.kf_frames,
+                        kf_poses=self.kf_poses, offsets=self.offsets, xy=self.xy, xyz=self.xyz,
+                        desc=self.desc, vocab=self.vocab, idf=self.idf, bow=self.bow)
         return path
 
     @classmethod

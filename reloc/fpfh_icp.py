@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import sys
 import time
 import zipfile
@@ -43,7 +42,7 @@ from scipy.spatial import cKDTree
 from synth.camera import write_tum
 from synth.errors import UserError
 
-from .io import write_json_atomic
+from .io import save_npz_atomic, write_json_atomic
 
 FORMAT = "videoreloc-fpfh-map/1"
 reg = o3d.pipelines.registration
@@ -314,16 +313,10 @@ class PointMap:
         """One ``.npz`` file (uncompressed arrays + JSON metadata), written atomically."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npz")
         meta = dict(self.meta, format=FORMAT, voxel=self.voxel)
-        try:
-            np.savez(tmp, points=self.points.astype(np.float32), normals=self.normals.astype(np.float32),
-                     keypoints=self.keypoints.astype(np.int32), features=self.features.astype(np.float32),
-                     meta=np.array(json.dumps(meta)))
-            os.replace(tmp, path)
-        finally:
-            if tmp.exists():
-                tmp.unlink()
+        save_npz_atomic(path, compressed=False, points=self.points.astype(np.float32),
+                        normals=self.normals.astype(np.float32), keypoints=self.keypoints.astype(np.int32),
+                        features=self.features.astype(np.float32), meta=np.array(json.dumps(meta)))
         return path
 
     @staticmethod

@@ -34,7 +34,7 @@ from .config import Config
 from .detection import Detector
 from .frontend import FrontEnd, PoseEvent
 from .geometry import inv_T
-from .io import write_json_atomic
+from .io import save_npz_atomic, write_json_atomic
 from .localize import localize_clip
 from .map import BoxMap
 from .units import default_detector, make_pose_stream, read_frame
@@ -256,10 +256,8 @@ def write_clip_poses(path: Path, clips) -> None:
                 fr.append(i)
                 cl.append(c.id)
                 V.append(c.V[i])
-    tmp = path.with_name(f".{path.name}.tmp.npz")
-    np.savez_compressed(tmp, frames=np.asarray(fr, np.int64), clip=np.asarray(cl, np.int64),
-                        V=np.asarray(V, np.float64).reshape(-1, 4, 4))
-    tmp.replace(path)
+    save_npz_atomic(path, frames=np.asarray(fr, np.int64), clip=np.asarray(cl, np.int64),
+                    V=np.asarray(V, np.float64).reshape(-1, 4, 4))
 
 
 def load_clip_poses(run_dir) -> dict[int, dict[int, np.ndarray]]:

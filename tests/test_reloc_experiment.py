@@ -311,3 +311,36 @@ def test_experiment_end_to_end_rerun_and_resume(tiny_design, capsys):
     p.write_text(yaml.safe_dump({"checks": ["videoreloc.closure.apt_0__day__query.recall_1m_10deg >= 0.8",
                                             "videoreloc.delta_L >= -0.03", "fpfh_icp.map_bytes > videoreloc.map_bytes"]}))
     assert reloc_main(["check", str(p), str(exp)]) == 0
+
+
+def test_units_and_ablation_tables_from_run_outputs(tmp_path):
+    """Table I pools the per-tour unit reports weighted by frames; Table III lists the variants in the paper's order."""
+    from reloc.experiment import ABLATIONS, ablation_name
+
+    queries = {"apt_0__day__query": {"layout": "apt_0"}, "apt_1__day__query": {"layout": "apt_1"}}
+    for name, (r1, r250, n1) in zip(queries, ((0.5, 1.0, 10), (0.2, 0.6, 30))):
+        d = tmp_path / "runs" / "one_frame" / name
+        d.mkdir(parents=True)
+        (d / "units.json").write_text(json.dumps({"units": [
+            {"unit": 1, "recall_1m_10deg": r1, "recall_25cm_5deg": r1 / 2, "frames": n1, "sampled_every": 15},
+            {"unit": 250, "recall_1m_10deg": r250, "recall_25cm_5deg": r250, "frames": 450, "sampled_every": 1}]}))
+    rows = tables._units(tmp_path, queries, "apt_0")
+    assert [r["unit"] for r in rows] == [1, 250]
+    assert rows[0]["all_recall_1m_10deg"] == pytest.approx((0.5 * 10 + 0.2 * 30) / 40)
+    assert rows[0]["unchanged_recall_1m_10deg"] == 0.5 and rows[1]["rearranged_recall_1m_10deg"] == 0.6
+    assert rows[1]["all_recall_1m_10deg"] == pytest.approx(0.8)
+    md, _ = tables.units_table({"units": rows})
+    assert "| one frame (every 15th frame) | 27.5 | 13.8 | 50.0 | 20.0 |" in md
+    assert "| 250-frame clip | 80.0 | 80.0 | 100.0 | 60.0 |" in md
+
+    def mode(c, f):
+        return {"all": {"recall_1m_10deg": c, "recall_25cm_5deg": f}}
+
+    res = {"methods": {("videoreloc" if v == (True, True, True) else ablation_name(v)):
+                       {"modes": {"closure": mode(0.5 + 0.1 * k, 0.3), "causal": mode(0.4, 0.2 + 0.05 * k)}}
+                       for k, v in enumerate(ABLATIONS)}}
+    rows = tables._ablation(res, [v for v in ABLATIONS if v != (True, True, True)])
+    assert [(r["orientation_aware"], r["run_level"], r["adaptive"]) for r in rows] == list(ABLATIONS)
+    md, _ = tables.ablation_table({"ablation": rows})
+    assert md.splitlines()[4] == "|  |  |  | 50.0 | 30.0 | 40.0 | 20.0 |"
+    assert md.splitlines()[-3] == "| ✓ | ✓ | ✓ | 90.0 | 30.0 | 40.0 | 40.0 |"
