@@ -355,6 +355,7 @@ def run_tour_task(task: dict) -> dict:
     t0 = time.perf_counter()
     d = Path(task["dir"])
     d.mkdir(parents=True, exist_ok=True)
+    (d / DONE).unlink(missing_ok=True)  # from here until done, this run's files are not a result
     tour = Tour(task["tour"])
     method = task["method"]
     extra: dict = {}
@@ -514,6 +515,7 @@ def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int |
     tour_keys = {n: _file_key(Path(t["dir"]) / "poses.txt") + _file_key(Path(t["dir"]) / "meta.json")
                  + json.dumps(t, sort_keys=True) for n, t in queries.items()}
     tasks = []
+    expected: dict[tuple[str, str], tuple[Path, str]] = {}
     common = {"map": str(files["boxes"]), "config": spec.config, "detector": spec.detector, "seed": spec.seed}
     methods = list(spec.methods)
     variants = [v for v in ABLATIONS if v != (True, True, True)] if "ablation" in spec.tables else []
@@ -524,6 +526,7 @@ def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int |
             d = out / "runs" / method / name
             arg = {**common, "method": method, "tour": t["dir"], "tour_name": name, "dir": str(d), **kw}
             arg["key"] = _key(arg, map_keys[uses], tour_keys[name])
+            expected[(method, name)] = (d, arg["key"])
             if not is_done(d, arg["key"]):
                 tasks.append((f"{method}/{name}", run_tour_task, arg, [x for x in deps if x in scheduled]))
                 scheduled.add(f"{method}/{name}")
@@ -552,7 +555,9 @@ def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int |
     run_seconds = dict(runner.seconds)
 
     # 3. evaluation, tables, plots, report
-    results = tables.evaluate_experiment(spec, out, queries, files, methods, variants)
+    # only results whose done marker holds the current key count; a failed or stale run has no poses
+    valid = {mt for mt, (d, key) in expected.items() if is_done(d, key)}
+    results = tables.evaluate_experiment(spec, out, queries, files, methods, variants, valid)
     results["seconds"] = _seconds(out, queries, methods, variants, maps_dir, files)
     results["seconds"]["this_run_wall"] = round(time.time() - t_start, 1)
     results["failed"] = runner.failed

@@ -80,7 +80,10 @@ def _clean(d: dict) -> dict:
     return {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in d.items()}
 
 
-def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: list, variants: list) -> dict:
+def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: list, variants: list,
+                        valid: set | None = None) -> dict:
+    """Every row on every tour; ``valid``: the (method, tour) runs that finished with the current
+    inputs (others, failed or stale, count as no poses)."""
     from .experiment import LABELS, PRIMARY, ROWS, ablation_name
 
     from .appearance import AppearanceConfig
@@ -108,7 +111,7 @@ def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: li
                                         spec.one_frame_stride)
                 g = {i: gt[i] for i in idx}
                 rel = Path("runs") / m / name / f"{mode}.txt"
-                est = _estimates(out / rel, t["fps"])
+                est = _estimates(out / rel, t["fps"]) if valid is None or (m, name) in valid else {}
                 s = summarize({i: T for i, T in est.items() if i in g}, g)
                 s["file"] = str(rel)
                 per[name] = _clean(s)
@@ -266,6 +269,11 @@ def make_tables(res: dict) -> dict[str, tuple[str, list]]:
         t["units"] = units_table(res)
     if res.get("ablation"):
         t["ablation"] = ablation_table(res)
+    failed = res.get("failed") or {}
+    if failed:  # a failed run has no poses: its tour counts as failures, which the reader must know
+        warn = (f"**Incomplete: {len(failed)} run(s) failed** ({', '.join(sorted(failed)[:3])}"
+                f"{', ...' if len(failed) > 3 else ''}); their frames count as failures below.\n\n")
+        t = {k: (warn + md, rows) for k, (md, rows) in t.items()}
     return t
 
 

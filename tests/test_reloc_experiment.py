@@ -306,6 +306,25 @@ def test_experiment_end_to_end_rerun_and_resume(tiny_design, capsys):
                                                     "config": {"registration": {"center_match_m": 0.45}}}))
     assert reloc_main(["experiment", str(root / "exp3.yaml"), "--quiet", "--no-plots"]) == 0
     assert "16 runs and 0 maps computed now" in capsys.readouterr().out  # VideoReloc, its controls, one-frame
+    # a corrupt frame: that run fails with the file named, its old files no longer count, the tables say
+    # they are incomplete; once the file is back, a rerun completes them
+    frame = Path(res["tours"]["apt_1__day__query"]["dir"]) / "frames" / "000150.exr"
+    good = frame.read_bytes()
+    (exp / "runs" / "videoreloc" / "apt_1__day__query" / "done.json").unlink()
+    frame.write_bytes(b"not an exr")
+    try:
+        assert reloc_main(["experiment", str(root / "exp3.yaml"), "--quiet", "--no-plots"]) == 1
+        cap = capsys.readouterr()
+        assert "failed: videoreloc/apt_1__day__query" in cap.err and "000150.exr" in cap.err
+        assert (exp / "tables" / "main.md").read_text().startswith("**Incomplete: 1 run(s) failed**")
+        broken = json.loads((exp / "results.json").read_text())["methods"]["videoreloc"]["modes"]["closure"]
+        assert broken["tours"]["apt_1__day__query"]["coverage"] == 0.0  # no stale poses evaluated
+        assert broken["tours"]["apt_0__day__query"]["coverage"] > 0.9
+    finally:
+        frame.write_bytes(good)
+    assert reloc_main(["experiment", str(root / "exp3.yaml"), "--quiet", "--no-plots"]) == 0
+    assert "1 runs and 0 maps computed now" in capsys.readouterr().out
+    assert not (exp / "tables" / "main.md").read_text().startswith("**Incomplete")
     # checks on the real results
     p = root / "checks.yaml"
     p.write_text(yaml.safe_dump({"checks": ["videoreloc.closure.apt_0__day__query.recall_1m_10deg >= 0.8",
