@@ -322,6 +322,7 @@ def run_map_task(task: dict) -> dict:
 
     t0 = time.perf_counter()
     out = Path(task["file"])
+    out.with_name(out.name + ".done.json").unlink(missing_ok=True)
     tour = Tour(task["tour"])
     if task["kind"] == "boxes":
         from .mapping import build_map, dumps_map, map_from_scene, write_atomic
