@@ -34,6 +34,7 @@ import cv2
 import numpy as np
 
 from synth.errors import UserError
+from synth.frames import FrameFileError
 
 from .io import save_npz_atomic
 
@@ -92,6 +93,27 @@ def _check_cfg(cfg: AppearanceConfig) -> None:
 
 # ---------------------------------------------------------------------------------------------
 # features
+
+
+def rgb_frames(tour, frames: list[int], counts: dict, depth: bool):
+    """(position, frame index, frame) of the frames that carry RGB, in order.
+
+    Frames a render job left without RGB (``Tour.rgb_every``) are not read at all; with ``depth``
+    a frame also needs depth. ``counts`` collects ``rgb`` (frames yielded) and ``unreadable``
+    (candidate frames whose file cannot be read)."""
+    every = tour.rgb_every
+    for n, i in enumerate(frames):
+        if i % every:
+            continue
+        try:
+            f = tour.frame(i, rgb=True, depth=depth, instance=False, semantic=False)
+        except FrameFileError:
+            counts["unreadable"] += 1
+            continue
+        if f.rgb is None or (depth and f.depth is None):
+            continue
+        counts["rgb"] += 1
+        yield n, i, f
 
 
 def to_gray8(rgb_linear: np.ndarray) -> np.ndarray:
@@ -211,7 +233,6 @@ class AppearanceMap:
               progress: bool = False) -> "AppearanceMap":
         """Map from a mapping tour (``synth.dataset.Tour`` or its directory) with ground-truth poses."""
         from synth.dataset import Tour
-        from synth.frames import FrameFileError
 
         cfg = cfg or AppearanceConfig()
         _check_cfg(cfg)
@@ -222,18 +243,10 @@ class AppearanceMap:
         K = tour.K
         Kinv = np.linalg.inv(K)
         kf_frames, kf_poses, offsets, XY, XYZ, D = [], [], [0], [], [], []
-        n_rgb = n_unreadable = 0
         frames = [int(i) for i in tour.frame_indices]
-        for n, i in enumerate(frames):
-            try:
-                f = tour.frame(i, rgb=True, depth=True, instance=False, semantic=False)
-            except FrameFileError:
-                n_unreadable += 1
-                continue
-            if f.rgb is None or f.depth is None:
-                continue
-            n_rgb += 1
-            if stride and (n_rgb - 1) % int(stride):
+        counts = {"rgb": 0, "unreadable": 0}
+        for n, i, f in rgb_frames(tour, frames, counts, depth=True):
+            if stride and (counts["rgb"] - 1) % int(stride):
                 continue
             xy, desc = extract(to_gray8(f.rgb), cfg)
             keep = _valid_depth(f.depth, xy, cfg)
@@ -267,8 +280,8 @@ class AppearanceMap:
         bow = np.stack([_bow(words[offsets[k]:offsets[k + 1]], idf) for k in range(len(kf_frames))])
         m = cls(cfg, K, (tour.intrinsics.width, tour.intrinsics.height), kf_frames, np.stack(kf_poses),
                 offsets, np.concatenate(XY), np.concatenate(XYZ), desc, vocab, idf, bow, source=str(tour.root))
-        m.build_info = {"tour": str(tour.root), "frames": len(frames), "frames_rgb": n_rgb,
-                        "frames_unreadable": n_unreadable, "keyframes": len(kf_frames), "points": int(offsets[-1]),
+        m.build_info = {"tour": str(tour.root), "frames": len(frames), "frames_rgb": counts["rgb"],
+                        "frames_unreadable": counts["unreadable"], "keyframes": len(kf_frames), "points": int(offsets[-1]),
                         "seconds": round(time.perf_counter() - t0, 2)}
         return m
 
@@ -477,7 +490,6 @@ def run_appearance(tour, amap: AppearanceMap, out_dir, clip_poses: dict[int, dic
     """
     from synth.camera import write_tum
     from synth.dataset import Tour
-    from synth.frames import FrameFileError
 
     from .clip_rigid import clip_rigid_trajectory
     from .io import write_json_atomic
@@ -490,19 +502,11 @@ def run_appearance(tour, amap: AppearanceMap, out_dir, clip_poses: dict[int, dic
     K = tour.K
     est: dict[int, np.ndarray] = {}
     rows = []
-    n_rgb = n_unreadable = 0
     t_loc = 0.0
     t0 = time.perf_counter()
     frames = [int(i) for i in tour.frame_indices]
-    for n, i in enumerate(frames):
-        try:
-            f = tour.frame(i, rgb=True, depth=False, instance=False, semantic=False)
-        except FrameFileError:
-            n_unreadable += 1
-            continue
-        if f.rgb is None:
-            continue
-        n_rgb += 1
+    counts = {"rgb": 0, "unreadable": 0}
+    for n, i, f in rgb_frames(tour, frames, counts, depth=False):
         t1 = time.perf_counter()
         T, info = localize_frame(amap, f.rgb, K, cfg)
         t_loc += time.perf_counter() - t1
@@ -511,7 +515,7 @@ def run_appearance(tour, amap: AppearanceMap, out_dir, clip_poses: dict[int, dic
         rows.append({"frame": i, "localized": T is not None, "inliers": info["inliers"], "matches": info["matches"],
                      "keyframe": info["keyframe"], "reason": info["reason"]})
         if progress:
-            print(f"\rappearance: {len(est)}/{n_rgb} localized ({n + 1}/{len(frames)} frames)", end="",
+            print(f"\rappearance: {len(est)}/{counts['rgb']} localized ({n + 1}/{len(frames)} frames)", end="",
                   file=sys.stderr, flush=True)
     if progress:
         print(file=sys.stderr)
@@ -523,8 +527,8 @@ def run_appearance(tour, amap: AppearanceMap, out_dir, clip_poses: dict[int, dic
               header=f"{src}: per-frame estimates (camera-to-world, OpenCV axes)")
     summary = {
         "method": "appearance", "feature": amap.cfg.feature, "tour": str(tour.root), "map": amap.source,
-        "frames": len(frames), "frames_rgb": n_rgb, "frames_unreadable": n_unreadable, "localized": len(est),
-        "seconds": round(seconds, 2), "ms_per_frame": round(1000.0 * t_loc / max(n_rgb, 1), 2),
+        "frames": len(frames), "frames_rgb": counts["rgb"], "frames_unreadable": counts["unreadable"], "localized": len(est),
+        "seconds": round(seconds, 2), "ms_per_frame": round(1000.0 * t_loc / max(counts["rgb"], 1), 2),
         "config": asdict(cfg),
         "note": "frames without RGB are skipped: per-frame recall is over the frames with RGB",
     }

@@ -362,8 +362,7 @@ def run_tour_task(task: dict) -> dict:
     extra: dict = {}
     if method == "videoreloc" or method.startswith("ablation_"):
         bmap = _load("boxes", task["map"])
-        variant = tuple(c == "1" for c in method.split("_")[1]) if method.startswith("ablation_") else None
-        cfg = _config(task["config"], variant)
+        cfg = _config(task["config"], task.get("variant"))
         s = relocalize(tour, bmap, d, cfg=cfg, detector=_detector(task["detector"], tour, bmap), seed=task["seed"],
                        progress=False)
         extra = {"fps": s["fps"], "clips": s["clips"]}
@@ -547,7 +546,7 @@ def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int |
             add("one_frame", [], stride=spec.one_frame_stride,
                 lengths=list(UNIT_LENGTHS if "units" in spec.tables else (1,)))
         for v in variants:
-            add(ablation_name(v), [])
+            add(ablation_name(v), [], variant=list(v))
     runner = _Runner(workers, progress, len(tasks), f"{spec.name}: runs")
     try:
         runner.run(tasks)
@@ -559,7 +558,7 @@ def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int |
     # only results whose done marker holds the current key count; a failed or stale run has no poses
     valid = {mt for mt, (d, key) in expected.items() if is_done(d, key)}
     results = tables.evaluate_experiment(spec, out, queries, files, methods, variants, valid)
-    results["seconds"] = _seconds(out, queries, methods, variants, maps_dir, files)
+    results["seconds"] = _seconds(out, queries, methods, variants, files)
     results["seconds"]["this_run_wall"] = round(time.time() - t_start, 1)
     results["failed"] = runner.failed
     write_json_atomic(out / "results.json", results)
@@ -574,7 +573,7 @@ def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int |
     return results
 
 
-def _seconds(out: Path, queries: dict, methods: list, variants: list, maps_dir: Path, files: dict) -> dict:
+def _seconds(out: Path, queries: dict, methods: list, variants: list, files: dict) -> dict:
     """Compute time of each method summed over tours (from the done markers), and of each map."""
     s: dict = {}
     for kind, f in files.items():

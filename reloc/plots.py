@@ -39,7 +39,7 @@ from synth.camera import read_tum
 from synth.errors import SceneFormatError, UserError
 from synth.preview import save_figure
 
-from .evaluation import pose_errors
+from .evaluation import THRESHOLDS, pose_errors
 
 __all__ = [
     "ERROR_CMAP", "ERROR_MAX_M", "POS_THRESHOLD_M", "ROT_THRESHOLD_DEG", "ROLLING_WINDOW", "DPI",
@@ -47,8 +47,7 @@ __all__ = [
     "tour_figure", "recall_bars", "plot_experiment", "tour_png_name",
 ]
 
-POS_THRESHOLD_M = 1.0
-ROT_THRESHOLD_DEG = 10.0
+POS_THRESHOLD_M, ROT_THRESHOLD_DEG = THRESHOLDS["recall_1m_10deg"]
 ERROR_MAX_M = 1.0  # the colour scale: 0 m green, 0.5 m yellow, >= 1 m red
 ROLLING_WINDOW = 31  # frames
 DPI = 100

@@ -279,11 +279,12 @@ def make_tables(res: dict) -> dict[str, tuple[str, list]]:
 
 def write_tables(res: dict, out: Path) -> None:
     d = Path(out) / "tables"
-    for name, (md, rows) in make_tables(res).items():
+    made = make_tables(res)
+    for name, (md, rows) in made.items():
         write_text_atomic(d / f"{name}.md", md + "\n")
         write_json_atomic(d / f"{name}.json", rows)
     for stale in d.glob("*.md"):  # a table no longer asked for
-        if stale.stem not in make_tables(res):
+        if stale.stem not in made:
             stale.unlink()
             stale.with_suffix(".json").unlink(missing_ok=True)
 
