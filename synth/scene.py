@@ -42,6 +42,53 @@ MAX_OBJECT_ID = 999
 WALL_ID_BASE, FLOOR_ID_BASE, CEILING_ID_BASE = 1000, 2000, 3000
 
 # --------------------------------------------------------------------------------------------
+# stored precision
+#
+# Generated values carry last-bit noise that depends on the processor and its maths library
+# (FMA, the SIMD variants of sin/cos/atan2 in libm, BLAS kernels): two machines can differ in
+# the 16th digit. A layout therefore holds every value at a stated precision, rounded where the
+# value enters the scene model (the dataclasses below round in ``__post_init__``, and the writer
+# rounds again), so that every later step -- placement checks, statistics, boxes, renders -- sees
+# exactly what the file holds, a regenerated layout is the same file on any machine, and
+# load -> save is exact. Rounding is Python's correctly rounded ``round``, so it is the same
+# everywhere; only a value within one ulp of a rounding boundary could still differ.
+
+LENGTH_DECIMALS = 4  # metres: positions, sizes, offsets, wall and room coordinates (0.1 mm)
+QUAT_DECIMALS = 9  # unit quaternion components (about 2e-9 rad)
+QUAT_NORM_TOL = 1e-8  # a quaternion further than this from unit norm is normalised before rounding
+SCALE_DECIMALS = 6  # dimensionless mesh scale factors
+LIGHT_DECIMALS = 3  # kelvin and watts
+
+
+def quantize(x, decimals: int = LENGTH_DECIMALS) -> float:
+    """``x`` at the stored precision; ``-0.0`` becomes ``0.0`` so the sign of a zero never differs."""
+    return round(float(x), decimals) + 0.0
+
+
+def quantize_vec(v, decimals: int = LENGTH_DECIMALS) -> tuple[float, ...]:
+    return tuple(quantize(x, decimals) for x in v)
+
+
+def quantize_quat(q) -> geo.Quat:
+    """A (w, x, y, z) quaternion rounded to ``QUAT_DECIMALS``, normalised first when it is not unit,
+    in the hemisphere whose first non-zero component is positive.
+
+    Normalising uses plain IEEE arithmetic (the same on every machine) and is skipped when the
+    norm is already within ``QUAT_NORM_TOL`` of 1 -- as it is for every generated rotation and for
+    every rounded one -- so quantising a quantised quaternion gives it back unchanged. A stored
+    quaternion's norm differs from 1 by at most about 1e-8; every consumer normalises before use.
+    """
+    q = tuple(float(x) for x in q)
+    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    if abs(n - 1.0) > QUAT_NORM_TOL and n > 0.0 and math.isfinite(n):
+        q = tuple(x / n for x in q)
+    q = tuple(quantize(x, QUAT_DECIMALS) for x in q)
+    # q and -q are one rotation: keep the one whose first non-zero component is positive. A yaw of
+    # pi comes out as (0, 0, 0, 1) or (0, 0, 0, -1) depending on the sign of a zero in atan2.
+    lead = next((x for x in q if x != 0.0), 0.0)
+    return tuple(-x + 0.0 for x in q) if lead < 0 else q  # type: ignore[return-value]
+
+# --------------------------------------------------------------------------------------------
 # data
 
 
@@ -50,6 +97,9 @@ class Room:
     name: str
     type: str  # living | kitchen | bedroom | bathroom | hallway | ...
     rect: tuple[float, float, float, float]  # free interior (inside wall faces): xmin, ymin, xmax, ymax
+
+    def __post_init__(self):
+        self.rect = quantize_vec(self.rect)
 
     @property
     def area(self) -> float:
@@ -63,6 +113,10 @@ class Wall:
     end: tuple[float, float]
     thickness: float
     height: float
+
+    def __post_init__(self):
+        self.start, self.end = quantize_vec(self.start), quantize_vec(self.end)
+        self.thickness, self.height = quantize(self.thickness), quantize(self.height)
 
     @property
     def length(self) -> float:
@@ -85,6 +139,10 @@ class Opening:
     height: float
     rooms: tuple[str, ...] = ()  # rooms a door connects (one room for an entrance door)
 
+    def __post_init__(self):
+        self.offset, self.width = quantize(self.offset), quantize(self.width)
+        self.bottom, self.height = quantize(self.bottom), quantize(self.height)
+
     def center_xy(self, wall: Wall) -> np.ndarray:
         return np.asarray(wall.start) + wall.direction * self.offset
 
@@ -99,6 +157,10 @@ class Stage:
     asset: str | None = None  # a stage mesh (ReplicaCAD); None for procedural stages
     position: tuple[float, float, float] = (0.0, 0.0, 0.0)
     rotation: geo.Quat = (1.0, 0.0, 0.0, 0.0)
+
+    def __post_init__(self):
+        self.ceiling_height, self.floor_z = quantize(self.ceiling_height), quantize(self.floor_z)
+        self.position, self.rotation = quantize_vec(self.position), quantize_quat(self.rotation)
 
     def wall(self, wall_id: str) -> Wall:
         for w in self.walls:
@@ -138,6 +200,11 @@ class ObjectInstance:
     scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
     params: dict[str, Any] = field(default_factory=dict)
 
+    def __post_init__(self):
+        self.position, self.rotation = quantize_vec(self.position), quantize_quat(self.rotation)
+        self.size, self.box_offset = quantize_vec(self.size), quantize_vec(self.box_offset)
+        self.scale = quantize_vec(self.scale, SCALE_DECIMALS)
+
     @property
     def yaw(self) -> float:
         return geo.quat_yaw(self.rotation)
@@ -167,6 +234,10 @@ class LightFixture:
     opening: str | None = None  # window opening id
     color_temperature: float = 3000.0  # kelvin
     power: float = 60.0  # watts (Blender's light power)
+
+    def __post_init__(self):
+        self.position = quantize_vec(self.position)
+        self.color_temperature, self.power = quantize(self.color_temperature, LIGHT_DECIMALS), quantize(self.power, LIGHT_DECIMALS)
 
 
 @dataclass
@@ -263,7 +334,9 @@ def boxes_document(layout: Layout, classes: ClassTable | None = None) -> dict:
     movable = {o.id: o.movable for o in layout.objects}
     out = []
     for b in layout_boxes(layout):
-        d = b.to_dict()
+        d = b.to_dict()  # boxes are computed (rotations, atan2): stored at the layout's precision too
+        d["center"], d["size"] = _vec(d["center"]), _vec(d["size"])
+        d["yaw"] = quantize(d["yaw"], QUAT_DECIMALS)
         d["movable"] = bool(movable.get(b.id, False))
         out.append(d)
     used = sorted({b["class"] for b in out})
@@ -280,37 +353,38 @@ def boxes_document(layout: Layout, classes: ClassTable | None = None) -> dict:
 # serialisation
 
 
-def _vec(v) -> list[float]:
-    return [float(x) for x in v]
+def _vec(v, decimals: int = LENGTH_DECIMALS) -> list[float]:
+    return list(quantize_vec(v, decimals))
 
 
 def layout_to_dict(layout: Layout) -> dict:
+    """The file representation; every number at its stored precision (see ``quantize``)."""
     st = layout.stage
-    stage: dict[str, Any] = {"ceiling_height": float(st.ceiling_height), "floor_z": float(st.floor_z)}
+    stage: dict[str, Any] = {"ceiling_height": quantize(st.ceiling_height), "floor_z": quantize(st.floor_z)}
     if st.asset is not None:
         stage["asset"] = st.asset
         stage["position"] = _vec(st.position)
-        stage["rotation"] = _vec(st.rotation)
+        stage["rotation"] = list(quantize_quat(st.rotation))
     stage["rooms"] = [{"name": r.name, "type": r.type, "rect": _vec(r.rect)} for r in st.rooms]
     stage["walls"] = [
-        {"id": w.id, "start": _vec(w.start), "end": _vec(w.end), "thickness": float(w.thickness), "height": float(w.height)}
+        {"id": w.id, "start": _vec(w.start), "end": _vec(w.end), "thickness": quantize(w.thickness), "height": quantize(w.height)}
         for w in st.walls
     ]
     stage["openings"] = [
         {
-            "id": o.id, "kind": o.kind, "wall": o.wall, "offset": float(o.offset), "width": float(o.width),
-            "bottom": float(o.bottom), "height": float(o.height), "rooms": list(o.rooms),
+            "id": o.id, "kind": o.kind, "wall": o.wall, "offset": quantize(o.offset), "width": quantize(o.width),
+            "bottom": quantize(o.bottom), "height": quantize(o.height), "rooms": list(o.rooms),
         }
         for o in st.openings
     ]
     objects = []
     for o in layout.objects:
         d: dict[str, Any] = {
-            "id": o.id, "class": o.cls, "asset": o.asset, "position": _vec(o.position), "rotation": _vec(o.rotation),
+            "id": o.id, "class": o.cls, "asset": o.asset, "position": _vec(o.position), "rotation": list(quantize_quat(o.rotation)),
             "size": _vec(o.size), "box_offset": _vec(o.box_offset), "support": o.support, "movable": bool(o.movable),
         }
-        if tuple(o.scale) != (1.0, 1.0, 1.0):
-            d["scale"] = _vec(o.scale)
+        if quantize_vec(o.scale, SCALE_DECIMALS) != (1.0, 1.0, 1.0):
+            d["scale"] = _vec(o.scale, SCALE_DECIMALS)
         if o.params:
             d["params"] = o.params
         objects.append(d)
@@ -320,8 +394,8 @@ def layout_to_dict(layout: Layout) -> dict:
         for key in ("room", "object", "opening"):
             if getattr(f, key) is not None:
                 d[key] = getattr(f, key)
-        d["color_temperature"] = float(f.color_temperature)
-        d["power"] = float(f.power)
+        d["color_temperature"] = quantize(f.color_temperature, LIGHT_DECIMALS)
+        d["power"] = quantize(f.power, LIGHT_DECIMALS)
         fixtures.append(d)
     doc: dict[str, Any] = {"format": FORMAT, "name": layout.name}
     if layout.seed is not None:

@@ -245,7 +245,12 @@ def test_shipped_paths_are_what_the_planner_makes(query, mapping):
         assert len(again) == len(saved)
         assert np.abs(again.poses[:, :3, 3] - saved.poses[:, :3, 3]).max() < 2e-6, saved.name
         assert np.abs(again.poses[:, :3, :3] - saved.poses[:, :3, :3]).max() < 1e-6, saved.name
-        assert again.meta["stats"] == saved.meta["stats"]
+        # stats are printed rounded (length mm, clearance 0.1 mm): last-bit noise on another
+        # processor may move a value across a rounding boundary, so allow one unit of the last place
+        sa, sb = again.meta["stats"], saved.meta["stats"]
+        assert sa.keys() == sb.keys() and sa["rooms"] == sb["rooms"]
+        for key, unit in (("length_m", 1e-3), ("duration_s", 1e-3), ("min_clearance_m", 1e-4)):
+            assert sa[key] == pytest.approx(sb[key], abs=1.01 * unit), (saved.name, key)
         assert again.meta["planner"] == saved.meta["planner"]
 
 
