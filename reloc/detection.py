@@ -16,7 +16,7 @@ by the oracle only so that map building can stand in for a class-agnostic 3D seg
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Protocol
 
 import cv2
@@ -185,6 +185,20 @@ def build_detector(spec: DetectorSpec, classes: dict[int, str], vocabulary=None)
 
         return OnnxDetector(spec.model, class_map=spec.class_map, vocabulary=vocabulary)
     raise UserError(f"unknown detector {spec.kind!r} (expected oracle or onnx)")
+
+
+def detector_record(detector: Detector) -> dict:
+    """What a run records of its detector (run.json), so that a degraded run can be told from a
+    clean one by its files: the oracle's corruption settings and seed, the ONNX model and thresholds."""
+    rec: dict = {"name": getattr(detector, "name", type(detector).__name__)}
+    if isinstance(detector, OracleDetector):
+        rec["corruption"] = {**asdict(detector.corruption), "active": detector.corruption.active}
+        rec["min_pixels"] = detector.min_pixels
+    for k in ("model_path", "score_threshold", "iou_threshold", "max_detections", "mask_threshold"):
+        v = getattr(detector, k, None)
+        if v is not None:
+            rec["model" if k == "model_path" else k] = str(v) if k == "model_path" else v
+    return rec
 
 
 def add_detector_arguments(p) -> None:

@@ -11,7 +11,7 @@ import json
 from pathlib import Path
 
 from synth.camera import read_tum
-from synth.errors import UserError
+from synth.errors import SceneFormatError, UserError
 
 from .evaluation import summarize
 from .io import write_json_atomic
@@ -20,6 +20,8 @@ TRAJECTORIES = ("causal", "closure")
 
 
 def evaluate_run(out_dir, tour) -> dict:
+    """Recall and errors of each trajectory of a run. A line whose time is off the frame grid,
+    repeats a frame or names a frame the tour does not have is an error naming file and line."""
     out = Path(out_dir)
     if not out.is_dir():
         raise UserError(f"{out}: run output directory not found")
@@ -30,13 +32,14 @@ def evaluate_run(out_dir, tour) -> dict:
         path = out / f"{name}.txt"
         if not path.is_file():
             raise UserError(f"{path}: trajectory file not found (is {out} a reloc run output?)")
-        frames, poses = read_tum(path, fps=tour.fps)
+        frames, poses, lines = read_tum(path, fps=tour.fps, strict=True, lines=True)
+        for i, ln in zip(frames, lines):
+            if int(i) not in gt:
+                raise SceneFormatError(path, f"line {ln}", f"frame {int(i)} (t = {int(i) / tour.fps:g}) is not in the "
+                                       f"tour {tour.root} ({len(gt)} frames, {min(gt)}..{max(gt)})")
         est = {int(i): T for i, T in zip(frames, poses)}
-        extra = sorted(set(est) - set(gt))
         s = summarize(est, gt)
         s.pop("frames", None)
-        if extra:
-            s["frames_not_in_gt"] = len(extra)
         rep[name] = s
     return rep
 

@@ -48,7 +48,7 @@ import sys
 import time
 from pathlib import Path
 
-from synth.errors import SceneFormatError, UserError
+from synth.errors import SceneFormatError, UserError, check_output_folder
 
 from .io import write_json_atomic
 
@@ -477,6 +477,7 @@ def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int |
 
     t_start = time.time()
     out = Path(out or spec.out)
+    check_output_folder(out)
     workers = workers or spec.workers
     queries, mapping = design_tours(spec)
     out.mkdir(parents=True, exist_ok=True)

@@ -53,7 +53,7 @@ from pathlib import Path
 
 import numpy as np
 
-from synth.errors import UserError
+from synth.errors import UserError, check_output_file
 
 from .detection import STRUCTURE_CLASSES, FrameData, OracleDetector
 
@@ -642,15 +642,15 @@ def build_map(tour_dir, detector=None, stride: int | None = None, voxel: float |
     ``detector``: anything with ``detect(FrameData) -> list[Detection]`` (default: the oracle of
     the tour's classes). ``stride``/``voxel`` (default 5 frames / 0.05 m, see
     :class:`MappingSettings`) override ``settings``. ``max_frames``: stop after that many visited
-    frames. ``progress``: a tqdm bar on stderr. Frames without depth, with
-    unreadable files or without detections are skipped and counted in the report; a tour from
-    which nothing can be built gives an empty (valid) map and a ``warnings`` entry.
+    frames. ``progress``: a tqdm bar on stderr. Frames without depth or without detections are
+    skipped and counted in the report; a tour from which nothing can be built gives an empty
+    (valid) map and a ``warnings`` entry. A missing or unreadable frame file is an error naming
+    the file (``FrameFileError``), as in ``reloc run``: a map must not quietly lack its views.
     """
     from tqdm import tqdm
 
     from synth.classes import class_table
     from synth.dataset import Tour
-    from synth.frames import FrameFileError
 
     t_start = time.perf_counter()
     s = settings or MappingSettings()
@@ -679,11 +679,7 @@ def build_map(tour_dir, detector=None, stride: int | None = None, voxel: float |
     pooled: dict[str, _Segment] = {}
     counts = Counter()
     for fi in tqdm(indices, desc="mapping", unit="frame", disable=not progress, file=sys.stderr):
-        try:
-            f = tour.frame(fi, rgb=want_rgb, instance=labels, semantic=labels)
-        except FrameFileError:
-            counts["unreadable"] += 1
-            continue
+        f = tour.frame(fi, rgb=want_rgb, instance=labels, semantic=labels)  # FrameFileError names the file
         depth = f.depth
         if depth is None:
             counts["no_depth"] += 1
@@ -829,8 +825,6 @@ def build_map(tour_dir, detector=None, stride: int | None = None, voxel: float |
         why = []
         if counts["no_depth"]:
             why.append(f"{counts['no_depth']} frames without valid depth")
-        if counts["unreadable"]:
-            why.append(f"{counts['unreadable']} unreadable frames")
         if counts["no_detections"]:
             why.append(f"{counts['no_detections']} frames without usable detections")
         warnings.append(f"{tour.root}: no boxes built from {len(indices)} frames"
@@ -841,7 +835,6 @@ def build_map(tour_dir, detector=None, stride: int | None = None, voxel: float |
         "frames_visited": len(indices),
         "frames_used": counts["frames_used"],
         "frames_no_depth": counts["no_depth"],
-        "frames_unreadable": counts["unreadable"],
         "frames_no_detections": counts["no_detections"],
         "detections": counts["detections"],
         "detections_too_small": counts["detections_too_small"],
@@ -1114,6 +1107,7 @@ def summary_line(doc: dict, size_bytes: int, errors: dict | None, report: dict |
 
 
 def cmd_from_scene(args) -> int:
+    check_output_file(args.out)
     doc = map_from_scene(args.name)
     out = write_atomic(args.out, dumps_map(doc))
     print(f"wrote {len(doc['boxes'])} boxes of {doc['layout']} to {out} ({out.stat().st_size / 1024:.1f} kB)")
@@ -1121,6 +1115,9 @@ def cmd_from_scene(args) -> int:
 
 
 def cmd_build(args) -> int:
+    check_output_file(args.out)
+    if args.report:
+        check_output_file(args.report)
     doc, report = build_map(args.tour, stride=args.stride, voxel=args.voxel, progress=not args.quiet)
     for w in report["warnings"]:
         print(f"warning: {w}", file=sys.stderr)

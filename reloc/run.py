@@ -27,11 +27,12 @@ from pathlib import Path
 import numpy as np
 
 from synth.camera import write_tum
+from synth.errors import check_output_folder
 
 from .backend import Backend, ClipState
 from .clips import fuse
 from .config import Config
-from .detection import Detector
+from .detection import Detector, detector_record
 from .frontend import FrontEnd, PoseEvent
 from .geometry import inv_T
 from .io import save_npz_atomic, write_json_atomic
@@ -47,6 +48,8 @@ class Relocalizer:
                  budgets=(), seed: int = 0):
         self.cfg = cfg or Config()
         self.map = bmap
+        self.detector = detector
+        self.seed = seed
         self.backend = Backend(bmap, self.cfg)
         self.fe = FrontEnd(bmap, K, detector, poses, config=self.cfg, seed=seed, predict=self.backend.predict,
                            on_frame=self._on_frame)
@@ -173,6 +176,7 @@ class Relocalizer:
 def relocalize(tour, bmap: BoxMap, out, cfg: Config | None = None, detector: Detector | None = None,
                poses: str = "odometry", budgets=(), frames: int | None = None, seed: int = 0,
                progress: bool = True) -> dict:
+    check_output_folder(out)  # before the tour is processed, not after
     cfg = cfg or Config()
     detector = detector or default_detector(tour, bmap)
     idx = [int(i) for i in tour.frame_indices][:frames]
@@ -230,6 +234,7 @@ def write_outputs(r: Relocalizer, out, tour, idx, seconds: float, poses: str) ->
         "causal_frames": len(r.causal), "closure_frames": len(r.closure),
         "frame_localizations": r.frame_localizations,
         "budgets": list(r.budget_out),
+        "detector": detector_record(r.detector), "seed": r.seed,
         "stage_ms_per_frame": {k: round(v * 1000 / max(len(idx), 1), 2) for k, v in r.fe.timings.items()},
     }
     if not clips:
@@ -280,6 +285,7 @@ def cmd_run(args) -> int:
     from .config import load_config
     from .detection import build_detector, detector_spec_from_args
 
+    check_output_folder(args.out)
     tour = Tour(args.tour)
     bmap = BoxMap.load(args.map)
     cfg = load_config(args.config) if args.config else Config()

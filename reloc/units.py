@@ -20,7 +20,7 @@ import time
 import numpy as np
 
 from .config import Config
-from .detection import Detector, FrameData, OracleDetector
+from .detection import Detector, FrameData, OracleDetector, detector_record
 from .evaluation import summarize
 from .frontend import FrontEnd, GroundTruthPoses, PoseStream, StaticPoses
 from .map import BoxMap
@@ -119,6 +119,7 @@ def run_units(tour, bmap: BoxMap, lengths=DEFAULT_LENGTHS, detector: Detector | 
         "map": bmap.source,
         "poses": poses,
         "detector": getattr(detector, "name", type(detector).__name__),
+        "detector_settings": detector_record(detector),
         "frames": len(idx),
         "seconds": round(time.perf_counter() - t_start, 2),
         "io_seconds": round(io_t, 2),

@@ -11,7 +11,7 @@ import sys
 from collections import Counter
 from pathlib import Path
 
-from .errors import UserError, run_command
+from .errors import UserError, check_output_file, run_command
 
 
 def _print_json(obj) -> None:
@@ -105,6 +105,8 @@ def cmd_check(args) -> int:
         _print_json(rep.to_dict())
     else:
         print(f"{rep.layout}: {rep.objects} objects, {rep.classes} classes")
+        for st in rep.structure:
+            print(f"  stage: {st['why']}")
         print(f"  collisions {len(rep.collisions)}, unsupported {len(rep.unsupported)}, "
               f"blocked doors {len(rep.blocked_doors)}, covered openings {len(rep.covered_openings)}")
         for c in rep.collisions:
@@ -122,6 +124,7 @@ def cmd_check(args) -> int:
 def cmd_export_boxes(args) -> int:
     from .scene import boxes_document
 
+    check_output_file(args.out)
     doc = boxes_document(_load(args.name))
     out = Path(args.out)
     _write_json(out, doc)
@@ -169,7 +172,7 @@ def cmd_build(args) -> int:
     from .preview import plot_layout
     from .rearrange import BUILTIN_VARIANTS, make_variant, reference_walkway
     from .scene import boxes_document, save_layout
-    from .stats import PAPER_RANGES, change_stats
+    from .stats import change_stats
 
     out = Path(args.out)
     (out / "layouts").mkdir(parents=True, exist_ok=True)
@@ -189,14 +192,67 @@ def cmd_build(args) -> int:
     print()
     s = _summary(ref)
     print(f"apt_0: {s['floor_area_m2']} m2, {len(s['rooms'])} rooms, {s['objects']} objects in {len(s['classes'])} classes")
-    hdr = f"{'layout':<7} {'objects':>7} {'check':>6} " + " ".join(f"{k:>15}" for k in PAPER_RANGES)
-    print(hdr)
-    print(f"{'paper':<7} {'':>7} {'':>6} " + " ".join(f"{f'{lo}-{hi}':>15}" for lo, hi in PAPER_RANGES.values()))
-    for lay, rep, st in rows:
-        vals = " ".join(f"{st[k]:>15}" for k in PAPER_RANGES) if st else " ".join(f"{'-':>15}" for _ in PAPER_RANGES)
-        print(f"{lay.name:<7} {len(lay.objects):>7} {'ok' if rep.ok else 'FAIL':>6} {vals}")
+    _print_stats_table(rows)
     print(f"\nlayouts, boxes and previews in {out}/ (previews: {out / 'previews'})")
     return 0 if all(r.ok for _, r, _ in rows) else 1
+
+
+def _print_stats_table(rows) -> None:
+    """Objects, check and change statistics per layout against the paper's ranges (rows: (layout, report, stats|None))."""
+    from .stats import PAPER_RANGES
+
+    w = max([7] + [len(lay.name) for lay, _, _ in rows])
+    print(f"{'layout':<{w}} {'objects':>7} {'check':>6} " + " ".join(f"{k:>15}" for k in PAPER_RANGES))
+    print(f"{'paper':<{w}} {'':>7} {'':>6} " + " ".join(f"{f'{lo}-{hi}':>15}" for lo, hi in PAPER_RANGES.values()))
+    for lay, rep, st in rows:
+        vals = " ".join(f"{st[k]:>15}" for k in PAPER_RANGES) if st else " ".join(f"{'-':>15}" for _ in PAPER_RANGES)
+        print(f"{lay.name:<{w}} {len(lay.objects):>7} {'ok' if rep.ok else 'FAIL':>6} {vals}")
+
+
+def _check_out_file(out: Path, suffixes=(".yaml", ".yml")) -> None:
+    """Refuse, before any work, a layout ``--out`` that could not be written; creates nothing."""
+    if out.suffix not in suffixes:
+        raise UserError(f"--out: cannot write {out}: a layout file ends in {' or '.join(suffixes)}")
+    try:
+        check_output_file(out)
+    except UserError as e:
+        raise UserError(f"--out: {e}") from None
+
+
+def cmd_rearrange(args) -> int:
+    """A new rearranged variant of BASE from a seed: the operator, ranges and checks of apt_1..apt_5."""
+    from .checks import check_layout
+    from .rearrange import NoVariantFound, RearrangePlan, VariantSpec, make_variant, reference_walkway
+    from .scene import save_layout
+    from .stats import PAPER_RANGES, change_stats
+
+    out = Path(args.out)
+    if args.seed < 0:
+        raise UserError(f"--seed must be >= 0, got {args.seed}")
+    if args.attempts <= 0:
+        raise UserError(f"--attempts must be positive, got {args.attempts}")
+    _check_out_file(out)
+    ref = _load(args.base)
+    name = args.name or out.stem
+    if name == ref.name:
+        raise UserError(f"--name: the variant needs a name other than its base's ('{ref.name}')")
+    walkway = reference_walkway(ref)
+    try:
+        var = make_variant(ref, VariantSpec(name, args.seed, RearrangePlan()), walkway=walkway, max_attempts=args.attempts)
+    except NoVariantFound as e:
+        last = e.last or {}
+        detail = ", ".join(f"{k} {last[k]} (paper {lo}-{hi})" for k, (lo, hi) in PAPER_RANGES.items() if k in last)
+        why = "" if e.last_check_ok is not False else "; it was in range but failed the layout checks"
+        raise UserError(f"no variant of {ref.name} from seed {args.seed} within the paper's ranges that checks clean "
+                        f"after {e.attempts} attempt(s) (last: {detail}{why}); try another --seed") from None
+    save_layout(var, out)
+    rep = check_layout(var)
+    st = change_stats(ref, var)
+    print(f"{var.name}: rearranged from {ref.name} (seed {args.seed}, attempt {var.meta['attempt']}), "
+          f"{len(var.objects)} objects")
+    _print_stats_table([(ref, check_layout(ref), None), (var, rep, st)])
+    print(f"wrote {out}")
+    return 0 if rep.ok else 1
 
 
 def cmd_import_replicacad(args) -> int:
@@ -215,7 +271,8 @@ def cmd_tour_render(args) -> int:
     w, h = _size(args.size)
     spec = TourSpec(layout=args.layout, path=args.path, out=args.out, lighting=args.lighting, renderer=args.renderer,
                     quality=args.quality, width=w, height=h, frames=args.frames, seed=args.seed, device=args.device,
-                    previews=args.previews, chunk_size=args.chunk_size, workers=args.workers)
+                    previews=args.previews, chunk_size=args.chunk_size, workers=args.workers,
+                    check_clearance=not args.allow_clearance_breach)
     meta = render_tour(spec, progress=not args.quiet)
     print(f"{args.out}: {meta['n_frames']} frames of {meta['layout']} / {meta['lighting'] or 'geometry only'} / "
           f"{meta['path']} ({meta['renderer']}) in {meta['wall_time_s']:.1f} s")
@@ -273,6 +330,13 @@ def build_parser() -> argparse.ArgumentParser:
     a = ss.add_parser("build", help="the scene pipeline: generate, check, stats, boxes and previews into --out")
     a.add_argument("--out", default="out/scenes")
     a.set_defaults(fn=cmd_build)
+    a = ss.add_parser("rearrange", help="a new rearranged variant of BASE from a seed (paper's change ranges, checked)")
+    a.add_argument("base", help="layout to rearrange (name or file), e.g. apt_0")
+    a.add_argument("--seed", type=int, required=True, help="variant seed (sub-seeds seed*1000+k are tried in turn)")
+    a.add_argument("--out", required=True, help="layout file to write (.yaml)")
+    a.add_argument("--name", help="layout name (default: the output file's stem)")
+    a.add_argument("--attempts", type=int, default=40, help="sub-seeds to try before giving up (default 40)")
+    a.set_defaults(fn=cmd_rearrange)
     a = ss.add_parser("import-replicacad", help="convert a ReplicaCAD scene instance to a layout file")
     a.add_argument("root", help="ReplicaCAD dataset folder (holds configs/)")
     a.add_argument("scene", help="scene instance name, e.g. apt_0")
@@ -295,12 +359,15 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--previews", action="store_true", help="also write 8-bit PNG previews")
     a.add_argument("--workers", type=int, default=1, help="Blender processes at a time")
     a.add_argument("--chunk-size", type=int, default=50, help="frames per Blender process")
+    a.add_argument("--allow-clearance-breach", action="store_true",
+                   help="render even where the path comes closer to an object than its declared clearance "
+                        "(checked for layouts the path was not planned on)")
     a.add_argument("--quiet", action="store_true")
     a.set_defaults(fn=cmd_tour_render)
     # stages with their own subcommands register them here
     from . import bench, camera_paths, dataset, jobs
 
-    camera_paths.register_cli(sub)  # synth path plan|show|preview|generate
+    camera_paths.register_cli(sub)  # synth path plan|show|check|preview|generate
     jobs.register_cli(sub)  # synth render SPEC.yaml
     dataset.register_cli(sub)  # synth dataset check|show
     bench.register_cli(sub)  # synth bench

@@ -26,6 +26,44 @@ class UnknownNameError(UserError):
     """A layout, class, asset or preset name that does not exist."""
 
 
+def check_output_folder(path) -> None:
+    """Fail now, before any work, if the output folder ``path`` could not be created or written later.
+
+    Creates nothing: its nearest existing ancestor must be a folder in which a folder can be made
+    (proved by making and removing one, which also catches read-only file systems and /proc, where
+    permission bits say yes to root)."""
+    _check_output(path, "folder")
+
+
+def check_output_file(path) -> None:
+    """Fail now, before any work, if the output file ``path`` could not be written (atomically) later."""
+    _check_output(path, "file")
+
+
+def _check_output(path, kind: str) -> None:
+    import os
+    import tempfile
+    from pathlib import Path
+
+    what = f"cannot write to output {kind} {path}"
+    p = Path(path).absolute()
+    if kind == "file":
+        if p.is_dir():
+            raise UserError(f"{what}: it is a folder")
+        if p.exists() and not os.access(p, os.W_OK):
+            raise UserError(f"{what}: it is not writable")
+        p = p.parent  # written under a temporary name next to it, then renamed
+    anc = p
+    while not anc.exists() and not anc.is_symlink():
+        anc = anc.parent
+    if not anc.is_dir():
+        raise UserError(f"{what}: {anc} is not a folder")
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".write_test_", dir=anc))
+    except OSError as e:
+        raise UserError(f"{what}: cannot create anything in {anc} ({e.strerror or e})") from None
+
+
 def run_command(prog: str, fn, args) -> int:
     """Run a CLI command function: a UserError prints one line and exits 2, Ctrl-C exits 130."""
     import sys

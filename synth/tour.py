@@ -29,7 +29,7 @@ import numpy as np
 from . import __version__
 from . import frames as fr
 from .camera import CAMERA_DOC, Intrinsics, write_tum
-from .errors import UserError
+from .errors import UserError, check_output_folder
 from .render_settings import DEVICES, quality
 from .scene import boxes_document, load_layout, resolve_layout_path
 
@@ -57,6 +57,9 @@ class TourSpec:
     workers: int = 1
     threads: int = 0  # Cycles threads per worker (0 = all)
     geometry_cache: str | None = None  # default: <out parent>/_geometry
+    # refuse a path whose declared clearance the layout breaks (layouts the path was not planned
+    # on only; synth.camera_paths.render_clearance_problem); False: --allow-clearance-breach
+    check_clearance: bool = True
 
 
 @dataclass
@@ -76,15 +79,8 @@ class Prepared:
 
 
 def _check_can_create(d: Path) -> None:
-    """Fail now if ``d`` could not be created or written later (checks its nearest existing ancestor)."""
-    d = Path(d).absolute()
-    anc = d
-    while not anc.exists():
-        anc = anc.parent
-    if not anc.is_dir():
-        raise UserError(f"cannot write to output folder {d}: {anc} is not a folder")
-    if not os.access(anc, os.W_OK | os.X_OK):
-        raise UserError(f"cannot write to output folder {d}: {anc} is not writable")
+    """Fail now if ``d`` could not be created or written later (one check for every command)."""
+    check_output_folder(d)
 
 
 def _check_writable(d: Path) -> None:
@@ -137,6 +133,12 @@ def prepare(spec: TourSpec, create: bool = True) -> Prepared:
         if spec.frames > n:
             raise UserError(f"--frames {spec.frames} exceeds the {n} frames of camera path '{cpath.name}'")
         n = spec.frames
+    if spec.check_clearance:
+        from .camera_paths import render_clearance_problem
+
+        why = render_clearance_problem(cpath, layout, layout_file, spec.layout, n)
+        if why:
+            raise UserError(why)
     out = Path(spec.out)
     (_check_writable if create else _check_can_create)(out)
     intr = Intrinsics.from_fov(spec.width, spec.height, spec.hfov_deg)

