@@ -64,7 +64,8 @@ from .scene import Layout, Stage, object_box
 
 __all__ = [
     "CameraPath", "plan_query_path", "plan_mapping_path", "plan_path", "replan", "save_path", "load_path",
-    "path_clearance", "list_paths", "paths_dir", "path_summary", "plot_path", "generate_shipped", "register_cli",
+    "path_clearance", "path_clearance_detail", "clearance_report", "declared_clearance", "render_clearance_problem",
+    "list_paths", "paths_dir", "path_summary", "plot_path", "generate_shipped", "register_cli",
     "SHIPPED", "FORMAT", "BAND",
 ]
 
@@ -231,9 +232,14 @@ class _Boxes:
 
     def dist(self, pts: np.ndarray, mask: np.ndarray | None = None, chunk: int = 4096) -> np.ndarray:
         """Min distance of each point to the footprints (``mask`` (N, K): which boxes count per point)."""
+        return self.nearest(pts, mask, chunk)[0]
+
+    def nearest(self, pts: np.ndarray, mask: np.ndarray | None = None, chunk: int = 4096) -> tuple[np.ndarray, np.ndarray]:
+        """(min distance, index of the nearest footprint; -1 when none counts) of each point."""
         out = np.full(len(pts), np.inf)
+        arg = np.full(len(pts), -1, dtype=np.int64)
         if len(self) == 0:
-            return out
+            return out, arg
         for s in range(0, len(pts), chunk):
             p = pts[s : s + chunk]
             dx = p[:, None, 0] - self.c[None, :, 0]
@@ -243,8 +249,10 @@ class _Boxes:
             d = np.hypot(np.maximum(lx, 0.0), np.maximum(ly, 0.0))
             if mask is not None:
                 d = np.where(mask[s : s + chunk], d, np.inf)
-            out[s : s + chunk] = d.min(axis=1)
-        return out
+            k = d.argmin(axis=1)
+            out[s : s + chunk] = d[np.arange(len(k)), k]
+            arg[s : s + chunk] = np.where(np.isfinite(out[s : s + chunk]), k, -1)
+        return out, arg
 
 
 def _object_boxes(layout: Layout, obstacles: str):
@@ -260,18 +268,159 @@ def path_clearance(path: CameraPath, layout: Layout, obstacles: str = "all", ban
     band ``[z - band, z + band]``; with ``"all"`` every object except ceiling-mounted ones. Walls:
     room rect edges except interior door gaps, plus door jambs. 0 outside every room / door gap.
     """
+    return path_clearance_detail(path, layout, obstacles, band)[0]
+
+
+NEAREST_WALL, NEAREST_OUTSIDE = 0, -1
+
+
+def path_clearance_detail(path: CameraPath, layout: Layout, obstacles: str = "all",
+                          band: float = BAND) -> tuple[np.ndarray, np.ndarray]:
+    """``path_clearance`` and, per frame, what is nearest: an object id (> 0), ``NEAREST_WALL`` (0)
+    or ``NEAREST_OUTSIDE`` (-1: the camera is outside every room and door gap)."""
     P = np.asarray(path.poses)[:, :3, 3]
     xy = P[:, :2]
     st = layout.stage
     d = _seg_dist(xy, wall_segments(st))
-    bx = _Boxes.of(_object_boxes(layout, obstacles))
+    boxes = _object_boxes(layout, obstacles)
+    bx = _Boxes.of(boxes)
     mask = None
     if obstacles == "band" and len(bx):
         z = P[:, 2:3]
         mask = (bx.zmax[None, :] > z - band) & (bx.zmin[None, :] < z + band)
-    d = np.minimum(d, bx.dist(xy, mask))
-    d[~_inside(st, xy)] = 0.0
-    return d
+    db, k = bx.nearest(xy, mask)
+    ids = np.array([b.id for b in boxes], dtype=np.int64)
+    nearest = np.where((db < d) & (k >= 0), ids[np.maximum(k, 0)] if len(ids) else NEAREST_WALL, NEAREST_WALL)
+    d = np.minimum(d, db)
+    outside = ~_inside(st, xy)
+    d[outside] = 0.0
+    nearest[outside] = NEAREST_OUTSIDE
+    return d, nearest
+
+
+# --------------------------------------------------------------------------------------------
+# clearance against a path's declared clearance (synth path check; refused renders)
+
+CLEARANCE_TOL = 1e-6  # m: paths are stored at 1 micrometre
+
+
+def declared_clearance(path: CameraPath) -> float | None:
+    """The clearance the path was planned with (``meta['planner']['clearance_m']``), or None."""
+    v = (path.meta.get("planner") or {}).get("clearance_m")
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        return None
+    return float(v)
+
+
+def clearance_report(path: CameraPath, layout: Layout, clearance: float | None = None, frames: int | None = None,
+                     obstacles: str | None = None) -> dict:
+    """Where ``path`` (its first ``frames`` frames) comes closer than ``clearance`` (default: the
+    declared one) to an object or wall of ``layout``: frame ranges, their minimum, the objects.
+
+    Obstacles follow the path's planner (``meta['planner']['obstacles']``, default ``all``)."""
+    if clearance is None:
+        clearance = declared_clearance(path)
+        if clearance is None:
+            raise UserError(f"camera path '{path.name}' declares no clearance (planner.clearance_m in its .yaml); "
+                            "give --clearance")
+    obstacles = obstacles or str((path.meta.get("planner") or {}).get("obstacles", "all"))
+    sub = path if frames is None else CameraPath(path.name, np.asarray(path.poses)[:frames], path.fps, path.meta)
+    d, nearest = path_clearance_detail(sub, layout, obstacles)
+    classes = {o.id: o.cls for o in layout.objects}
+
+    def what(n: int) -> dict:
+        if n > 0:
+            return {"id": int(n), "class": classes.get(int(n), "?")}
+        return {"id": None, "class": "wall" if n == NEAREST_WALL else "outside every room"}
+
+    below = d < clearance - CLEARANCE_TOL
+    ranges = []
+    idx = np.flatnonzero(below)
+    if len(idx):
+        splits = np.flatnonzero(np.diff(idx) > 1) + 1
+        for run in np.split(idx, splits):
+            k = int(run[np.argmin(d[run])])
+            order = []
+            for n in nearest[run[np.argsort(d[run], kind="stable")]]:
+                if int(n) not in order:
+                    order.append(int(n))
+            ranges.append({"frames": [int(run[0]), int(run[-1])], "count": int(len(run)),
+                           "min_clearance_m": round(float(d[k]), 4), "min_frame": k,
+                           "objects": [what(n) for n in order]})
+    k = int(np.argmin(d)) if len(d) else None
+    return {
+        "path": path.name, "layout": layout.name, "clearance_m": float(clearance), "obstacles": obstacles,
+        "frames": int(len(d)), "min_clearance_m": round(float(d[k]), 4) if k is not None else None,
+        "min_frame": k, "nearest": what(int(nearest[k])) if k is not None else None,
+        "frames_below": int(below.sum()), "ranges": ranges, "ok": not ranges,
+    }
+
+
+def _what(o: dict) -> str:
+    return f"object {o['id']} ({o['class']})" if o["id"] is not None else o["class"]
+
+
+def _range_text(r: dict) -> str:
+    a, b = r["frames"]
+    objs = r["objects"]
+    return (f"frames {a}-{b}" if a != b else f"frame {a}") + (
+        f": min {r['min_clearance_m']:.3f} m at frame {r['min_frame']}, "
+        + ", ".join(_what(o) for o in objs[:3]) + (f" and {len(objs) - 3} more" if len(objs) > 3 else ""))
+
+
+def replan_command(path: CameraPath, layout_args: list[str]) -> str:
+    """The ``synth path plan`` command that replans ``path`` for its layouts plus ``layout_args``."""
+    m = path.meta
+    pl = m.get("planner") or {}
+    kind = m.get("kind")
+    opts = ""
+    if pl.get("clearance_m") is not None:
+        opts += f" --clearance {float(pl['clearance_m']):g}"
+    if pl.get("frames") is not None:
+        opts += f" --frames {int(pl['frames'])}"
+    if kind == "mapping":
+        return f"synth path plan mapping --layout {layout_args[-1]}{opts} --out FILE.txt"
+    names = [str(n) for n in (m.get("layouts") or [])]
+    names += [a for a in layout_args if a not in names]
+    return f"synth path plan query --layouts {' '.join(names)}{opts} --out FILE.txt"
+
+
+def planned_on(path: CameraPath, layout_file) -> bool:
+    """Whether ``layout_file`` is one of the layouts the path was planned on (``meta['layouts']``)."""
+    from .scene import resolve_layout_path
+
+    target = Path(layout_file).resolve()
+    for n in path.meta.get("layouts") or []:
+        try:
+            if resolve_layout_path(str(n)).resolve() == target:
+                return True
+        except UserError:
+            continue
+    return False
+
+
+def render_clearance_problem(path: CameraPath, layout: Layout, layout_file, layout_arg: str,
+                             frames: int | None = None) -> str | None:
+    """Why rendering ``path`` through ``layout`` breaks the path's declared clearance, or None.
+
+    Only layouts the path was not planned on are checked (the planner guarantees the others),
+    and only paths that declare a clearance. One line: the layout, the minimum, the frames, the
+    object, and the remedy (replan with ``synth path plan``, or allow the breach)."""
+    c = declared_clearance(path)
+    if c is None or planned_on(path, layout_file):
+        return None
+    rep = clearance_report(path, layout, c, frames)
+    if rep["ok"]:
+        return None
+    worst = min(rep["ranges"], key=lambda r: r["min_clearance_m"])
+    spans = ", ".join(f"{r['frames'][0]}-{r['frames'][1]}" for r in rep["ranges"][:4])
+    if len(rep["ranges"]) > 4:
+        spans += f" and {len(rep['ranges']) - 4} more"
+    planned = ", ".join(map(str, path.meta.get("layouts") or [])) or "no named layouts"
+    return (f"camera path '{path.name}' was planned on {planned} with {c:g} m clearance, but in layout "
+            f"'{layout.name}' it passes {worst['min_clearance_m']:.3f} m from {_what(worst['objects'][0])} at frame "
+            f"{worst['min_frame']} ({rep['frames_below']} frames closer than {c:g} m: {spans}); replan it for this "
+            f"layout (`{replan_command(path, [layout_arg])}`) or pass --allow-clearance-breach")
 
 
 # --------------------------------------------------------------------------------------------
@@ -1400,10 +1549,56 @@ def _cmd_show(args) -> int:
     if lay is not None:
         rooms = ", ".join(f"{r} ({n} frames)" for r, n in s["rooms_frames"].items())
         print(f"  rooms visited in {lay.name}: {rooms or 'none'}")
-        print(f"  min clearance in {lay.name}: {s['min_clearance_m']:.3f} m")
+        c = declared_clearance(path)
+        note = (f" (below the path's {c:g} m clearance: see `synth path check {args.path} --layout {args.layout or lay.name}`)"
+                if c is not None and s["min_clearance_m"] is not None and s["min_clearance_m"] < c - CLEARANCE_TOL else "")
+        print(f"  min clearance in {lay.name}: {s['min_clearance_m']:.3f} m{note}")
     else:
         print("  rooms visited: unknown (give --layout)")
     return 0
+
+
+def _cmd_check(args) -> int:
+    import json
+
+    path = load_path(args.path)
+    names = args.layout or [str(n) for n in path.meta.get("layouts") or []]
+    if not names:
+        raise UserError(f"camera path '{path.name}' names no layout it was planned on; give --layout")
+    if args.clearance is not None and not (math.isfinite(args.clearance) and args.clearance >= 0):
+        raise UserError(f"--clearance must be >= 0, got {args.clearance!r}")
+    lays = []
+    for n in names:
+        try:
+            lays.append(_layout(n))
+        except UnknownNameError:
+            if args.layout:
+                raise
+            raise UserError(f"camera path '{path.name}' was planned on layout '{n}', which is not in "
+                            f"scenes/layouts; give its file with --layout") from None
+    reps = [clearance_report(path, lay, args.clearance) for lay in lays]
+    ok = all(r["ok"] for r in reps)
+    if args.json:
+        print(json.dumps({"path": path.name, "ok": ok, "layouts": reps}, indent=2))
+        return 0 if ok else 1
+    c = reps[0]["clearance_m"]
+    if ok:
+        worst = min(reps, key=lambda r: r["min_clearance_m"] if r["min_clearance_m"] is not None else np.inf)
+        print(f"OK: camera path '{path.name}' keeps {c:g} m clearance in {', '.join(r['layout'] for r in reps)} "
+              f"(min {worst['min_clearance_m']:.3f} m, in {worst['layout']} at frame {worst['min_frame']})")
+        return 0
+    for r, arg in zip(reps, names):
+        if r["ok"]:
+            print(f"{r['layout']}: ok (min {r['min_clearance_m']:.3f} m)")
+            continue
+        print(f"{r['layout']}: {r['frames_below']} frames closer than {c:g} m (min {r['min_clearance_m']:.3f} m at "
+              f"frame {r['min_frame']}, {_what(r['nearest'])})")
+        for rg in r["ranges"]:
+            print(f"  {_range_text(rg)}")
+    bad = [arg for r, arg in zip(reps, names) if not r["ok"]]
+    print(f"PROBLEMS FOUND: camera path '{path.name}' breaks its {c:g} m clearance in {len(bad)} of {len(reps)} "
+          f"layout(s); replan it: {replan_command(path, bad)}")
+    return 1
 
 
 def _cmd_generate(args) -> int:
@@ -1417,7 +1612,7 @@ def _cmd_generate(args) -> int:
 
 def register_cli(subparsers) -> None:
     """Add the ``path`` group to the ``synth`` command line."""
-    grp = subparsers.add_parser("path", help="camera paths: plan (query, mapping), show, preview")
+    grp = subparsers.add_parser("path", help="camera paths: plan (query, mapping), show, check, preview")
     sub = grp.add_subparsers(dest="cmd", required=True)
     plan = sub.add_parser("plan", help="plan a camera path and write it (TUM + .yaml)")
     ps = plan.add_subparsers(dest="kind", required=True)
@@ -1450,6 +1645,13 @@ def register_cli(subparsers) -> None:
     a.add_argument("--layout", help="layout for rooms and clearance (default: the first it was planned on)")
     a.add_argument("--json", action="store_true")
     a.set_defaults(fn=_cmd_show)
+    a = sub.add_parser("check", help="does the path keep its declared clearance in these layouts? (exit 1 if not)")
+    a.add_argument("path", help="path name or file")
+    a.add_argument("--layout", action="append", metavar="LAYOUT",
+                   help="layout to check (repeat for several; default: the layouts it was planned on)")
+    a.add_argument("--clearance", type=float, help="m (default: the clearance the path was planned with)")
+    a.add_argument("--json", action="store_true")
+    a.set_defaults(fn=_cmd_check)
     a = sub.add_parser("preview", help="top-down plot of a path over a layout")
     a.add_argument("path", help="path name or file")
     a.add_argument("--layout", help="default: the first layout it was planned on")

@@ -38,10 +38,11 @@ class CheckReport:
     unsupported: list[dict] = field(default_factory=list)
     blocked_doors: list[dict] = field(default_factory=list)
     covered_openings: list[dict] = field(default_factory=list)
+    structure: list[dict] = field(default_factory=list)  # a shell without rooms or walls
 
     @property
     def ok(self) -> bool:
-        return not (self.collisions or self.unsupported or self.blocked_doors or self.covered_openings)
+        return not (self.structure or self.collisions or self.unsupported or self.blocked_doors or self.covered_openings)
 
     def to_dict(self) -> dict:
         return {
@@ -52,6 +53,7 @@ class CheckReport:
             "unsupported": self.unsupported,
             "blocked_doors": self.blocked_doors,
             "covered_openings": self.covered_openings,
+            "structure": self.structure,
             "ok": self.ok,
         }
 
@@ -163,6 +165,14 @@ def check_layout(layout: Layout) -> CheckReport:
     boxes = {o.id: object_box(o) for o in objs}
     rep = CheckReport(layout.name, len(objs), len({o.cls for o in objs}))
     st = layout.stage
+
+    # the shell: a procedural stage needs rooms (free space, floors, ceilings) and walls; a stage
+    # mesh (ReplicaCAD) is its own shell and carries neither (synth.replicacad)
+    if st.asset is None:
+        if not st.rooms:
+            rep.structure.append({"what": "rooms", "why": "no rooms (stage.rooms is empty): a layout needs at least one"})
+        if not st.walls:
+            rep.structure.append({"what": "walls", "why": "no walls (stage.walls is empty)"})
 
     # support
     for o in objs:

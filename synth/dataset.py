@@ -177,9 +177,17 @@ def _channel_names(path: Path) -> list[str]:
 
 
 class Tour:
-    """A rendered tour directory. The small files are read here; frames are read when asked for."""
+    """A rendered tour directory. The small files are read here; frames are read when asked for.
 
-    def __init__(self, root):
+    A tour whose poses.txt and frame files disagree is refused (``SceneFormatError`` naming
+    poses.txt and both counts): frame files without a pose (poses.txt cut short: reading it
+    would silently shorten the tour), or a meta.json ``n_frames`` other than the number of poses.
+    Fewer frame files than poses is allowed: a partly rendered (or resumed) tour has them, and a
+    missing frame is a ``FrameFileError`` naming its file when read. ``strict=False`` (what
+    ``check_tour`` uses) accepts either, to report it.
+    """
+
+    def __init__(self, root, strict: bool = True):
         self.root = Path(root)
         if not self.root.is_dir():
             raise UserError(f"{self.root}: tour directory not found")
@@ -197,6 +205,10 @@ class Tour:
         self._row = {int(i): k for k, i in enumerate(self.frame_indices)}
         self.meta = _read_json(self.root / META_FILE, "tour metadata")
         self._objects: dict | None = None
+        if strict:
+            why = self.count_problem()
+            if why:
+                raise SceneFormatError(poses_file, None, why)
 
     # -- basics --------------------------------------------------------------------------------
 
@@ -220,6 +232,27 @@ class Tour:
 
     def frame_path(self, index: int) -> Path:
         return self.frames_dir / fr.frame_name(int(index))
+
+    def frame_files(self) -> list[int]:
+        """Indices of the frame files on disk (``frames/NNNNNN.exr``), sorted; one directory listing."""
+        return sorted(int(e.name[:-4]) for e in _scan_dir(self.frames_dir)
+                      if e.name.endswith(".exr") and e.name[:-4].isdigit())
+
+    def count_problem(self, frame_files: list[int] | None = None) -> str | None:
+        """Why poses.txt, the frame files and meta.json's ``n_frames`` disagree, or None.
+
+        Frame files without a pose, or ``n_frames`` other than the number of poses, disagree;
+        fewer frame files than poses (a partly rendered tour) does not."""
+        present = self.frame_files() if frame_files is None else frame_files
+        n = len(self.frame_indices)
+        extra = sorted(set(present) - set(self._row))
+        if extra:
+            return (f"{n} poses for {len(present)} frame files in {FRAMES_DIR}/ ({len(extra)} frame files have no "
+                    f"pose: {_ranges(extra)}); poses.txt was cut short or belongs to another render")
+        n_meta = self.meta.get("n_frames")
+        if isinstance(n_meta, int) and not isinstance(n_meta, bool) and n_meta != n:
+            return f"{n} poses, but {META_FILE} says the tour has {n_meta} frames (n_frames)"
+        return None
 
     def pose(self, index: int) -> np.ndarray:
         return self.poses[self._position(index)].copy()
@@ -467,7 +500,7 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
     """
     from tqdm import tqdm
 
-    tour = Tour(root)
+    tour = Tour(root, strict=False)
     intr = tour.intrinsics
     H, W = intr.height, intr.width
     N = len(tour)
@@ -475,8 +508,11 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
         "tour": str(tour.root),
         "ok": False,
         "problems": [],
+        "problem_counts": {},
+        "problem_total": 0,
         "frames_expected": N,
         "frames_found": 0,
+        "frame_files": 0,
         "missing": [],
         "extra_frames": [],
         "unreadable": [],
@@ -512,6 +548,7 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
     rep["missing"] = sorted(expected - present)
     rep["extra_frames"] = sorted(present - expected)
     rep["frames_found"] = len(expected & present)
+    rep["frame_files"] = len(present)
 
     meta_frames = tour.meta.get("frames")
     fi = tour.frame_indices
@@ -576,10 +613,12 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
             neg = int((d < 0).sum())
             if neg:
                 why.append(f"{neg} negative pixels")
+            kinds = (["nonfinite"] if nonfinite else []) + (["negative"] if neg else [])
             if not (d > 0).any():
                 why.append("all zero (no surface hit)")
+                kinds.append("all_zero")
             if why:
-                rep["bad_depth"].append({"frame": idx, "why": "; ".join(why)})
+                rep["bad_depth"].append({"frame": idx, "why": "; ".join(why), "kinds": kinds})
             else:
                 depth_ok[k] = True
         if img.rgb is not None:
@@ -635,6 +674,10 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
         problems.append(f"missing frames ({len(rep['missing'])} of {N}, no EXR in {FRAMES_DIR}/): {_ranges(rep['missing'])}")
     if rep["extra_frames"]:
         problems.append(f"frames not in {POSES_FILE} ({len(rep['extra_frames'])}): {_ranges(rep['extra_frames'])}")
+    n_meta = tour.meta.get("n_frames")
+    meta_count_bad = isinstance(n_meta, int) and not isinstance(n_meta, bool) and n_meta != N
+    if meta_count_bad:
+        problems.append(f"{POSES_FILE} has {N} poses, but {META_FILE} says the tour has {n_meta} frames (n_frames)")
     capped([f"unreadable frame {u['frame']}: {u['error']}" for u in rep["unreadable"]])
     capped([f"stray temporary file (interrupted write?): {p}" for p in rep["stray_temp_files"]])
     capped([f"frame {m['frame']}: missing channel(s) {', '.join(m['missing'])}" for m in rep["missing_channels"]])
@@ -657,6 +700,28 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
     capped([f"frames {p['frames'][0]} -> {p['frames'][1]}: depth inconsistent with poses: "
             f"{p['agreement']:.1%} of {p['compared_pixels']} pixels agree (need {MIN_AGREEMENT:.0%}), "
             f"median |diff| {p['median_abs_diff_m'] * 100:.1f} cm" for p in rep["consistency"]["pairs"] if p["flagged"]])
+
+    # -- how many problems of each kind (the text lines above are capped per kind) -------------
+    depth_kinds = {"all_zero": "frames with all-zero depth", "nonfinite": "frames with NaN/inf depth",
+                   "negative": "frames with negative depth"}
+    counts = {
+        "errors reading the tour's files": len(rep["errors"]),
+        "missing frames": len(rep["missing"]),
+        f"frame files without a pose in {POSES_FILE}": len(rep["extra_frames"]),
+        f"{META_FILE} frame count disagreeing with {POSES_FILE}": int(meta_count_bad),
+        "unreadable frames": len(rep["unreadable"]),
+        "stray temporary files": len(rep["stray_temp_files"]),
+        "frames missing channels": len(rep["missing_channels"]),
+        "frames of the wrong size": len(rep["shape_mismatch"]),
+        **{label: sum(k in b["kinds"] for b in rep["bad_depth"]) for k, label in depth_kinds.items()},
+        "frames with NaN/inf RGB": len(rep["bad_rgb"]),
+        f"frames with ids unknown to {OBJECTS_FILE}": len(rep["unknown_ids"]),
+        f"frames whose instance/semantic ids disagree with {OBJECTS_FILE}": len(rep["class_mismatch"]),
+        "bad poses": len(rep["bad_poses"]),
+        "frame pairs with depth inconsistent with the poses": len(rep["consistency"]["flagged"]),
+    }
+    rep["problem_counts"] = {k: v for k, v in counts.items() if v}
+    rep["problem_total"] = sum(rep["problem_counts"].values())
     rep["ok"] = not problems
     return rep
 
@@ -713,8 +778,9 @@ def _consistency(tour: Tour, depth_ok: np.ndarray, n_pairs: int) -> dict:
 
 def format_report(rep: dict) -> str:
     """The text form of a check report: a summary, then one line per problem."""
-    lines = [f"{rep['tour']}: {rep['frames_found']}/{rep['frames_expected']} frames, "
-             f"channels {' '.join(rep['channels']) or '-'}"]
+    n, files, found = rep["frames_expected"], rep.get("frame_files", rep["frames_found"]), rep["frames_found"]
+    count = f"{found}/{n} frames" if files == found == n else f"{n} poses for {files} frame files"
+    lines = [f"{rep['tour']}: {count}, channels {' '.join(rep['channels']) or '-'}"]
     c = rep.get("consistency") or {}
     pairs = c.get("pairs") or []
     if pairs:
@@ -729,7 +795,13 @@ def format_report(rep: dict) -> str:
         lines.append(f"  warning: {w}")
     for p in rep["problems"]:
         lines.append(f"  {p}")
-    lines.append("  OK" if rep["ok"] else f"  PROBLEMS FOUND ({len(rep['problems'])})")
+    if rep["ok"]:
+        lines.append("  OK")
+    else:
+        counts = rep.get("problem_counts") or {}
+        total = rep.get("problem_total", len(rep["problems"]))
+        lines.append(f"  PROBLEMS FOUND ({total}): " + ", ".join(f"{v} {k}" for k, v in counts.items())
+                     if counts else f"  PROBLEMS FOUND ({len(rep['problems'])})")
     return "\n".join(lines)
 
 

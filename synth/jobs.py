@@ -211,15 +211,87 @@ class Plan:
         return sum(len(c.frames) for c in self.chunks)
 
 
+def _short(name: str) -> str:
+    """A layout, lighting or path given as a file stands for its stem in tour names (a path in the
+    name would put the tour outside the job's folder)."""
+    p = Path(name)
+    if "/" in name or "\\" in name or p.suffix.lower() in (".yaml", ".yml", ".json", ".txt", ".tum"):
+        return p.stem
+    return name
+
+
 def tour_name(layout: str, lighting: str | None, path: str) -> str:
-    return f"{layout}__{lighting or 'geometry'}__{path}"
+    return f"{_short(layout)}__{_short(lighting) if lighting else 'geometry'}__{_short(path)}"
 
 
-def expand(spec: JobSpec, out: Path | None = None) -> Plan:
-    """Validate every name and expand the spec into tours and chunks. Writes nothing."""
-    from .tour import TourSpec, prepare
+def _out_error(spec: JobSpec, from_cli: bool, e: UserError):
+    """An unusable output folder, named as the spec's ``out`` or as the ``--out`` that overrides it."""
+    if from_cli:
+        raise UserError(f"--out: {e}") from None
+    raise SceneFormatError(spec.source or "<spec>", "out", str(e)) from None
 
+
+def validate_names(spec: JobSpec, check_clearance: bool = False) -> None:
+    """Every layout, lighting and path of the spec exists and loads, and every path has the frames
+    asked for; a UserError names the spec file and the field (``designs[0].layouts[1]``).
+
+    With ``check_clearance``, a path rendered through a layout it was not planned on must keep its
+    declared clearance there (``synth.camera_paths.render_clearance_problem``)."""
+    from .camera_paths import load_path, render_clearance_problem
+    from .lighting import load_lighting
+    from .scene import load_layout, resolve_layout_path
+
+    src = spec.source or "<spec>"
+    layouts: dict[str, tuple] = {}
+    paths: dict[str, object] = {}
+    checked: set = set()
+
+    def named(field: str, load, name):
+        try:
+            return load(name)
+        except UserError as e:
+            raise SceneFormatError(src, field, str(e)) from None
+
+    for i, d in enumerate(spec.designs):
+        f = f"designs[{i}]"
+        for k, name in enumerate(d.lightings or []):
+            named(f"{f}.lightings[{k}]", load_lighting, name)
+        if d.path not in paths:
+            paths[d.path] = named(f"{f}.path", load_path, d.path)
+        cpath = paths[d.path]
+        n = len(cpath.poses)
+        if n == 0:
+            _fail(src, f"{f}.path", f"camera path '{d.path}' has no poses")
+        if d.frames is not None and d.frames > n:
+            _fail(src, f"{f}.path.frames", f"{d.frames} exceeds the {n} frames of camera path '{cpath.name}'")
+        for k, name in enumerate(d.layouts):
+            field = f"{f}.layouts[{k}]"
+            if name not in layouts:
+                layouts[name] = (named(field, resolve_layout_path, name), named(field, load_layout, name))
+            lfile, lay = layouts[name]
+            key = (name, d.path, d.frames)
+            if check_clearance and key not in checked:
+                checked.add(key)
+                why = render_clearance_problem(cpath, lay, lfile, name, d.frames)
+                if why:
+                    _fail(src, field, why)
+
+
+def expand(spec: JobSpec, out: Path | None = None, check_clearance: bool = False) -> Plan:
+    """Validate every name and expand the spec into tours and chunks. Writes nothing.
+
+    ``check_clearance`` (what ``synth render`` does unless ``--allow-clearance-breach``): refuse a
+    path that breaks its declared clearance in a layout it was not planned on. Readers of rendered
+    tours (``reloc experiment``) expand without it."""
+    from .tour import TourSpec, _check_can_create, prepare
+
+    from_cli = out is not None
     out = Path(out or spec.out)
+    try:
+        _check_can_create(out)
+    except UserError as e:
+        _out_error(spec, from_cli, e)
+    validate_names(spec, check_clearance)
     plan = Plan(spec, out, {})
     seen_geo: dict[str, list[Chunk]] = {}
     for d in spec.designs:
@@ -231,7 +303,8 @@ def expand(spec: JobSpec, out: Path | None = None) -> Plan:
                 ts = TourSpec(layout=layout, path=d.path, out=str(out / name), lighting=lighting, renderer=spec.renderer,
                               quality=spec.quality, width=spec.width, height=spec.height, hfov_deg=spec.hfov_deg,
                               frames=d.frames, seed=spec.seed, device=spec.device, previews=spec.previews,
-                              chunk_size=spec.chunk_size, geometry_cache=str(out / "_geometry"))
+                              chunk_size=spec.chunk_size, geometry_cache=str(out / "_geometry"),
+                              check_clearance=False)  # validate_names did, once per layout + path
                 p = prepare(ts, create=False)
                 if spec.renderer == "blender" and spec.geometry == "fast":  # never mixed with a Cycles cache
                     p.geometry_dir = p.geometry_dir.with_name(p.geometry_dir.name + "__fast")
@@ -510,7 +583,7 @@ def run_ray(plan: Plan, state: JobState, todo: list[Chunk], address: str | None,
 
 
 def run_job(spec: JobSpec, out: Path | None = None, workers: int = 1, backend: str = "local", ray_address: str | None = None,
-            resume: bool = False, progress: bool = True) -> dict:
+            resume: bool = False, progress: bool = True, allow_clearance_breach: bool = False) -> dict:
     """Render everything the spec asks for that is not on disk yet. Returns a summary."""
     from .tour import _check_writable, _write_json, write_static_files
 
@@ -519,8 +592,11 @@ def run_job(spec: JobSpec, out: Path | None = None, workers: int = 1, backend: s
         raise UserError(f"--workers must be positive, got {workers}")
     if backend not in ("local", "ray"):
         raise UserError(f"unknown backend '{backend}'; use local or ray")
-    plan = expand(spec, out)
-    _check_writable(plan.out)
+    plan = expand(spec, out, check_clearance=not allow_clearance_breach)
+    try:
+        _check_writable(plan.out)
+    except UserError as e:
+        _out_error(spec, out is not None, e)
     state_path = plan.out / STATE_FILE
     old = JobState.load(state_path)
     if old is not None and not resume:
@@ -682,7 +758,7 @@ def fmt_duration(s: float) -> str:
 def cmd_render(args) -> int:
     spec = load_spec(args.spec)
     if args.dry_run:
-        plan = expand(spec, Path(args.out) if args.out else None)
+        plan = expand(spec, Path(args.out) if args.out else None, check_clearance=not args.allow_clearance_breach)
         print(describe(plan))
         per = calibrate(plan)
         eta = estimate(plan, per, args.workers)
@@ -691,7 +767,8 @@ def cmd_render(args) -> int:
               f"({os.cpu_count()} CPUs); a Ray cluster of N such machines: about 1/N of that")
         return 0
     s = run_job(spec, Path(args.out) if args.out else None, workers=args.workers, backend=args.backend,
-                ray_address=args.ray_address, resume=args.resume, progress=not args.quiet)
+                ray_address=args.ray_address, resume=args.resume, progress=not args.quiet,
+                allow_clearance_breach=args.allow_clearance_breach)
     print(f"{s['job']}: {s['tours']} tours, {s['frames_rendered_now']} frames rendered in {s['wall_time_s']:.1f} s "
           f"({s['frames_per_s']} frames/s), chunks {s['chunks']} -> {s['out']}")
     for cid, err in s["failed"].items():
@@ -708,5 +785,8 @@ def register_cli(subparsers) -> None:
     a.add_argument("--ray-address", help="address of a running Ray cluster (default: start a local one on loopback)")
     a.add_argument("--resume", action="store_true", help="finish a job that was stopped; renders only what is missing")
     a.add_argument("--dry-run", action="store_true", help="print the plan and an estimate from a short calibration render")
+    a.add_argument("--allow-clearance-breach", action="store_true",
+                   help="render even where a path comes closer to an object than its declared clearance "
+                        "(checked for layouts the path was not planned on)")
     a.add_argument("--quiet", action="store_true")
     a.set_defaults(fn=cmd_render)

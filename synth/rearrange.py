@@ -267,17 +267,31 @@ def in_ranges(stats: dict, ranges: dict) -> bool:
     return all(lo <= stats[k] <= hi for k, (lo, hi) in ranges.items())
 
 
+class NoVariantFound(RuntimeError):
+    """``make_variant`` found no rearrangement within the ranges that checks clean."""
+
+    def __init__(self, message: str, attempts: int, last: dict | None, last_check_ok: bool | None):
+        super().__init__(message)
+        self.attempts, self.last, self.last_check_ok = attempts, last, last_check_ok
+
+
 def make_variant(ref: Layout, spec: VariantSpec, ranges: dict = PAPER_RANGES, max_attempts: int = 40,
                  walkway: np.ndarray | None = None) -> Layout:
-    """``rearrange`` with sub-seeds ``spec.seed * 1000 + k`` until stats are in range and checks pass."""
-    last = None
+    """``rearrange`` with sub-seeds ``spec.seed * 1000 + k`` until stats are in range and checks pass.
+
+    Raises ``NoVariantFound`` (a RuntimeError) after ``max_attempts``."""
+    last, last_ok = None, None
     for k in range(max_attempts):
         sub = spec.seed * 1000 + k
         var = rearrange(ref, spec.name, sub, spec.plan, walkway)
         st = change_stats(ref, var)
         last = st
-        if in_ranges(st, ranges) and check_layout(var).ok:
-            var.meta["variant_seed"] = spec.seed
-            var.meta["attempt"] = k
-            return var
-    raise RuntimeError(f"no rearrangement of {ref.name} within the target ranges after {max_attempts} attempts (last: {last})")
+        last_ok = None
+        if in_ranges(st, ranges):
+            last_ok = check_layout(var).ok
+            if last_ok:
+                var.meta["variant_seed"] = spec.seed
+                var.meta["attempt"] = k
+                return var
+    raise NoVariantFound(f"no rearrangement of {ref.name} within the target ranges after {max_attempts} attempts "
+                         f"(last: {last})", max_attempts, last, last_ok)
