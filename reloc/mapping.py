@@ -44,15 +44,14 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import sys
 import time
 from collections import Counter
 from dataclasses import asdict, dataclass
-from pathlib import Path
 
 import numpy as np
 
+from synth.atomic import write_text_atomic
 from synth.errors import UserError, check_output_file
 
 from .detection import STRUCTURE_CLASSES, FrameData, OracleDetector
@@ -1076,17 +1075,7 @@ def dumps_map(doc: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_atomic(path, text: str) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp.{os.getpid()}")
-    try:
-        tmp.write_text(text)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-    return path
+write_atomic = write_text_atomic  # the name the map commands use
 
 
 def summary_line(doc: dict, size_bytes: int, errors: dict | None, report: dict | None = None) -> str:

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from . import geometry as geo
+from .atomic import write_text_atomic
 from .errors import SceneFormatError
 
 DEFAULT_WIDTH, DEFAULT_HEIGHT = 640, 480
@@ -153,10 +154,7 @@ def write_tum(path, poses, fps: float = DEFAULT_FPS, frames=None, header: str | 
         q = geo.matrix_to_quat(np.asarray(T)[:3, :3])  # (w, x, y, z)
         t = np.asarray(T)[:3, 3]
         lines.append(f"{i / fps:.6f} {t[0]:.6f} {t[1]:.6f} {t[2]:.6f} {q[1]:.9f} {q[2]:.9f} {q[3]:.9f} {q[0]:.9f}")
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text("\n".join(lines) + "\n")
-    tmp.replace(path)
-    return path
+    return write_text_atomic(path, "\n".join(lines) + "\n")
 
 
 # frames: how far t * fps may lie from a whole frame in a strict read (float printing of

@@ -58,6 +58,7 @@ import numpy as np
 import yaml
 
 from . import camera
+from .atomic import write_text_atomic
 from .errors import SceneFormatError, UnknownNameError, UserError
 from .resources import scenes_dir
 from .scene import Layout, Stage, object_box
@@ -1330,9 +1331,7 @@ def save_path(path: CameraPath, file) -> Path:
     if meta:
         doc["meta"] = meta
     side = file.with_suffix(".yaml")
-    tmp = side.with_name(f".{side.name}.tmp")
-    tmp.write_text(yaml.safe_dump(_plain(doc), sort_keys=False, default_flow_style=None, width=110))
-    tmp.replace(side)
+    write_text_atomic(side, yaml.safe_dump(_plain(doc), sort_keys=False, default_flow_style=None, width=110))
     return file
 
 

@@ -2,12 +2,11 @@
 
 ``fast``: render depth, instance and semantic with the Open3D renderer (``synth.fast_render``).
 ``copy``: copy shared geometry frames (the geometry cache) into a tour (hard links where possible).
-Frames already on disk are skipped; progress goes to stdout as JSON lines, like the Blender worker.
+Frames already on disk are skipped; progress goes to stdout as JSON lines (``synth.chunks``).
 """
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import sys
@@ -15,29 +14,27 @@ import time
 from pathlib import Path
 
 from . import frames as fr
-
-
-def _emit(**kw) -> None:
-    print(json.dumps(kw), flush=True)
+from .atomic import temp_name
+from .chunks import emit, worker_main
 
 
 def run(job: dict) -> int:
     out = Path(job["out_dir"])
     out.mkdir(parents=True, exist_ok=True)
     todo = [int(i) for i in job["frames"] if not (out / fr.frame_name(int(i))).exists()]
-    _emit(event="start", pass_=job["pass"], frames=len(job["frames"]), todo=len(todo))
+    emit(event="start", pass_=job["pass"], frames=len(job["frames"]), todo=len(todo))
     if job["pass"] == "copy":
         src = Path(job["geometry_dir"])
         for i in todo:
             t0 = time.time()
             dst = out / fr.frame_name(i)
-            tmp = fr.tmp_name(dst)
+            tmp = temp_name(dst)
             try:  # a hard link: the same bytes, no second copy on disk
                 os.link(src / fr.frame_name(i), tmp)
             except OSError:  # another file system, or links not supported
                 shutil.copyfile(src / fr.frame_name(i), tmp)
             os.replace(tmp, dst)
-            _emit(event="frame", frame=i, seconds=round(time.time() - t0, 4))
+            emit(event="frame", frame=i, seconds=round(time.time() - t0, 4))
         return 0
     if job["pass"] != "fast":
         raise ValueError(f"unknown pass {job['pass']!r}")
@@ -50,25 +47,17 @@ def run(job: dict) -> int:
     pose_of = dict(zip(ids.tolist(), poses))
     if todo:
         r = FastRenderer(load_layout(job["layout"]))
-        _emit(event="ready", device="CPU")
+        emit(event="ready", device="CPU")
         for i in todo:
             t0 = time.time()
             d, ins, sem = r.render(pose_of[i], intr)
             fr.write_frame(out / fr.frame_name(i), depth=d, instance=ins, semantic=sem)
-            _emit(event="frame", frame=i, seconds=round(time.time() - t0, 4))
+            emit(event="frame", frame=i, seconds=round(time.time() - t0, 4))
     return 0
 
 
 def main(argv=None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    if len(argv) != 1:
-        print("usage: python -m synth.chunk_worker JOB.json", file=sys.stderr)
-        return 2
-    try:
-        return run(json.loads(Path(argv[0]).read_text()))
-    except Exception as e:
-        _emit(event="error", error=f"{type(e).__name__}: {e}")
-        raise
+    return worker_main("synth.chunk_worker", run, argv)
 
 
 if __name__ == "__main__":

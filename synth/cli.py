@@ -11,6 +11,7 @@ import sys
 from collections import Counter
 from pathlib import Path
 
+from .atomic import write_json_atomic
 from .errors import UserError, check_output_file, run_command
 
 
@@ -19,10 +20,7 @@ def _print_json(obj) -> None:
 
 
 def _write_json(path: Path, obj) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(obj, indent=1) + "\n")
-    tmp.replace(path)
+    write_json_atomic(path, obj, indent=1)
 
 
 def _load(name):

@@ -809,12 +809,6 @@ def format_report(rep: dict) -> str:
 # contact sheet
 
 
-def srgb_encode(x: np.ndarray) -> np.ndarray:
-    """Linear [0, 1] -> sRGB-encoded [0, 1]."""
-    x = np.clip(x, 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
-
-
 def tonemap(rgb: np.ndarray, exposure: float | None = None) -> tuple[np.ndarray, float]:
     """Simple display transform: scale (auto: the 97th luminance percentile to 0.9), sRGB gamma, clip.
 
@@ -827,7 +821,7 @@ def tonemap(rgb: np.ndarray, exposure: float | None = None) -> tuple[np.ndarray,
         scale = 0.9 / p if p > 1e-8 else 1.0
     else:
         scale = float(exposure)
-    return srgb_encode(rgb * scale).astype(np.float32), scale
+    return fr.srgb_encode(rgb * scale).astype(np.float32), scale
 
 
 def id_colors(ids, salt: int = 0) -> np.ndarray:

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import OpenEXR
 
+from .atomic import replacing
 from .errors import UserError
 
 RGB_CHANNELS = ("R", "G", "B")
@@ -50,12 +51,15 @@ class FrameImages:
         raise ValueError("empty frame")
 
 
-def tmp_name(path: Path) -> Path:
-    """The hidden temporary name a file is written under before it is renamed into place.
+def srgb_encode(x: np.ndarray) -> np.ndarray:
+    """Linear [0, 1] -> sRGB-encoded [0, 1] (IEC 61966-2-1), the one transfer function of the toolkit."""
+    x = np.clip(x, 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
 
-    It carries the process id, so two processes writing the same frame (a resumed job next to an
-    orphaned worker) never share a temporary file."""
-    return path.with_name(f".{path.name}.{os.getpid()}.tmp")
+
+def srgb8(x: np.ndarray) -> np.ndarray:
+    """Linear [0, 1] -> 8-bit sRGB (rounded)."""
+    return (srgb_encode(x) * 255.0 + 0.5).astype(np.uint8)
 
 
 def write_frame(path, rgb=None, depth=None, instance=None, semantic=None) -> Path:
@@ -80,16 +84,9 @@ def write_frame(path, rgb=None, depth=None, instance=None, semantic=None) -> Pat
         ch[name] = arr
     if not ch:
         raise ValueError("a frame needs at least one of rgb, depth, instance, semantic")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = tmp_name(path)
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    try:
-        with OpenEXR.File(header, ch) as f:
-            f.write(str(tmp))
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    with replacing(path) as tmp, OpenEXR.File(header, ch) as f:
+        f.write(str(tmp))
     return path
 
 

@@ -28,16 +28,18 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
 import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from . import frames as fr
-from .errors import SceneFormatError, UserError
+from .atomic import write_json_atomic, write_text_atomic
+from .chunks import chunk_job, missing_frames, run_chunk_process
+from .errors import SceneFormatError, UserError, check_output_folder
 from .render_settings import DEVICES, quality
 from .scene import read_yaml
+from .tour import TourSpec, make_output_folder, package_versions, prepare, write_static_files
 
 STATE_FILE = "job_state.json"
 SPEC_KEYS = {"name", "description", "out", "renderer", "geometry", "quality", "size", "hfov_deg", "seed", "device",
@@ -283,12 +285,10 @@ def expand(spec: JobSpec, out: Path | None = None, check_clearance: bool = False
     ``check_clearance`` (what ``synth render`` does unless ``--allow-clearance-breach``): refuse a
     path that breaks its declared clearance in a layout it was not planned on. Readers of rendered
     tours (``reloc experiment``) expand without it."""
-    from .tour import TourSpec, _check_can_create, prepare
-
     from_cli = out is not None
     out = Path(out or spec.out)
     try:
-        _check_can_create(out)
+        check_output_folder(out)
     except UserError as e:
         _out_error(spec, from_cli, e)
     validate_names(spec, check_clearance)
@@ -314,14 +314,14 @@ def expand(spec: JobSpec, out: Path | None = None, check_clearance: bool = False
                 groups = [ids[k : k + spec.chunk_size] for k in range(0, len(ids), spec.chunk_size)]
                 if spec.renderer == "fast":
                     for k, g in enumerate(groups):
-                        plan.chunks.append(Chunk(f"fast/{name}/{k:04d}", "fast", name, g, _job(p, "fast", g), str(p.out / "frames")))
+                        plan.chunks.append(Chunk(f"fast/{name}/{k:04d}", "fast", name, g, chunk_job(p, "fast", g), str(p.out / "frames")))
                     continue
                 gkey = p.geometry_dir.name
                 if gkey not in seen_geo:
                     seen_geo[gkey] = []
                     gkind = "fast" if spec.geometry == "fast" else "geometry"
                     for k, g in enumerate(groups):
-                        c = Chunk(f"geometry/{gkey}/{k:04d}", gkind, name, g, _job(p, gkind, g, p.geometry_dir),
+                        c = Chunk(f"geometry/{gkey}/{k:04d}", gkind, name, g, chunk_job(p, gkind, g, p.geometry_dir),
                                   str(p.geometry_dir))
                         seen_geo[gkey].append(c)
                         plan.chunks.append(c)
@@ -331,27 +331,12 @@ def expand(spec: JobSpec, out: Path | None = None, check_clearance: bool = False
                     rgb = [i for i in g if every and i % every == 0]
                     copy = [i for i in g if not (every and i % every == 0)]
                     if rgb:
-                        plan.chunks.append(Chunk(f"rgb/{name}/{k:04d}", "rgb", name, rgb, _job(p, "rgb", rgb),
+                        plan.chunks.append(Chunk(f"rgb/{name}/{k:04d}", "rgb", name, rgb, chunk_job(p, "rgb", rgb),
                                                  str(p.out / "frames"), needs=need))
                     if copy:
-                        plan.chunks.append(Chunk(f"copy/{name}/{k:04d}", "copy", name, copy, _job(p, "copy", copy),
+                        plan.chunks.append(Chunk(f"copy/{name}/{k:04d}", "copy", name, copy, chunk_job(p, "copy", copy),
                                                  str(p.out / "frames"), needs=need))
     return plan
-
-
-def _job(p, kind: str, frames: list[int], out_dir: Path | None = None) -> dict:
-    from .tour import _job as tour_job
-
-    if kind in ("fast", "copy"):
-        out_dir = out_dir or p.out / "frames"
-        return {"pass": kind, "layout": str(p.layout_file.resolve()), "poses": str((p.out / "poses.txt").resolve()),
-                "fps": p.path_fps, "frames": frames, "intrinsics": p.intr.to_dict(), "out_dir": str(out_dir.resolve()),
-                "geometry_dir": str(p.geometry_dir.resolve()) if p.geometry_dir else None}
-    j = tour_job(p, kind, frames, p.geometry_dir if kind == "geometry" else p.out / "frames", (p.out / "poses.txt"))
-    for k in ("layout", "poses", "out_dir", "geometry_dir", "previews_dir"):
-        if j.get(k):
-            j[k] = str(Path(j[k]).resolve())
-    return j
 
 
 # ---------------------------------------------------------------------------------------------
@@ -389,9 +374,7 @@ class JobState:
         self.save()
 
     def save(self) -> None:
-        tmp = self.path.with_name(f".{self.path.name}.tmp")
-        tmp.write_text(json.dumps(self.doc, indent=1))
-        os.replace(tmp, self.path)
+        write_text_atomic(self.path, json.dumps(self.doc, indent=1))
 
     def counts(self) -> dict:
         out: dict[str, int] = {}
@@ -408,38 +391,6 @@ def spec_document(spec: JobSpec) -> dict:
 
 # ---------------------------------------------------------------------------------------------
 # running chunks
-
-
-def run_chunk_process(chunk_kind: str, job: dict, job_file: str, log_file: str, on_frame=None) -> tuple[int, str | None, dict]:
-    """Run one chunk in a fresh process; returns (exit status, error, info). Used by both backends."""
-    Path(job_file).write_text(json.dumps(job))
-    cmd = ([sys.executable, "-m", "synth.blender.worker", job_file] if chunk_kind in ("geometry", "rgb")
-           else [sys.executable, "-m", "synth.chunk_worker", job_file])
-    info: dict = {}
-    err = None
-    with open(log_file, "w") as log:
-        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True, bufsize=1)
-        for line in proc.stdout:
-            if not line.startswith("{"):
-                log.write(line)
-                continue
-            try:
-                ev = json.loads(line)
-            except json.JSONDecodeError:
-                continue
-            e = ev.get("event")
-            if e == "frame" and on_frame:
-                on_frame(ev)
-            elif e == "start":
-                info["blender"] = ev.get("blender")
-            elif e == "ready":
-                info["device"] = ev.get("device")
-            elif e == "error":
-                err = ev.get("error")
-        rc = proc.wait()
-    if rc != 0 and err is None:
-        err = f"exit status {rc}" + (" (killed)" if rc < 0 else "")
-    return rc, err, info
 
 
 class _Bar:
@@ -585,8 +536,6 @@ def run_ray(plan: Plan, state: JobState, todo: list[Chunk], address: str | None,
 def run_job(spec: JobSpec, out: Path | None = None, workers: int = 1, backend: str = "local", ray_address: str | None = None,
             resume: bool = False, progress: bool = True, allow_clearance_breach: bool = False) -> dict:
     """Render everything the spec asks for that is not on disk yet. Returns a summary."""
-    from .tour import _check_writable, _write_json, write_static_files
-
     t0 = time.time()
     if workers <= 0:
         raise UserError(f"--workers must be positive, got {workers}")
@@ -594,7 +543,7 @@ def run_job(spec: JobSpec, out: Path | None = None, workers: int = 1, backend: s
         raise UserError(f"unknown backend '{backend}'; use local or ray")
     plan = expand(spec, out, check_clearance=not allow_clearance_breach)
     try:
-        _check_writable(plan.out)
+        make_output_folder(plan.out)
     except UserError as e:
         _out_error(spec, out is not None, e)
     state_path = plan.out / STATE_FILE
@@ -606,9 +555,9 @@ def run_job(spec: JobSpec, out: Path | None = None, workers: int = 1, backend: s
     state = JobState(state_path, plan.chunks, spec_document(spec))
     state.merge(old)
     for p in plan.tours.values():
-        _check_writable(p.out)
+        make_output_folder(p.out)
         if p.geometry_dir:
-            _check_writable(p.geometry_dir)
+            make_output_folder(p.geometry_dir)
         write_static_files(p)
     todo = []
     for c in plan.chunks:
@@ -633,12 +582,12 @@ def run_job(spec: JobSpec, out: Path | None = None, workers: int = 1, backend: s
     rendered = sum(len(c.frames) for c in todo)
     for name, p in plan.tours.items():
         meta = tour_meta(p, spec, info)
-        _write_json(p.out / "meta.json", meta)
+        write_json_atomic(p.out / "meta.json", meta, indent=1)
     summary = {"job": spec.name, "out": str(plan.out), "tours": len(plan.tours), "chunks": counts,
                "frames_total": plan.frames_total, "frames_rendered_now": rendered, "wall_time_s": wall,
                "frames_per_s": round(rendered / wall, 3) if wall > 0 else None, "backend": backend, "workers": workers,
                "failed": {cid: c["error"] for cid, c in state.doc["chunks"].items() if c["state"] == "failed"}}
-    _write_json(plan.out / "job_summary.json", summary)
+    write_json_atomic(plan.out / "job_summary.json", summary, indent=1)
     if not summary["failed"]:
         import shutil
 
@@ -649,8 +598,6 @@ def run_job(spec: JobSpec, out: Path | None = None, workers: int = 1, backend: s
 def tour_meta(p, spec: JobSpec, info: dict) -> dict:
     """meta.json of a tour. Deterministic (a resumed job writes the same file); timing and progress
     of the job are in ``job_summary.json``."""
-    from .tour import missing_frames, package_versions
-
     frames_dir = p.out / "frames"
     return {
         "toolkit": package_versions(),

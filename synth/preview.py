@@ -25,8 +25,6 @@ format follows the extension (png, pdf, svg, ...).
 from __future__ import annotations
 
 import math
-import os
-import uuid
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,6 +38,7 @@ from matplotlib.patches import Arc, FancyArrowPatch, Patch, Polygon, Rectangle
 from matplotlib.ticker import MultipleLocator
 from matplotlib.transforms import Bbox
 
+from .atomic import replacing
 from . import geometry as geo
 from .errors import UserError
 from .scene import Layout, Stage, Wall, object_box
@@ -499,19 +498,9 @@ def save_figure(fig, out_path, dpi: float) -> Path:
     supported = fig.canvas.get_supported_filetypes()
     if fmt not in supported:
         raise UserError(f"{out}: cannot write '.{fmt}' plots; use one of: {', '.join(sorted(supported))}")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    # a fresh name next to the target (created by savefig, so with the usual permissions)
-    tmp = out.with_name(f".{out.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
     meta = {"png": {"Software": None}, "pdf": {"CreationDate": None, "Producer": None}, "svg": {"Date": None}}.get(fmt)
-    try:
+    with replacing(out) as tmp:
         fig.savefig(tmp, format=fmt, dpi=dpi, facecolor="white", metadata=meta)
-        os.replace(tmp, out)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
     return out
 
 

@@ -33,6 +33,7 @@ import numpy as np
 import yaml
 
 from . import geometry as geo
+from .atomic import write_text_atomic
 from .classes import ClassTable, class_table
 from .errors import SceneFormatError, UnknownNameError
 from .resources import layouts_dir
@@ -638,12 +639,7 @@ def dump_yaml(doc) -> str:
 
 def save_layout(layout: Layout, path: str | Path) -> Path:
     """Write the layout as YAML (atomically: temporary file, then rename)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(dump_yaml(layout_to_dict(layout)))
-    tmp.replace(path)
-    return path
+    return write_text_atomic(path, dump_yaml(layout_to_dict(layout)))
 
 
 def read_yaml(path: Path):

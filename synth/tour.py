@@ -28,6 +28,8 @@ import numpy as np
 
 from . import __version__
 from . import frames as fr
+from .atomic import temp_name, write_json_atomic
+from .chunks import chunk_job, missing_frames, run_chunk_process, split
 from .camera import CAMERA_DOC, Intrinsics, write_tum
 from .errors import UserError, check_output_folder
 from .render_settings import DEVICES, quality
@@ -78,12 +80,8 @@ class Prepared:
     extra: dict = field(default_factory=dict)
 
 
-def _check_can_create(d: Path) -> None:
-    """Fail now if ``d`` could not be created or written later (one check for every command)."""
-    check_output_folder(d)
-
-
-def _check_writable(d: Path) -> None:
+def make_output_folder(d: Path) -> None:
+    """Create the output folder ``d`` and prove a file can be written in it (a one-line UserError if not)."""
     try:
         d.mkdir(parents=True, exist_ok=True)
         with tempfile.NamedTemporaryFile(dir=d, prefix=".write_test_"):
@@ -140,7 +138,7 @@ def prepare(spec: TourSpec, create: bool = True) -> Prepared:
         if why:
             raise UserError(why)
     out = Path(spec.out)
-    (_check_writable if create else _check_can_create)(out)
+    (make_output_folder if create else check_output_folder)(out)
     intr = Intrinsics.from_fov(spec.width, spec.height, spec.hfov_deg)
     poses = cpath.poses[:n]
     geometry_dir = None
@@ -149,7 +147,7 @@ def prepare(spec: TourSpec, create: bool = True) -> Prepared:
         key = _hash(layout_file.read_bytes(), np.ascontiguousarray(poses, dtype=np.float64).tobytes(),
                     json.dumps(intr.to_dict(), sort_keys=True).encode())
         geometry_dir = root / f"{layout.name}__{cpath.name}__{spec.width}x{spec.height}__{key}"
-        (_check_writable if create else _check_can_create)(geometry_dir)
+        (make_output_folder if create else check_output_folder)(geometry_dir)
     return Prepared(spec, layout_file, layout.name, cpath.name, cpath.fps, poses, list(range(n)), intr, out,
                     geometry_dir, lighting_name, {"path_meta": cpath.meta})
 
@@ -157,25 +155,10 @@ def prepare(spec: TourSpec, create: bool = True) -> Prepared:
 def write_static_files(p: Prepared) -> None:
     """camera.json, poses.txt, objects.json (atomically; identical on every re-run)."""
     cam = {**p.intr.to_dict(), "fps": p.path_fps, "hfov_deg": p.spec.hfov_deg, **CAMERA_DOC}
-    _write_json(p.out / "camera.json", cam)
+    write_json_atomic(p.out / "camera.json", cam, indent=1)
     write_tum(p.out / "poses.txt", p.poses, fps=p.path_fps, frames=p.frame_ids,
               header=f"camera-to-world poses (OpenCV camera axes) of path '{p.path_name}'\nt tx ty tz qx qy qz qw, t = frame / {p.path_fps:g}")
-    _write_json(p.out / "objects.json", boxes_document(load_layout(p.layout_file)))
-
-
-def _write_json(path: Path, obj) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(obj, indent=1) + "\n")
-    os.replace(tmp, path)
-
-
-def missing_frames(frames_dir: Path, frame_ids) -> list[int]:
-    return [i for i in frame_ids if not (frames_dir / fr.frame_name(i)).exists()]
-
-
-def chunks(ids: list[int], size: int) -> list[list[int]]:
-    return [ids[k : k + size] for k in range(0, len(ids), size)]
+    write_json_atomic(p.out / "objects.json", boxes_document(load_layout(p.layout_file)), indent=1)
 
 
 def package_versions() -> dict:
@@ -207,14 +190,12 @@ class _Progress:
 
 def _render_pass(p: Prepared, kind: str, out_dir: Path, work: Path, desc: str, progress: bool) -> tuple[dict, int]:
     """Render the frames of one pass (geometry or rgb) that ``out_dir`` lacks, in chunks, each in a
-    fresh worker process (``synth.jobs.run_chunk_process``), ``spec.workers`` at a time.
+    fresh worker process (``synth.chunks``), ``spec.workers`` at a time.
 
     Returns (worker info, frames rendered); raises RenderError naming the log of a failed chunk
     after the other chunks finished."""
     import threading
     from concurrent.futures import ThreadPoolExecutor
-
-    from .jobs import run_chunk_process
 
     todo = missing_frames(out_dir, p.frame_ids)
     if not todo:
@@ -231,12 +212,12 @@ def _render_pass(p: Prepared, kind: str, out_dir: Path, work: Path, desc: str, p
     def one(k_frames):
         k, frames = k_frames
         jf, log = work / f"{kind}_{k:05d}.json", work / f"{kind}_{k:05d}.log"
-        job = _job(p, kind, frames, out_dir, p.out / "poses.txt")
+        job = chunk_job(p, kind, frames, out_dir)
         return run_chunk_process(kind, job, str(jf), str(log), on_frame) + (log,)
 
     try:
         with ThreadPoolExecutor(max_workers=p.spec.workers) as pool:
-            results = list(pool.map(one, enumerate(chunks(todo, p.spec.chunk_size))))
+            results = list(pool.map(one, enumerate(split(todo, p.spec.chunk_size))))
     finally:
         bar.close()
     info: dict = {}
@@ -249,16 +230,6 @@ def _render_pass(p: Prepared, kind: str, out_dir: Path, work: Path, desc: str, p
         err, log = failed[0]
         raise RenderError(f"{len(failed)} chunk(s) failed; first: {err} (log: {log})")
     return info, len(todo)
-
-
-def _job(p: Prepared, pass_: str, frames: list[int], out_dir: Path, poses_file: Path) -> dict:
-    s = p.spec
-    return {
-        "pass": pass_, "layout": str(p.layout_file.resolve()), "lighting": s.lighting, "poses": str(poses_file),
-        "fps": p.path_fps, "frames": frames, "intrinsics": p.intr.to_dict(), "quality": s.quality, "seed": s.seed,
-        "device": s.device, "out_dir": str(out_dir), "geometry_dir": str(p.geometry_dir) if p.geometry_dir else None,
-        "previews_dir": str(p.out / "previews") if s.previews else None, "threads": s.threads,
-    }
 
 
 def render_tour(spec: TourSpec, progress: bool = True) -> dict:
@@ -294,7 +265,7 @@ def render_tour(spec: TourSpec, progress: bool = True) -> dict:
             if p.lighting_name is None:  # geometry-only tour: the cached frames are the tour's frames
                 for i in missing_frames(frames_dir, p.frame_ids):
                     src, dst = gdir / fr.frame_name(i), frames_dir / fr.frame_name(i)
-                    tmp = fr.tmp_name(dst)
+                    tmp = temp_name(dst)
                     shutil.copyfile(src, tmp)
                     os.replace(tmp, dst)
             else:
@@ -323,5 +294,5 @@ def render_tour(spec: TourSpec, progress: bool = True) -> dict:
         "host": {"platform": platform.platform(), "cpus": os.cpu_count()},
         "complete": not missing_frames(frames_dir, p.frame_ids),
     }
-    _write_json(p.out / "meta.json", meta)
+    write_json_atomic(p.out / "meta.json", meta, indent=1)
     return meta

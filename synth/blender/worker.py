@@ -16,7 +16,6 @@ skipped, so a killed chunk resumes where it stopped. Progress goes to stdout as 
 
 from __future__ import annotations
 
-import json
 import os
 import sys
 import tempfile
@@ -26,10 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import frames as fr
-
-
-def _emit(**kw) -> None:
-    print(json.dumps(kw), flush=True)
+from ..chunks import emit, worker_main
 
 
 def read_blender_exr(path: str) -> dict[str, np.ndarray]:
@@ -50,12 +46,6 @@ def read_blender_exr(path: str) -> dict[str, np.ndarray]:
     return out
 
 
-def srgb_preview(rgb: np.ndarray) -> np.ndarray:
-    x = np.clip(rgb, 0.0, 1.0)
-    x = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
-    return (x * 255.0 + 0.5).astype(np.uint8)
-
-
 def run(job: dict) -> int:
     import bpy
 
@@ -73,7 +63,7 @@ def run(job: dict) -> int:
     pose_of = dict(zip(frame_ids.tolist(), poses))
     out_dir = Path(job["out_dir"])
     todo = [int(i) for i in job["frames"] if not (out_dir / fr.frame_name(int(i))).exists()]
-    _emit(event="start", blender=bpy.app.version_string, pass_=mode, frames=len(job["frames"]), todo=len(todo))
+    emit(event="start", blender=bpy.app.version_string, pass_=mode, frames=len(job["frames"]), todo=len(todo))
     if not todo:
         return 0
 
@@ -96,7 +86,7 @@ def run(job: dict) -> int:
         sb.add_lighting(scene, resolve_lighting(load_lighting(job["lighting"]), layout), emitters)
         geom_dir = Path(job["geometry_dir"])
         previews = Path(job["previews_dir"]) if job.get("previews_dir") else None
-    _emit(event="ready", device=device, parts=len(parts))
+    emit(event="ready", device=device, parts=len(parts))
 
     tmpdir = tempfile.mkdtemp(prefix="synth_render_")
     tmp_exr = os.path.join(tmpdir, "render.exr")
@@ -123,24 +113,15 @@ def run(job: dict) -> int:
                 previews.mkdir(parents=True, exist_ok=True)
                 png = previews / f"{i:06d}.png"
                 tmp_png = previews / f".{i:06d}.tmp.png"
-                cv2.imwrite(str(tmp_png), srgb_preview(rgb)[..., ::-1])
+                cv2.imwrite(str(tmp_png), fr.srgb8(rgb)[..., ::-1])
                 os.replace(tmp_png, png)
             fr.write_frame(target, rgb=rgb, depth=g.depth, instance=g.instance, semantic=g.semantic)
-        _emit(event="frame", frame=i, seconds=round(time.time() - t0, 4))
+        emit(event="frame", frame=i, seconds=round(time.time() - t0, 4))
     return 0
 
 
 def main(argv=None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    if len(argv) != 1:
-        print("usage: python -m synth.blender.worker JOB.json", file=sys.stderr)
-        return 2
-    job = json.loads(Path(argv[0]).read_text())
-    try:
-        return run(job)
-    except Exception as e:  # reported to the parent, which records it in the job state
-        _emit(event="error", error=f"{type(e).__name__}: {e}")
-        raise
+    return worker_main("synth.blender.worker", run, argv)
 
 
 if __name__ == "__main__":
