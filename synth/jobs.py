@@ -35,11 +35,11 @@ from pathlib import Path
 
 from . import frames as fr
 from .atomic import write_json_atomic, write_text_atomic
-from .chunks import chunk_job, missing_frames, run_chunk_process
+from .chunks import chunk_job, run_chunk_process
 from .errors import SceneFormatError, UserError, check_output_folder
 from .render_settings import DEVICES, quality
 from .scene import read_yaml
-from .tour import TourSpec, make_output_folder, package_versions, prepare, write_static_files
+from .tour import TourSpec, make_output_folder, prepare, tour_meta, write_static_files
 
 STATE_FILE = "job_state.json"
 SPEC_KEYS = {"name", "description", "out", "renderer", "geometry", "quality", "size", "hfov_deg", "seed", "device",
@@ -572,16 +572,16 @@ def run_job(spec: JobSpec, out: Path | None = None, workers: int = 1, backend: s
     work.mkdir(parents=True, exist_ok=True)
     try:
         if backend == "local":
-            info = run_local(plan, state, todo, workers, bar, work)
+            run_local(plan, state, todo, workers, bar, work)
         else:
-            info = run_ray(plan, state, todo, ray_address, bar, work)
+            run_ray(plan, state, todo, ray_address, bar, work)
     finally:
         bar.close()
     counts = state.counts()
     wall = round(time.time() - t0, 2)
     rendered = sum(len(c.frames) for c in todo)
     for name, p in plan.tours.items():
-        meta = tour_meta(p, spec, info)
+        meta = job_tour_meta(p, spec)
         write_json_atomic(p.out / "meta.json", meta, indent=1)
     summary = {"job": spec.name, "out": str(plan.out), "tours": len(plan.tours), "chunks": counts,
                "frames_total": plan.frames_total, "frames_rendered_now": rendered, "wall_time_s": wall,
@@ -595,30 +595,16 @@ def run_job(spec: JobSpec, out: Path | None = None, workers: int = 1, backend: s
     return summary
 
 
-def tour_meta(p, spec: JobSpec, info: dict) -> dict:
-    """meta.json of a tour. Deterministic (a resumed job writes the same file); timing and progress
-    of the job are in ``job_summary.json``."""
-    frames_dir = p.out / "frames"
-    return {
-        "toolkit": package_versions(),
-        "blender": _blender_version() if spec.renderer == "blender" else None,
-        "layout": p.layout_name,
-        "layout_file": str(p.layout_file),
-        "lighting": p.lighting_name,
-        "path": p.path_name,
-        "renderer": spec.renderer,
-        "geometry_renderer": spec.geometry,
-        "seed": spec.seed,
-        "job": spec.name,
-        "settings": {"quality": spec.quality, "quality_settings": quality(spec.quality) if p.lighting_name else None,
-                     "width": spec.width, "height": spec.height, "hfov_deg": spec.hfov_deg, "device": spec.device,
-                     "chunk_size": spec.chunk_size, "previews": spec.previews, "rgb_every": p.extra.get("rgb_every")},
-        "frames": [p.frame_ids[0], p.frame_ids[-1]],
-        "n_frames": len(p.frame_ids),
-        # relative to the tour, so a job folder can be moved and reruns write the same file
-        "geometry_cache": os.path.relpath(p.geometry_dir, p.out) if p.geometry_dir else None,
-        "complete": not missing_frames(frames_dir, p.frame_ids),
-    }
+def job_tour_meta(p, spec: JobSpec) -> dict:
+    """meta.json of a job's tour (``synth.tour.tour_meta``). Deterministic (a resumed job writes the
+    same file); timing and progress of the job are in ``job_summary.json``."""
+    return tour_meta(
+        p, renderer=spec.renderer, seed=spec.seed, blender=_blender_version() if spec.renderer == "blender" else None,
+        settings={"quality": spec.quality, "quality_settings": quality(spec.quality) if p.lighting_name else None,
+                  "width": spec.width, "height": spec.height, "hfov_deg": spec.hfov_deg, "device": spec.device,
+                  "chunk_size": spec.chunk_size, "previews": spec.previews, "rgb_every": p.extra.get("rgb_every")},
+        geometry_renderer=spec.geometry, job=spec.name,
+    )
 
 
 def _blender_version() -> str | None:

@@ -173,6 +173,28 @@ def package_versions() -> dict:
     return out
 
 
+def tour_meta(p: Prepared, *, renderer: str, seed: int, settings: dict, blender: str | None = None, **extra) -> dict:
+    """meta.json of a tour, whichever command rendered it (``synth tour render`` or a render job):
+    what was rendered and how, then ``extra`` (a job's name, a single tour's timing). Paths inside
+    the tour are relative to it, so a tour folder can be moved."""
+    return {
+        "toolkit": package_versions(),
+        "blender": blender,
+        "layout": p.layout_name,
+        "layout_file": str(p.layout_file),
+        "lighting": p.lighting_name,
+        "path": p.path_name,
+        "renderer": renderer,
+        "seed": seed,
+        "settings": settings,
+        "frames": [p.frame_ids[0], p.frame_ids[-1]],
+        "n_frames": len(p.frame_ids),
+        "geometry_cache": os.path.relpath(p.geometry_dir, p.out) if p.geometry_dir else None,
+        "complete": not missing_frames(p.out / "frames", p.frame_ids),
+        **extra,
+    }
+
+
 class _Progress:
     """frames done/total, frames/s and ETA on a tqdm bar."""
 
@@ -275,24 +297,12 @@ def render_tour(spec: TourSpec, progress: bool = True) -> dict:
         finally:
             if ok:  # a failed chunk's job and log stay for the user to read
                 shutil.rmtree(work, ignore_errors=True)
-    meta = {
-        "toolkit": package_versions(),
-        "blender": info.get("blender"),
-        "device": info.get("device", "CPU" if spec.renderer == "blender" else None),
-        "layout": p.layout_name,
-        "layout_file": str(p.layout_file),
-        "lighting": p.lighting_name,
-        "path": p.path_name,
-        "renderer": spec.renderer,
-        "seed": spec.seed,
-        "settings": {**asdict(spec), "quality_settings": quality(spec.quality) if spec.lighting else None},
-        "frames": [p.frame_ids[0], p.frame_ids[-1]],
-        "n_frames": len(p.frame_ids),
-        "geometry_cache": str(p.geometry_dir) if p.geometry_dir else None,
-        "geometry_frames_rendered_now": geometry_rendered,
-        "wall_time_s": round(time.time() - t0, 3),
-        "host": {"platform": platform.platform(), "cpus": os.cpu_count()},
-        "complete": not missing_frames(frames_dir, p.frame_ids),
-    }
+    meta = tour_meta(
+        p, renderer=spec.renderer, seed=spec.seed, blender=info.get("blender"),
+        settings={**asdict(spec), "quality_settings": quality(spec.quality) if spec.lighting else None},
+        device=info.get("device", "CPU" if spec.renderer == "blender" else None),
+        geometry_frames_rendered_now=geometry_rendered, wall_time_s=round(time.time() - t0, 3),
+        host={"platform": platform.platform(), "cpus": os.cpu_count()},
+    )
     write_json_atomic(p.out / "meta.json", meta, indent=1)
     return meta
