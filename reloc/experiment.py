@@ -11,7 +11,7 @@ tour, the query path, the unchanged layout, the methods and the optional tables:
     unchanged: apt_0                   # the reference layout for Delta_R and kept
     map: build                         # VideoReloc's box map: build (from the mapping tour) | ground-truth
     methods: [videoreloc, fpfh_icp, appearance, one_frame]
-    tables: [units, ablation]          # optional: Table I and Table III (main and factors are always made)
+    tables: [units, ablation]          # optional: Tables III and IV (Tables I and II, main and factors, always)
     one_frame_stride: 15               # one-frame units on every k-th frame (one registration each)
     detector: {miss_rate: 0.1}         # optional oracle corruption (reloc.detection.Corruption)
     config: {}                         # VideoReloc threshold overrides (reloc/config.py sections)
@@ -31,49 +31,39 @@ The clip-rigid controls reuse VideoReloc's clip partition and within-clip odomet
 (``clip_poses.npz`` of its run), as the paper's dagger rows do.
 
 Resumable: every (method, tour) result and every map is written atomically and marked done with
-the key of its inputs; a rerun does only what is missing or changed. Results, tables, plots and
+a key of what it depends on: its input files' content, its settings and the code that computes it
+(``code_fingerprint``); a rerun does only what is missing or changed. Results, tables, plots and
 the report go to ``out`` (layout in ``results.json``, see :mod:`reloc.tables`).
 """
 
 from __future__ import annotations
 
+import ast
 import concurrent.futures as cf
 import dataclasses
+import functools
 import hashlib
 import json
 import math
 import multiprocessing as mp
 import os
+import platform
 import sys
 import time
+from importlib import metadata
 from pathlib import Path
 
 from synth.errors import SceneFormatError, UserError, check_output_folder
 
+from . import tables
 from .io import write_json_atomic
+from .tables import ABLATIONS, UNIT_LENGTHS, ablation_name
 
 SPEC_KEYS = {"name", "description", "render", "tours", "out", "mapping", "query", "unchanged", "map", "methods",
              "tables", "one_frame_stride", "detector", "config", "appearance", "fpfh_icp", "workers", "seed"}
 METHODS = ("videoreloc", "fpfh_icp", "appearance", "one_frame")
 TABLES = ("units", "ablation")
 DONE = "done.json"
-
-# (method, mode, label, dagger): the table rows in the paper's order (per frame, clip-rigid, ours)
-ROWS = (
-    ("appearance", "causal", "Appearance ({feature} + PnP), per frame", False),
-    ("one_frame", "causal", "One-frame object unit", False),
-    ("fpfh_icp", "closure", "FPFH-ICP", True),
-    ("appearance", "closure", "Appearance ({feature} + PnP)", True),
-    ("videoreloc", "causal", "VideoReloc, causal", False),
-    ("videoreloc", "closure", "VideoReloc, with clip closure", False),
-)
-PRIMARY = {"videoreloc": "closure", "fpfh_icp": "closure", "appearance": "causal", "one_frame": "causal"}
-LABELS = {"videoreloc": "VideoReloc", "fpfh_icp": "FPFH-ICP", "appearance": "Appearance ({feature} + PnP)",
-          "one_frame": "One-frame object unit"}
-
-# Table III: (orientation-aware, run-level, adaptive); empty = point-to-point, none, fixed 100 frames
-ABLATIONS = ((False, False, False), (True, False, False), (True, True, False), (True, False, True), (True, True, True))
-UNIT_LENGTHS = (1, 30, 100, 250)
 
 
 @dataclasses.dataclass
@@ -243,6 +233,98 @@ def design_tours(spec: ExperimentSpec) -> tuple[dict, dict]:
 
 
 # ---------------------------------------------------------------------------------------------
+# the code a result depends on
+
+# The project's top-level packages (pyproject.toml's tool.setuptools.packages.find). A new one must
+# be added here for the fingerprint to follow imports into it (tests check this list).
+PROJECT_PACKAGES = ("reloc", "synth")
+# Distributions whose version changes numbers: the numeric and image libraries reloc computes with.
+LIBRARIES = ("numpy", "scipy", "open3d", "opencv-python-headless", "opencv-python", "OpenEXR", "onnxruntime")
+SOURCE_ROOT = Path(__file__).resolve().parent.parent  # the folder holding the reloc and synth packages
+
+
+def _module_file(root: Path, name: str) -> Path | None:
+    """The source file of module ``name`` under ``root`` (a package's ``__init__.py``), or None."""
+    p = root.joinpath(*name.split("."))
+    for f in (p.with_suffix(".py"), p / "__init__.py"):
+        if f.is_file():
+            return f
+    return None
+
+
+def _imported_names(path: Path, module: str) -> set[str]:
+    """Every module name an import statement of ``path`` may load, function-level ones included
+    (``from a import b`` gives a and a.b: b may be a module)."""
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    names: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_bytes(), filename=str(path))):
+        if isinstance(node, ast.Import):
+            names.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                parts = package.split(".")
+                base = ".".join(parts[: len(parts) - node.level + 1] + ([node.module] if node.module else []))
+            else:
+                base = node.module or ""
+            names.add(base)
+            names.update(f"{base}.{a.name}" for a in node.names)
+    return names
+
+
+def code_files(root: Path | None = None) -> list[Path]:
+    """The sources whose code can compute a result: every module of the ``reloc`` package, and every
+    module of the project's other packages (``PROJECT_PACKAGES``: synth) that reloc imports, directly
+    or through other such modules, with the ``__init__.py`` of each package on the way; found by
+    reading the import statements. Sorted by path relative to ``root`` (default ``SOURCE_ROOT``)."""
+    root = Path(root or SOURCE_ROOT)
+    todo = sorted((root / "reloc").rglob("*.py"))
+    seen = set(todo)
+    while todo:
+        f = todo.pop()
+        module = ".".join(f.relative_to(root).with_suffix("").parts)
+        for name in _imported_names(f, module.removesuffix(".__init__")):
+            parts = name.split(".")
+            if parts[0] not in PROJECT_PACKAGES:
+                continue
+            for k in range(1, len(parts) + 1):  # importing a.b.c runs a and a.b first
+                g = _module_file(root, ".".join(parts[:k]))
+                if g is not None and g not in seen:
+                    seen.add(g)
+                    todo.append(g)
+    return sorted(seen, key=lambda f: f.relative_to(root).as_posix())
+
+
+def library_versions() -> dict[str, str]:
+    out = {"python": platform.python_version()}
+    for dist in LIBRARIES:
+        try:
+            out[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            pass
+    return out
+
+
+def source_fingerprint(root: Path | None = None, versions: dict | None = None) -> str:
+    """sha256 over ``code_files(root)`` (relative path and bytes of each) and the library versions."""
+    root = Path(root or SOURCE_ROOT)
+    h = hashlib.sha256()
+    for f in code_files(root):
+        data = f.read_bytes()
+        h.update(f"{f.relative_to(root).as_posix()}\0{len(data)}\0".encode())
+        h.update(data)
+    h.update(json.dumps(library_versions() if versions is None else versions, sort_keys=True).encode())
+    return h.hexdigest()[:16]
+
+
+@functools.lru_cache(maxsize=1)
+def code_fingerprint() -> str:
+    """The fingerprint of the code this process computes with; part of every done-key, so that a
+    change of reloc, of the synth modules it imports or of a numeric library recomputes the results
+    (once per process: a few tens of files parsed and hashed)."""
+    return source_fingerprint()
+
+
+# ---------------------------------------------------------------------------------------------
 # tasks (run in worker processes)
 
 
@@ -257,6 +339,13 @@ def _file_key(path) -> str:
         for block in iter(lambda: f.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()[:16]
+
+
+def _ground_truth_key(tour_dir) -> str:
+    """What a ground-truth map depends on: the content of the layout file the tour was rendered from."""
+    meta = json.loads((Path(tour_dir) / "meta.json").read_text())
+    f = meta.get("layout_file")
+    return "ground-truth:" + (_file_key(f) if f and Path(f).is_file() else str(meta.get("layout")))
 
 
 def is_done(d: Path, key: str) -> bool:
@@ -289,10 +378,6 @@ def _detector(det: dict, tour, bmap):
     from .detection import Corruption, DetectorSpec, build_detector
 
     return build_detector(DetectorSpec(corruption=Corruption(**det)), tour.class_names(), vocabulary=bmap.class_set)
-
-
-def ablation_name(variant) -> str:
-    return "ablation_" + "".join("1" if v else "0" for v in variant)
 
 
 _CACHE: dict = {}
@@ -343,7 +428,8 @@ def run_map_task(task: dict) -> dict:
 
         PointMap.build(tour, cfg=FpfhConfig(**task["options"])).save(out)
     s = time.perf_counter() - t0
-    write_json_atomic(out.with_name(out.name + ".done.json"), {"key": task["key"], "seconds": round(s, 2)})
+    write_json_atomic(out.with_name(out.name + ".done.json"),
+                      {"key": task["key"], "seconds": round(s, 2), "code": task["code"]})
     return {"kind": task["kind"], "seconds": s}
 
 
@@ -397,7 +483,7 @@ def run_tour_task(task: dict) -> dict:
     else:
         raise ValueError(f"unknown method {method!r}")
     seconds = time.perf_counter() - t0
-    _mark_done(d, task["key"], seconds, extra)
+    _mark_done(d, task["key"], seconds, {**extra, "code": task["code"]})
     return {"method": method, "tour": task["tour_name"], "seconds": seconds}
 
 
@@ -473,8 +559,6 @@ class _Runner:
 def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int | None = None,
                    progress: bool = True, plots: bool = True) -> dict:
     """Maps, every method on every query tour, evaluation, tables, plots and the report."""
-    from . import tables
-
     t_start = time.time()
     out = Path(out or spec.out)
     check_output_folder(out)
@@ -492,16 +576,20 @@ def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int |
     if "appearance" in spec.methods:
         files["appearance"] = maps_dir / "appearance_map.npz"
     options = {"boxes": {}, "fpfh": spec.fpfh_icp, "appearance": spec.appearance}
+    code = code_fingerprint()  # every key below holds it: a change of the code recomputes
     for kind, f in files.items():
-        key = _key(kind, _file_key(Path(mapping["dir"]) / "poses.txt"), mapping, spec.map if kind == "boxes" else None,
-                   options[kind])
+        source = None
+        if kind == "boxes":
+            source = _ground_truth_key(mapping["dir"]) if spec.map == "ground-truth" else spec.map
+        key = _key(kind, _file_key(Path(mapping["dir"]) / "poses.txt"), mapping, source, options[kind], code)
         try:
             done = json.loads(f.with_name(f.name + ".done.json").read_text()).get("key") == key and f.is_file()
         except (OSError, ValueError):
             done = False
         if not done:
             map_tasks.append((f"map/{kind}", run_map_task, {"kind": kind, "file": str(f), "tour": mapping["dir"],
-                                                             "source": spec.map, "options": options[kind], "key": key}, []))
+                                                             "source": spec.map, "options": options[kind], "key": key,
+                                                             "code": code}, []))
     runner = _Runner(workers, progress, len(map_tasks), f"{spec.name}: maps")
     try:
         runner.run(map_tasks)
@@ -517,7 +605,8 @@ def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int |
                  + json.dumps(t, sort_keys=True) for n, t in queries.items()}
     tasks = []
     expected: dict[tuple[str, str], tuple[Path, str]] = {}
-    common = {"map": str(files["boxes"]), "config": spec.config, "detector": spec.detector, "seed": spec.seed}
+    common = {"map": str(files["boxes"]), "config": spec.config, "detector": spec.detector, "seed": spec.seed,
+              "code": code}
     methods = list(spec.methods)
     variants = [v for v in ABLATIONS if v != (True, True, True)] if "ablation" in spec.tables else []
     for name, t in queries.items():
@@ -562,6 +651,7 @@ def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int |
     results["seconds"] = _seconds(out, queries, methods, variants, files)
     results["seconds"]["this_run_wall"] = round(time.time() - t_start, 1)
     results["failed"] = runner.failed
+    results["code"] = code
     write_json_atomic(out / "results.json", results)
     tables.write_tables(results, out)
     if plots:
@@ -598,8 +688,6 @@ def _seconds(out: Path, queries: dict, methods: list, variants: list, files: dic
 
 
 def cmd_experiment(args) -> int:
-    from . import tables
-
     spec = load_experiment(args.spec)
     if args.tours:
         spec.tours_root = Path(args.tours)

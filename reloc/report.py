@@ -3,7 +3,8 @@
 ``write_report(results_dir)`` writes ``report.md`` and ``report.html`` next to ``results.json``
 (the ``videoreloc-experiment/1`` schema): title and experiment name, the evaluation protocol in
 short, the design (query tours) and methods, the tables that ``reloc/tables.py`` wrote
-(``tables/main.md``, ``factors.md``, ``units.md``, ``ablation.md``, then any others), the plots
+(``tables/main.md``, ``factors.md``, ``units.md``, ``ablation.md``: the paper's Tables I-IV, then
+any others), the plots
 that ``reloc/plots.py`` wrote (recall bars, then one figure per tour) and the timings.
 
 The markdown is the source; the HTML is converted from it by the small converter here
@@ -24,15 +25,12 @@ from pathlib import Path
 from synth.errors import SceneFormatError, UserError
 
 from .io import write_text_atomic
+from .tables import PAPER_TABLES, table_title
 
 __all__ = ["write_report", "build_markdown", "markdown_to_html", "table_to_html", "split_row", "TABLE_ORDER"]
 
-TABLE_ORDER = (
-    ("main", "Main results"),
-    ("factors", "Lighting and rearrangement factors"),
-    ("units", "Units"),
-    ("ablation", "Ablation"),
-)
+# (file stem under tables/, heading): the paper's tables in its order, numbered and titled as there
+TABLE_ORDER = tuple((key, table_title(key)) for key in PAPER_TABLES)
 
 PROTOCOL = [
     "Recall at 1 m/10\u00b0 (and at 0.25 m/5\u00b0) counts **all** ground-truth frames of the query tours: "

@@ -1,18 +1,22 @@
-"""Evaluation of an experiment and the paper's tables (markdown and JSON).
+"""Evaluation of an experiment and the paper's tables (markdown and JSON), numbered and titled as
+in the paper (``PAPER_TABLES``):
 
-* ``main``: map size, median position/rotation error over returned poses, recall at 1 m/10 deg and
-  0.25 m/5 deg over all frames (a missing pose is a failure), pose coverage; one row per method and
-  cutoff, pooled over every query tour (the paper's Table IV);
-* ``factors``: recall at 1 m/10 deg by lighting (day, evening, night, Delta_L = night - day; each a
-  mean over layouts) and by layout (unchanged, rearranged, Delta_R, kept = rearranged / unchanged;
-  means over tours), the paper's Table II;
-* ``units``: the localization-unit experiment (Table I), when asked;
-* ``ablation``: orientation-aware refinement, run-level decision, adaptive clips (Table III), when asked.
+* ``main``, Table I: map size, median position/rotation error over returned poses, recall at
+  1 m/10 deg and 0.25 m/5 deg over all frames (a missing pose is a failure), pose coverage; one row
+  per method and cutoff (``ROWS``), pooled over every query tour;
+* ``factors``, Table II: recall at 1 m/10 deg by lighting (day, evening, night, Delta_L = night -
+  day; each a mean over layouts) and by layout (unchanged, rearranged, Delta_R, kept = rearranged /
+  unchanged; means over tours);
+* ``units``, Table III: the localization-unit experiment, when asked;
+* ``ablation``, Table IV: orientation-aware refinement, run-level decision, adaptive clips
+  (``ABLATIONS``), when asked.
 
+The keys are the file names under ``tables/`` and the names an experiment spec's ``tables:`` uses.
 ``results.json`` (format ``videoreloc-experiment/1``) holds every figure, fractions in [0, 1]:
 ``methods.<m>.modes.<mode>.tours.<tour>``, ``.all`` (pooled) and ``.factors``; the tables print
 percent. Per-frame methods that localize only some frames (appearance: frames with RGB; the
 one-frame unit: every k-th frame) are evaluated over those frames, which ``frames`` states.
+``tables/<key>.json`` is ``{"table": "I", "title": ..., "rows": [...]}``.
 """
 
 from __future__ import annotations
@@ -32,6 +36,46 @@ FORMAT = "videoreloc-experiment/1"
 LIGHTINGS = ("day", "evening", "night")
 METRICS = ("recall_1m_10deg", "recall_25cm_5deg", "median_pos_m", "median_rot_deg", "coverage")
 FACTOR_KEYS = ("day", "evening", "night", "delta_L", "unchanged", "rearranged", "delta_R", "kept")
+
+# The paper's tables: key -> (number, caption). The captions leave out the paper's datasets (RIO10,
+# ReplicaCAD): these tables are computed on a rendered design, which the title line names instead.
+PAPER_TABLES = {
+    "main": ("I", "Comparison of recall and pose errors across relocalization methods and evaluation variants"),
+    "factors": ("II", "Recall at 1 m/10\u00b0 under illumination and furniture changes"),
+    "units": ("III", "Effect of the localization unit"),
+    "ablation": ("IV", "Effects of refinement, run-level decisions and adaptive clips"),
+}
+
+# Table I rows: (method, mode, label, dagger), in the paper's order (per frame, clip-rigid, ours)
+ROWS = (
+    ("appearance", "causal", "Appearance ({feature} + PnP), per frame", False),
+    ("one_frame", "causal", "One-frame object unit", False),
+    ("fpfh_icp", "closure", "FPFH-ICP", True),
+    ("appearance", "closure", "Appearance ({feature} + PnP)", True),
+    ("videoreloc", "causal", "VideoReloc, causal", False),
+    ("videoreloc", "closure", "VideoReloc, with clip closure", False),
+)
+# the cutoff ``reloc check`` reads for METHOD.KEY
+PRIMARY = {"videoreloc": "closure", "fpfh_icp": "closure", "appearance": "causal", "one_frame": "causal"}
+LABELS = {"videoreloc": "VideoReloc", "fpfh_icp": "FPFH-ICP", "appearance": "Appearance ({feature} + PnP)",
+          "one_frame": "One-frame object unit"}
+
+# Table III rows: unit lengths in frames
+UNIT_LENGTHS = (1, 30, 100, 250)
+# Table IV rows, in the paper's order: (orientation-aware, run-level, adaptive); False = point-to-point
+# refinement, no run-level decision, fixed 100-frame clips. The last is VideoReloc itself.
+ABLATIONS = ((False, False, False), (True, False, False), (True, True, False), (True, False, True), (True, True, True))
+
+
+def ablation_name(variant) -> str:
+    """The method name of an ablation variant's runs (``ablation_010``: orientation-aware off, ...)."""
+    return "ablation_" + "".join("1" if v else "0" for v in variant)
+
+
+def table_title(key: str) -> str:
+    """``Table I: Comparison of ...``: the paper's number and caption of a table."""
+    number, caption = PAPER_TABLES[key]
+    return f"Table {number}: {caption}"
 
 
 def _gt(tour_dir: str):
@@ -58,7 +102,7 @@ def evaluation_frames(method: str, mode: str, frames: list[int], rgb_every: int,
 
 
 def factors(per_tour: dict, tours: dict, unchanged: str) -> dict:
-    """Table II figures from per-tour recall at 1 m/10 deg (fractions; None when the design lacks it)."""
+    """Table II's figures from per-tour recall at 1 m/10 deg (fractions; None when the design lacks it)."""
 
     def mean(names):
         v = [per_tour[n]["recall_1m_10deg"] for n in names if n in per_tour]
@@ -84,8 +128,6 @@ def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: li
                         valid: set | None = None) -> dict:
     """Every row on every tour; ``valid``: the (method, tour) runs that finished with the current
     inputs (others, failed or stale, count as no poses)."""
-    from .experiment import LABELS, PRIMARY, ROWS, ablation_name
-
     from .appearance import AppearanceConfig
 
     feature = str(spec.appearance.get("feature", AppearanceConfig().feature)).upper()
@@ -156,8 +198,6 @@ def _units(out: Path, queries: dict, unchanged: str) -> list[dict]:
 
 
 def _ablation(res: dict, variants: list) -> list[dict]:
-    from .experiment import ABLATIONS, ablation_name
-
     rows = []
     for v in ABLATIONS:
         m = "videoreloc" if v == (True, True, True) else ablation_name(v)
@@ -198,7 +238,7 @@ def _label(row: dict) -> str:
 def main_table(res: dict) -> tuple[str, list[dict]]:
     n_tours = len(res["tours"])
     frames = sum(t["frames"] for t in res["tours"].values())
-    lines = [f"**Main results** ({n_tours} query tours, {frames} frames; as the paper's Table IV)", "",
+    lines = [f"**{table_title('main')}** ({n_tours} query tours, {frames} frames)", "",
              "| Method | Map size | Pos. / rot. | 1 m/10° | 0.25 m/5° | Coverage | Frames evaluated |",
              "|---|---|---|---|---|---|---|"]
     rows = []
@@ -219,16 +259,18 @@ def main_table(res: dict) -> tuple[str, list[dict]]:
 
 def factors_table(res: dict) -> tuple[str, list[dict]]:
     lights = [x for x in LIGHTINGS if any(t["lighting"] == x for t in res["tours"].values())]
-    head = "| Method | " + " | ".join(lights) + " | ΔL | unchanged | rearranged | ΔR | kept |"
-    lines = ["**Recall at 1 m/10° under illumination and furniture changes** (as the paper's Table II)", "", head,
-             "|---" * (len(lights) + 6) + "|"]
+
+    def line(cells) -> str:
+        return "| " + " | ".join(cells) + " |"
+
+    head = ["Method", *lights, "ΔL", "unchanged", "rearranged", "ΔR", "kept"]
+    lines = [f"**{table_title('factors')}**", "", line(head), "|---" * len(head) + "|"]
     rows = []
     for r in res["rows"]:
         f = res["methods"][r["method"]]["modes"][r["mode"]]["factors"]
         kept = "-" if f["kept"] is None else f"{100 * f['kept']:.0f} %"
-        lines.append(f"| {_label(r)} | " + " | ".join(pct(f[x]) for x in lights) +
-                     f" | {pct(f['delta_L'], True)} | {pct(f['unchanged'])} | {pct(f['rearranged'])} | "
-                     f"{pct(f['delta_R'], True)} | {kept} |")
+        lines.append(line([_label(r), *(pct(f[x]) for x in lights), pct(f["delta_L"], True), pct(f["unchanged"]),
+                           pct(f["rearranged"]), pct(f["delta_R"], True), kept]))
         rows.append({"key": r["key"], "label": _label(r), **f})
     lines += ["", "Recall (%); lighting columns average the layouts, unchanged/rearranged average the tours. "
               "ΔL = night - day and ΔR = rearranged - unchanged (points); kept = rearranged / unchanged."]
@@ -236,7 +278,7 @@ def factors_table(res: dict) -> tuple[str, list[dict]]:
 
 
 def units_table(res: dict) -> tuple[str, list[dict]]:
-    lines = ["**Effect of the localization unit** (as the paper's Table I)", "",
+    lines = [f"**{table_title('units')}**", "",
              "| Unit | 1 m/10° | 0.25 m/5° | unchanged 1 m/10° | rearranged 1 m/10° |", "|---|---|---|---|---|"]
     for u in res["units"]:
         name = "one frame" if u["unit"] == 1 else f"{u['unit']}-frame clip"
@@ -251,7 +293,7 @@ def units_table(res: dict) -> tuple[str, list[dict]]:
 
 def ablation_table(res: dict) -> tuple[str, list[dict]]:
     ck = lambda b: "✓" if b else ""  # noqa: E731
-    lines = ["**Effects of refinement, run-level decisions and adaptive clips** (as the paper's Table III)", "",
+    lines = [f"**{table_title('ablation')}**", "",
              "| orientation-aware | run-level | adaptive | closure 1 m/10° | closure 0.25 m/5° | causal 1 m/10° | "
              "causal 0.25 m/5° |", "|---|---|---|---|---|---|---|"]
     for a in res["ablation"]:
@@ -281,8 +323,9 @@ def write_tables(res: dict, out: Path) -> None:
     d = Path(out) / "tables"
     made = make_tables(res)
     for name, (md, rows) in made.items():
+        number, caption = PAPER_TABLES[name]
         write_text_atomic(d / f"{name}.md", md + "\n")
-        write_json_atomic(d / f"{name}.json", rows)
+        write_json_atomic(d / f"{name}.json", {"table": number, "title": caption, "rows": rows})
     for stale in d.glob("*.md"):  # a table no longer asked for
         if stale.stem not in made:
             stale.unlink()

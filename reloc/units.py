@@ -1,4 +1,4 @@
-"""The localization-unit experiment (paper Table I).
+"""The localization-unit experiment (the paper's Table III, "Effect of the localization unit").
 
 Each unit of L consecutive frames (1, 30, 100, 250) is registered independently: same map,
 detector, registration and refinement as VideoReloc, but no tracking and no pose graph. Recall is
@@ -183,7 +183,8 @@ def cmd_units(args) -> int:
 def register_cli(subparsers) -> None:
     from .detection import add_detector_arguments
 
-    p = subparsers.add_parser("units", help="the paper's Table I: independent 1/30/100/250-frame units, recall per length")
+    p = subparsers.add_parser("units",
+                              help="the paper's Table III: independent 1/30/100/250-frame units, recall per length")
     p.add_argument("--map", required=True, help="map file (videoreloc-boxes/1 JSON)")
     p.add_argument("--tour", required=True, help="rendered tour directory")
     p.add_argument("--lengths", default=",".join(map(str, DEFAULT_LENGTHS)), help="unit lengths in frames (default 1,30,100,250)")

@@ -195,18 +195,78 @@ def test_causal_poses_do_not_depend_on_later_frames(data, tmp_path):
             assert np.allclose(ca[i], cb[i], atol=1e-4)
 
 
-def test_ablation_switches_run(data, tmp_path, capsys):
+def test_ablation_switches_run(data, tmp_path, capsys, monkeypatch):
+    """Each ablation flag of reloc run switches its mechanism off, and nothing else, with a visible effect.
+
+    The front-end is made to place the last clip (frames 300-399) 2 m / 90 deg off, as a wrong graph
+    placement would; the run-level decision must replace it, and --no-run-level must leave it to the
+    pose graph. Fixed clips run under a config whose adaptive criteria can never be met (2 km of
+    camera travel), so 100-frame clips can only come from the fixed policy."""
+    import dataclasses
+
+    import reloc.frontend
+    import reloc.run
     from reloc.cli import main
 
     tour, bmap = data["tour"], data["map"]
-    for flag in ("--point-to-point", "--no-run-level", "--fixed-clips"):
-        out = tmp_path / flag.strip("-")
-        assert main(["run", "--map", bmap.source, "--tour", str(tour.root), "--out", str(out), "--frames", "220",
-                     "--quiet", flag]) == 0
-        clips = json.loads((out / "clips.json").read_text())
-        if flag == "--fixed-clips":
-            assert [c["frames"] for c in clips[:-1]] == [100] * (len(clips) - 1)
+    real_localize, real_relocalize = reloc.frontend.localize_clip, reloc.run.relocalize
+
+    def misplace_last_clip(nodes, frame_obs, V, *args, **kwargs):
+        p = real_localize(nodes, frame_obs, V, *args, **kwargs)
+        if min(V) >= 300 and p.S is not None:
+            p = dataclasses.replace(p, S=p.S @ yaw_T(math.pi / 2, [2.0, 0.5, 0.0]))
+        return p
+
+    used = {}
+
+    def record_config(*args, **kwargs):
+        used[flag] = kwargs["cfg"]
+        return real_relocalize(*args, **kwargs)
+
+    monkeypatch.setattr(reloc.frontend, "localize_clip", misplace_last_clip)
+    monkeypatch.setattr(reloc.run, "relocalize", record_config)
+    never = tmp_path / "never_adaptive.yaml"
+    never.write_text("clips: {min_path_m: 2000.0}\n")
+    out, clips, closure = {}, {}, {}
+    runs = (("", []), ("--no-run-level", []), ("--point-to-point", []), ("--fixed-clips", ["--config", str(never)]))
+    for flag, extra in runs:
+        out[flag] = tmp_path / (flag.strip("-") or "default")
+        assert main(["run", "--map", bmap.source, "--tour", str(tour.root), "--out", str(out[flag]), "--quiet",
+                     *([flag] if flag else []), *extra]) == 0
+        clips[flag] = json.loads((out[flag] / "clips.json").read_text())
+        closure[flag] = read_tum_independently(out[flag] / "closure.txt")
     capsys.readouterr()
+    # the configuration each run used: the default with exactly its switch off
+    assert used[""] == Config()
+    assert used["--no-run-level"] == Config.from_dict({"backend": {"run_level": False}})
+    assert used["--point-to-point"] == Config.from_dict({"refinement": {"orientation_aware": False}})
+    assert used["--fixed-clips"] == Config.from_dict({"clips": {"adaptive": False, "start_frames": 100,
+                                                                "min_path_m": 2000.0}})
+    gt = read_tum_independently(tour.root / "poses.txt")
+
+    def last_clip(flag):
+        c = clips[flag][-1]
+        assert c["start"] == 300 and c["front_source"] == "graph", clips[flag]
+        return c
+
+    def pos_err(flag, frames):
+        return max(np.linalg.norm(closure[flag][i][:3, 3] - gt[i][:3, 3]) for i in frames)
+
+    # run-level decision on: the misplaced clip is replaced, and its poses are right again
+    assert last_clip("")["source"] == "run-level"
+    assert pos_err("", range(300, 400)) < 0.5
+    # off: the wrong placement stays a graph placement (the pose graph demotes it); no run-level source
+    c = last_clip("--no-run-level")
+    assert c["source"] == "graph" and c["demoted"]
+    frames = json.loads((out["--no-run-level"] / "frames.json").read_text())
+    assert not any("run-level" in str(f["closure"]) + str(f["causal"]) for f in frames)
+    # point-to-point refinement: a different refinement, so different poses on the correctly placed clips
+    common = [i for i in range(300) if i in closure[""] and i in closure["--point-to-point"]]
+    assert len(common) > 250
+    moved = [np.linalg.norm(closure[""][i][:3, 3] - closure["--point-to-point"][i][:3, 3]) for i in common]
+    assert np.median(moved) > 0.01, np.median(moved)
+    # fixed clips: 100 frames each although the adaptive criteria are never met
+    assert [(c["frames"], c["end_reason"]) for c in clips["--fixed-clips"]] == [(100, "closed")] * 4
 
 
 def test_no_clip_ever_placed_gives_complete_empty_outputs(data, tmp_path, capsys):

@@ -6,6 +6,7 @@ that choice (an independent computation), never with another output of the same 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -401,6 +402,101 @@ def test_refinement_pulls_a_perturbed_placement_back():
     assert math.degrees(d1[1]) < 1.0
 
 
+class _Delegate:
+    """A stand-in for a module: its attributes, except those given."""
+
+    def __init__(self, base, **over):
+        self._base = base
+        self.__dict__.update(over)
+
+    def __getattr__(self, name):
+        return getattr(self._base, name)
+
+
+def test_refinement_jacobian_matches_finite_differences(monkeypatch):
+    """Each Gauss-Newton step of ``refine`` solves (J^T J) delta = -J^T r. Both sides are rebuilt here
+    from Eq. 3's residuals (written in the map frame: S(p) - q_p for exterior samples, q_p the closest
+    point of the assigned solid box; the tilt residual, the horizontal part of R u; the prior on the
+    rotation and on the mapped centroid) with J by central finite differences over the step's own
+    parametrization (a left rotation about the mapped centroid, then a translation of it), holding the
+    iteration's assignments fixed, as a Gauss-Newton step does."""
+    from reloc import refinement
+    from reloc.refinement import refine
+
+    m = room_map(n_objects=30, seed=12)
+    rng = np.random.default_rng(4)
+    S_true = yaw_T(0.8, [1.0, 2.0, 0.0])
+    nodes = nodes_from_map(m, S_true, rng, ids=list(m.object_nodes[:20]), samples=40, noise=0.0)
+    u = S_true[:3, :3].T @ np.array([0, 0, 1.0])
+    u = G.exp_so3([0.01, -0.02, 0.0]) @ u  # a slightly wrong vertical: the tilt residual is not zero
+    S0 = S_true @ G.make_T(G.exp_so3([0.03, -0.03, 0.06]), [0.15, -0.1, 0.05])
+    cfg = Config()
+    rc, reg = cfg.refinement, cfg.registration
+    # record what each iteration sees (its transform and assignments) and the system it solves
+    scorer = SurfaceScorer(m, [n.cls for n in nodes], [n.samples for n in nodes])
+    seen, solves = [], []
+
+    class Recording:
+        def rho(self, Ss):
+            rho, asg = scorer.rho(Ss)
+            seen.append((Ss[0].copy(), rho[0].copy(), asg[0].copy()))
+            return rho, asg
+
+    def solve(A, b):
+        solves.append((np.array(A), np.array(b)))
+        return np.linalg.solve(A, b)
+
+    monkeypatch.setattr(refinement, "np", _Delegate(np, linalg=_Delegate(np.linalg, solve=solve)))
+    refine(S0, nodes, m, rc, reg, Gravity(u, "structure"), scorer=Recording())
+    monkeypatch.undo()
+    assert len(solves) >= 2 and len(seen) == len(solves)
+
+    centroid = np.mean([n.center for n in nodes], axis=0)
+    sig_f, sig_g = rc.sigma_f_m, math.radians(rc.sigma_g_deg)
+    sig_r, sig_t = math.radians(rc.prior_rotation_deg), rc.prior_translation_m
+    R0, c0 = S0[:3, :3], S0[:3, :3] @ centroid + S0[:3, 3]
+
+    def residuals(S, consistent, asg):
+        r = []
+        for k in consistent:
+            c, size, yaw = m.box(int(asg[k]))
+            P = G.apply(S, nodes[k].samples)
+            Rb = G.rot_z(yaw)
+            local = (P - c) @ Rb
+            q = np.clip(local, -size / 2, size / 2) @ Rb.T + c  # closest point of the solid box
+            r.append(((P - q) / (sig_f * math.sqrt(len(P)))).reshape(-1))  # zero for interior samples
+        g = S[:3, :3] @ u
+        r.append(g[:2] / sig_g)
+        r.append(G.log_so3(S[:3, :3] @ R0.T) / sig_r)
+        r.append((S[:3, :3] @ centroid + S[:3, 3] - c0) / sig_t)
+        return np.concatenate(r)
+
+    for it in (0, 1):
+        S, rho, asg = seen[it]
+        consistent = np.flatnonzero(rho < reg.kappa_tau_m)
+        assert len(consistent) >= 10
+        c_map = S[:3, :3] @ centroid + S[:3, 3]
+
+        def perturbed(d):
+            R = G.exp_so3(d[:3]) @ S[:3, :3]
+            return G.make_T(R, c_map + d[3:] - R @ centroid)
+
+        r0 = residuals(S, consistent, asg)
+        assert np.count_nonzero(r0[:-8]) > 100  # many exterior samples: the data term is exercised
+        eps = 1e-6
+        J = np.column_stack([(residuals(perturbed(e), consistent, asg) - residuals(perturbed(-e), consistent, asg))
+                             / (2 * eps) for e in np.eye(6) * eps])
+        A, b = solves[it]
+        scale = np.abs(J.T @ J).max()
+        # the gradient J^T r is exact at every iteration
+        np.testing.assert_allclose(b, J.T @ r0, rtol=1e-5, atol=1e-6 * np.abs(b).max())
+        # J^T J: exact at the first iteration (S = S0); later the rotation prior's Jacobian, the inverse
+        # left Jacobian of log(R R0^T), is taken as the identity, equal to second order in the
+        # rotation already made (a few degrees here)
+        tol = 1e-8 if it == 0 else 1e-4  # measured: 3e-11 and 1.5e-6 of the largest entry
+        np.testing.assert_allclose(A, J.T @ J + 1e-9 * np.eye(6), rtol=0, atol=tol * scale)
+
+
 def test_point_to_point_ablation_also_refines_but_ignores_gravity():
     m = room_map(n_objects=30, seed=12)
     rng = np.random.default_rng(4)
@@ -517,14 +613,58 @@ def test_fuse_joins_nearby_same_class_and_keeps_classes_apart():
     assert np.allclose(big.center, [0.3, 0, 0])
 
 
+class _NoDetections:
+    name = "none"
+
+    def detect(self, frame):
+        return []
+
+
+def _clip_schedule(clip_cfg: ClipConfig, frames: int) -> tuple[list[int], list[tuple[int, str]]]:
+    """Stream ``frames`` frames without evidence (no detections, no camera travel) through the
+    front-end: the clip lengths at which it asked the policy whether to close, and each clip's
+    (length, end reason)."""
+    from reloc.detection import FrameData
+    from reloc.frontend import FrontEnd, StaticPoses
+
+    cfg = dataclasses.replace(Config(), clips=clip_cfg)
+    K = np.array([[40.0, 0, 8], [0, 40.0, 6], [0, 0, 1]])
+    fe = FrontEnd(room_map(), K, _NoDetections(), StaticPoses(), config=cfg)
+    asked = []
+    real = fe.policy.should_close
+
+    def should_close(length, n_nodes, path_m):
+        asked.append(length)
+        return real(length, n_nodes, path_m)
+
+    fe.policy.should_close = should_close
+    results = []
+    for i in range(frames):
+        results += fe.add(FrameData(i, np.full((12, 16), 2.0, np.float32), K))
+    results += fe.finish()
+    return asked, [(len(r.clip), r.clip.end_reason) for r in results]
+
+
 def test_clip_policy_schedule():
+    """Sec. IV-A: "Clips begin at 100 frames, grow by 50 to at most 600, and close once |K_c| >= 20
+    and the camera path reaches 2 m." A clip is checked at 100, 150, ..., 600 frames and never grows
+    past 600."""
     pol = ClipPolicy(ClipConfig())
-    assert [n for n in range(1, 700) if pol.is_checkpoint(n)] == list(range(100, 601, 50)) + [650]
+    assert [n for n in range(1, 601) if pol.is_checkpoint(n)] == list(range(100, 601, 50))
     assert not pol.should_close(100, 19, 5.0)
     assert not pol.should_close(100, 25, 1.5)
     assert pol.should_close(150, 20, 2.0)
     assert not pol.should_close(151, 30, 9.0)  # only at checkpoints
     assert pol.should_close(600, 0, 0.0)  # the maximum length
+    # in the front-end: a clip that never meets the criteria is asked at 100, 150, ..., 600 and closes
+    # at 600, so no clip is ever asked about (or reaches) a length past the maximum
+    asked, clips = _clip_schedule(ClipConfig(), 1300)
+    assert asked == list(range(100, 601, 50)) * 2 + [100]
+    assert clips == [(600, "max length"), (600, "max length"), (100, "end of tour")]
+    # a maximum off the 50-frame grid still ends the clip there
+    asked, clips = _clip_schedule(ClipConfig(max_frames=625), 700)
+    assert asked == list(range(100, 601, 50)) + [625]
+    assert clips == [(625, "max length"), (75, "end of tour")]
     fixed = ClipPolicy(ClipConfig(adaptive=False, start_frames=30))
     assert fixed.should_close(30, 0, 0.0) and not fixed.should_close(29, 99, 99.0)
 

@@ -277,7 +277,8 @@ def test_experiment_end_to_end_rerun_and_resume(tiny_design, capsys):
     main = (exp / "tables" / "main.md").read_text()
     for r in res["rows"]:
         assert r["label"] in main and r["label"] in printed
-    assert json.loads((exp / "tables" / "factors.json").read_text())[0]["key"] == "appearance.causal"
+    factors = json.loads((exp / "tables" / "factors.json").read_text())
+    assert factors["table"] == "II" and factors["rows"][0]["key"] == "appearance.causal"
     report = (exp / "report.html").read_text()
     pngs = sorted((exp / "plots").glob("*.png"))
     assert len(pngs) == 5 and all(p.name in report for p in pngs)
@@ -333,8 +334,9 @@ def test_experiment_end_to_end_rerun_and_resume(tiny_design, capsys):
 
 
 def test_units_and_ablation_tables_from_run_outputs(tmp_path):
-    """Table I pools the per-tour unit reports weighted by frames; Table III lists the variants in the paper's order."""
-    from reloc.experiment import ABLATIONS, ablation_name
+    """Table III pools the per-tour unit reports weighted by frames; Table IV lists the variants in the
+    paper's order."""
+    from reloc.tables import ABLATIONS, ablation_name
 
     queries = {"apt_0__day__query": {"layout": "apt_0"}, "apt_1__day__query": {"layout": "apt_1"}}
     for name, (r1, r250, n1) in zip(queries, ((0.5, 1.0, 10), (0.2, 0.6, 30))):
@@ -363,3 +365,195 @@ def test_units_and_ablation_tables_from_run_outputs(tmp_path):
     md, _ = tables.ablation_table({"ablation": rows})
     assert md.splitlines()[4] == "|  |  |  | 50.0 | 30.0 | 40.0 | 20.0 |"
     assert md.splitlines()[-3] == "| ✓ | ✓ | ✓ | 90.0 | 30.0 | 40.0 | 40.0 |"
+
+
+# ---------------------------------------------------------------------------------------------
+# the tables are numbered and titled as in the paper
+
+# the paper's \caption{} texts, by the number LaTeX gives each table (main results, then the factors
+# table that the experiments section inputs first, then units and ablations); the captions' dataset
+# names ("on RIO10 and ReplicaCAD", "in ReplicaCAD", "on RIO10") are left out: the design is rendered
+PAPER_CAPTIONS = {
+    "main": ("I", "Comparison of recall and pose errors across relocalization methods and evaluation variants"),
+    "factors": ("II", "Recall at 1 m/10\u00b0 under illumination and furniture changes"),
+    "units": ("III", "Effect of the localization unit"),
+    "ablation": ("IV", "Effects of refinement, run-level decisions and adaptive clips"),
+}
+
+
+def _table_results(lightings=("day", "night")) -> dict:
+    """results.json-like figures for two VideoReloc rows, with the units and ablation tables."""
+    tours = {f"apt_{k}__{light}__query": {"layout": f"apt_{k}", "lighting": light, "frames": 100}
+             for k in (0, 1) for light in lightings}
+    allm = {"recall_1m_10deg": 0.9, "recall_25cm_5deg": 0.8, "median_pos_m": 0.05, "median_rot_deg": 1.0,
+            "coverage": 1.0, "frames": 100 * len(tours)}
+    fac = {k: 0.5 for k in tables.FACTOR_KEYS}
+    rows = [{"key": f"videoreloc.{m}", "method": "videoreloc", "mode": m, "label": f"VideoReloc, {m}",
+             "dagger": False} for m in ("causal", "closure")]
+    unit = {"unit": 30, "all_recall_1m_10deg": 0.5, "all_recall_25cm_5deg": 0.4, "unchanged_recall_1m_10deg": 0.6,
+            "rearranged_recall_1m_10deg": 0.4}
+    abl = {"orientation_aware": True, "run_level": True, "adaptive": True, "closure_coarse": 0.9,
+           "closure_fine": 0.8, "causal_coarse": 0.7, "causal_fine": 0.6}
+    return {"tours": tours, "rows": rows, "one_frame_stride": 15, "units": [unit], "ablation": [abl],
+            "methods": {"videoreloc": {"map_bytes": 20000, "modes": {m: {"all": allm, "factors": fac}
+                                                                      for m in ("causal", "closure")}}}}
+
+
+def test_tables_are_numbered_and_titled_as_in_the_paper(tmp_path):
+    from reloc.report import TABLE_ORDER
+
+    res = _table_results()
+    made = tables.make_tables(res)
+    assert list(made) == ["main", "factors", "units", "ablation"]  # the paper's order, I to IV
+    for key, (md, _) in made.items():
+        number, caption = PAPER_CAPTIONS[key]
+        assert md.splitlines()[0].startswith(f"**Table {number}: {caption}**"), md.splitlines()[0]
+    tables.write_tables(res, tmp_path)
+    for key, (number, caption) in PAPER_CAPTIONS.items():
+        doc = json.loads((tmp_path / "tables" / f"{key}.json").read_text())
+        assert (doc["table"], doc["title"]) == (number, caption) and doc["rows"] == made[key][1]
+    assert TABLE_ORDER == tuple((k, f"Table {n}: {c}") for k, (n, c) in PAPER_CAPTIONS.items())
+
+
+@pytest.mark.parametrize("lightings", [("day", "evening", "night"), ("day",), (None,)])
+def test_factors_table_columns_line_up(lightings):
+    """Header, separator and rows have one cell per column, also in a geometry-only design (no lightings)."""
+    md, _ = tables.factors_table(_table_results(lightings))
+    lines = [x for x in md.splitlines() if x.startswith("|")]
+    head = [c.strip() for c in lines[0].strip("|").split("|")]
+    assert head == ["Method", *[x for x in lightings if x], "ΔL", "unchanged", "rearranged", "ΔR", "kept"]
+    assert {len(x.strip("|").split("|")) for x in lines} == {len(head)}
+
+
+# ---------------------------------------------------------------------------------------------
+# the done-key covers the code
+
+
+def _copy_sources(root: Path, files) -> None:
+    from reloc.experiment import SOURCE_ROOT
+
+    for f in files:
+        dst = root / f.relative_to(SOURCE_ROOT)
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        dst.write_bytes(f.read_bytes())
+
+
+def _flip_one_byte(path: Path) -> None:
+    data = bytearray(path.read_bytes())
+    k = data.rindex(b"#")  # inside a comment: the module still means the same to Python
+    data[k + 1] = ord("!") if data[k + 1] != ord("!") else ord("?")
+    path.write_bytes(bytes(data))
+
+
+@pytest.fixture
+def fresh_fingerprint():
+    """code_fingerprint is computed once per process: forget it before and after a test that moves it."""
+    from reloc.experiment import code_fingerprint
+
+    code_fingerprint.cache_clear()
+    yield
+    code_fingerprint.cache_clear()
+
+
+def test_code_fingerprint_covers_reloc_and_the_synth_modules_it_imports(tmp_path, fresh_fingerprint):
+    from reloc import experiment as E
+
+    files = E.code_files()
+    rel = {f.relative_to(E.SOURCE_ROOT).as_posix() for f in files}
+    # every module of reloc, and the synth modules that reloc reads tours with, directly or not
+    assert {p.relative_to(REPO).as_posix() for p in (REPO / "reloc").rglob("*.py")} <= rel
+    assert {"synth/__init__.py", "synth/dataset.py", "synth/camera.py", "synth/frames.py", "synth/errors.py"} <= rel
+    assert not any(r.startswith("synth/blender/") for r in rel)  # Blender-side code computes no result here
+    outside = sorted(p for p in (REPO / "synth").rglob("*.py") if p.relative_to(REPO).as_posix() not in rel)
+    assert outside
+    # a copy of the sources gives the same fingerprint; one byte changed in any covered file changes it
+    copy = tmp_path / "src"
+    _copy_sources(copy, files + outside)
+    fp = E.code_fingerprint()
+    assert E.source_fingerprint(copy) == fp == E.code_fingerprint() and len(fp) == 16
+    for name in ("reloc/tables.py", "synth/dataset.py"):
+        _flip_one_byte(copy / name)
+        changed = E.source_fingerprint(copy)
+        assert changed != fp, name
+        (copy / name).write_bytes((REPO / name).read_bytes())
+    assert E.source_fingerprint(copy) == fp
+    # a file outside (not imported by reloc) does not count; a library version does
+    _flip_one_byte(copy / outside[0].relative_to(REPO))
+    assert E.source_fingerprint(copy) == fp
+    versions = E.library_versions()
+    assert {"python", "numpy", "scipy", "open3d"} <= set(versions)
+    assert E.source_fingerprint(copy, versions={**versions, "numpy": "0.0"}) != fp
+
+
+def test_project_packages_are_the_ones_pyproject_ships():
+    """The fingerprint follows imports into PROJECT_PACKAGES only: every top-level package is there."""
+    from reloc.experiment import PROJECT_PACKAGES
+
+    import tomllib
+
+    found = sorted(p.parent.name for p in REPO.glob("*/__init__.py"))
+    assert sorted(PROJECT_PACKAGES) == found
+    include = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]["find"]["include"]
+    assert sorted(x.rstrip("*") for x in include) == found
+
+
+@pytest.fixture(scope="module")
+def fast_design(tmp_path_factory):
+    """Two 150-frame geometry-only query tours (apt_0, apt_1) and a 30-frame mapping tour, 64x48."""
+    from synth.jobs import load_spec, run_job
+
+    root = tmp_path_factory.mktemp("fast_design")
+    render = {"name": "fast", "out": str(root / "tours"), "renderer": "fast", "size": [64, 48], "chunk_size": 600,
+              "designs": [{"layouts": ["apt_0", "apt_1"], "path": {"name": "query", "frames": 150}},
+                          {"layouts": ["apt_0"], "path": {"name": "mapping", "frames": 30}}]}
+    (root / "render.yaml").write_text(yaml.safe_dump(render))
+    assert run_job(load_spec(root / "render.yaml"), progress=False)["failed"] == {}
+    exp = {"name": "fast", "render": "render.yaml", "out": str(root / "exp"), "query": "query", "unchanged": "apt_0",
+           "mapping": {"layout": "apt_0", "lighting": "geometry", "path": "mapping"}, "map": "ground-truth",
+           "methods": ["videoreloc", "one_frame"], "one_frame_stride": 50, "workers": 1}
+    (root / "exp.yaml").write_text(yaml.safe_dump(exp))
+    return root
+
+
+def _done_markers(exp: Path) -> dict:
+    marks = {p.relative_to(exp).as_posix(): json.loads(p.read_text()) for p in (exp / "runs").rglob("done.json")}
+    marks.update({p.name: json.loads(p.read_text()) for p in (exp / "maps").glob("*.done.json")})
+    return marks
+
+
+@pytest.mark.slow
+def test_a_code_change_recomputes_every_result(fast_design, capsys, monkeypatch, tmp_path, fresh_fingerprint):
+    from reloc import experiment as E
+
+    exp = fast_design / "exp"
+    argv = ["experiment", str(fast_design / "exp.yaml"), "--quiet", "--no-plots"]
+    assert reloc_main(argv) == 0
+    assert "4 runs and 1 maps computed now" in capsys.readouterr().out
+    marks = _done_markers(exp)
+    assert len(marks) == 5 and {m["code"] for m in marks.values()} == {E.code_fingerprint()}
+    assert json.loads((exp / "results.json").read_text())["code"] == E.code_fingerprint()
+    # the same code: nothing is recomputed
+    assert reloc_main(argv) == 0
+    assert "0 runs and 0 maps computed now" in capsys.readouterr().out
+    assert _done_markers(exp) == marks
+    # the same sources read from elsewhere, and a module reloc does not import changed: still nothing
+    files = E.code_files()
+    outside = [p for p in (REPO / "synth").rglob("*.py") if p not in set(files)]
+    copy = tmp_path / "src"
+    _copy_sources(copy, files + outside)
+    _flip_one_byte(copy / outside[0].relative_to(REPO))
+    monkeypatch.setattr(E, "SOURCE_ROOT", copy)
+    E.code_fingerprint.cache_clear()
+    assert reloc_main(argv) == 0
+    assert "0 runs and 0 maps computed now" in capsys.readouterr().out
+    # one byte of one covered module changed: every map and run is computed again, and says with what
+    _flip_one_byte(copy / "synth" / "dataset.py")
+    E.code_fingerprint.cache_clear()
+    changed = E.code_fingerprint()
+    assert changed != marks["runs/videoreloc/apt_0__geometry__query/done.json"]["code"]
+    assert reloc_main(argv) == 0
+    assert "4 runs and 1 maps computed now" in capsys.readouterr().out
+    again = _done_markers(exp)
+    assert set(again) == set(marks) and {m["code"] for m in again.values()} == {changed}
+    assert all(again[k]["key"] != marks[k]["key"] for k in marks)
+    assert json.loads((exp / "results.json").read_text())["code"] == changed

@@ -14,6 +14,7 @@ import math
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -36,6 +37,7 @@ from synth.errors import UserError
 from synth.frames import write_frame
 
 TOUR_FRAMES = 600
+REPO = Path(__file__).resolve().parents[1]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -129,22 +131,59 @@ def test_fit_box_thickens_thin_surfaces_away_from_the_camera():
 # ground truth map
 
 
+def _boxes_by_hand(layout_file) -> dict[int, tuple]:
+    """id -> (class, kind, center, size, yaw, movable) of a layout's boxes, computed here from the
+    layout YAML alone (plain yaml + numpy): an object's box is centred at position + R(q) box_offset
+    with its size and the quaternion's yaw (the layouts' objects turn about +Z only); a wall's runs
+    from start to end, thickness x height, standing on the floor; each room has a 0.1 m floor slab
+    below floor_z and a ceiling slab above floor_z + ceiling_height. Ids: objects their own, walls
+    1000 + k, floors 2000 + k, ceilings 3000 + k (the videoreloc-boxes/1 id bases)."""
+    import yaml
+
+    doc = yaml.safe_load(open(layout_file))
+    out = {}
+    for o in doc["objects"]:
+        w, x, y, z = o["rotation"]  # (w, x, y, z)
+        assert x == 0 and y == 0, o["id"]  # a yaw-only rotation
+        yaw = 2.0 * math.atan2(z, w)
+        R = np.array([[math.cos(yaw), -math.sin(yaw), 0.0], [math.sin(yaw), math.cos(yaw), 0.0], [0.0, 0.0, 1.0]])
+        center = np.array(o["position"]) + R @ np.array(o["box_offset"])
+        out[o["id"]] = (o["class"], "object", center, np.array(o["size"]), yaw, o["movable"])
+    st = doc["stage"]
+    for k, w in enumerate(st["walls"]):
+        a, b = np.array(w["start"]), np.array(w["end"])
+        c = (a + b) / 2
+        out[1000 + k] = ("wall", "wall", np.array([c[0], c[1], st["floor_z"] + w["height"] / 2]),
+                         np.array([np.linalg.norm(b - a), w["thickness"], w["height"]]),
+                         math.atan2(b[1] - a[1], b[0] - a[0]), False)
+    for k, r in enumerate(st["rooms"]):
+        x0, y0, x1, y1 = r["rect"]
+        size = np.array([x1 - x0, y1 - y0, 0.1])
+        out[2000 + k] = ("floor", "floor", np.array([(x0 + x1) / 2, (y0 + y1) / 2, st["floor_z"] - 0.05]), size, 0.0,
+                         False)
+        top = st["floor_z"] + st["ceiling_height"] + 0.05
+        out[3000 + k] = ("ceiling", "ceiling", np.array([(x0 + x1) / 2, (y0 + y1) / 2, top]), size, 0.0, False)
+    return out
+
+
 def test_from_scene_round_trip_equals_the_ground_truth(tmp_path, capsys, tour):
     out = tmp_path / "gt.json"
     code, stdout, _ = run_cli(["map", "from-scene", "apt_0", "--out", str(out)], capsys)
     assert code == 0 and "apt_0" in stdout
     m = BoxMap.load(out)
-    gt = tour.objects()  # the renderer's own copy of the ground truth
-    assert m.ids.tolist() == [b["id"] for b in gt["boxes"]]
-    assert m.classes == [b["class"] for b in gt["boxes"]]
-    assert np.array_equal(m.centers, np.array([b["center"] for b in gt["boxes"]]))
-    assert np.array_equal(m.sizes, np.array([b["size"] for b in gt["boxes"]]))
-    assert np.array_equal(m.yaws, np.array([b["yaw"] for b in gt["boxes"]]))
-    assert m.movable.tolist() == [b["movable"] for b in gt["boxes"]]
+    want = _boxes_by_hand(REPO / "scenes" / "layouts" / "apt_0.yaml")
+    assert sorted(m.ids.tolist()) == sorted(want) and len(want) == 123
+    kinds = m.kinds
+    for j, i in enumerate(m.ids.tolist()):
+        cls, kind, center, size, yaw, movable = want[i]
+        assert (m.classes[j], kinds[j], bool(m.movable[j])) == (cls, kind, movable), i
+        # stored at the layouts' precision: 0.1 mm, and quaternions to 9 decimals
+        np.testing.assert_allclose(m.centers[j], center, rtol=0, atol=1.5e-4, err_msg=str(i))
+        np.testing.assert_allclose(m.sizes[j], size, rtol=0, atol=1e-4, err_msg=str(i))
+        assert abs(math.remainder(m.yaws[j] - yaw, 2 * math.pi)) < 1e-6, (i, m.yaws[j], yaw)
+    # the renderer's copy of the ground truth (the tour's objects.json) is the same map
+    assert json.loads(out.read_text())["boxes"] == tour.objects()["boxes"]
     assert map_from_scene("apt_0") == json.loads(out.read_text())
-    errs = box_errors(map_from_scene("apt_0"), gt)
-    assert errs["gt_unobserved"] == 0 and errs["built_unmatched"] == 0
-    assert max(r["center_err_m"] for r in errs["boxes"]) == 0.0
 
 
 def test_from_scene_unknown_layout_is_a_user_error(tmp_path, capsys):
@@ -196,25 +235,39 @@ def test_built_map_is_valid_small_and_keeps_track_ids(built, tour):
     assert len(json.dumps(doc)) < 40_000
 
 
-def test_well_seen_objects_match_the_ground_truth(built, tour):
+def test_built_object_boxes_match_the_ground_truth(built, tour):
+    """Every object box of the built map, against the true box of the instance it was built from (each
+    carries that id, so all are matched). Partial views give boxes smaller than the object, never
+    larger: the tail of the center and size errors comes from objects seen from one side, and every
+    built box lies inside its true box. Measured on this tour (54 of apt_0's 97 objects built):
+    center error median 1.4 cm, 90th percentile 26 cm; size error median 2.3 cm; corners at most
+    9.4 cm outside the true box."""
     doc, _ = built
     gt = _gt_by_id(tour)
-    center_err, size_err = [], []
+    center_err, size_err, outside = [], [], []
     for b in doc["boxes"]:
         if b["kind"] != "object":
             continue
         g = gt[b["id"]]
-        # well seen: the built box holds most of the true volume (partial views give smaller boxes)
-        if np.prod(b["size"]) < 0.7 * np.prod(g["size"]):
-            continue
         center_err.append(np.linalg.norm(np.subtract(b["center"], g["center"])))
         sb = sorted(b["size"][:2]) + [b["size"][2]]
         sg = sorted(g["size"][:2]) + [g["size"][2]]
         size_err.append(np.abs(np.subtract(sb, sg)).max())
-    assert len(center_err) >= 15
-    assert np.median(center_err) < 0.05
+        # the built box's corners in the true box's frame: how far any lies outside it
+        signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)])
+        corners = _rot_z(b["yaw"]) @ (signs * np.divide(b["size"], 2)).T + np.array(b["center"])[:, None]
+        local = _rot_z(g["yaw"]).T @ (corners - np.array(g["center"])[:, None])
+        outside.append(max(0.0, float((np.abs(local) - np.divide(g["size"], 2)[:, None]).max())))
+    assert len(center_err) >= 50
+    assert np.median(center_err) < 0.03
+    assert np.percentile(center_err, 90) < 0.35
     assert np.median(size_err) < 0.05
-    assert np.percentile(center_err, 90) < 0.15
+    assert max(outside) < 0.12, max(outside)
+
+
+def _rot_z(yaw) -> np.ndarray:
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 def test_walls_floors_and_ceilings_match_the_ground_truth(built, tour):

@@ -147,6 +147,47 @@ def all_texts(fig):
 
 
 # ---------------------------------------------------------------------------------------------
+# reading figures back: pixels of the saved PNG, located through the drawn figure's transforms
+
+# the colour code by hand: a straight line from green (0, 0.70, 0) at 0 m to yellow (1, 0.88, 0) at
+# 0.5 m and on to red (0.85, 0, 0) at 1 m and beyond
+GREEN, YELLOW, RED = (0.0, 0.70, 0.0), (1.0, 0.88, 0.0), (0.85, 0.0, 0.0)
+
+
+def colour_by_hand(err_m: float) -> np.ndarray:
+    t = min(max(err_m, 0.0), 1.0)
+    a, b, u = (GREEN, YELLOW, t / 0.5) if t <= 0.5 else (YELLOW, RED, (t - 0.5) / 0.5)
+    return (1 - u) * np.array(a) + u * np.array(b)
+
+
+def read_png(path) -> np.ndarray:
+    from matplotlib.image import imread
+
+    return imread(str(path))[..., :3]  # (H, W, 3) floats in [0, 1]
+
+
+def pixel_of(ax, x, y, img) -> tuple[int, int]:
+    """(row, column) in the saved PNG of data point (x, y) of ``ax`` (figure and PNG share the dpi)."""
+    dx, dy = ax.transData.transform((x, y))
+    return int(img.shape[0] - dy), int(dx)
+
+
+def near(img, rc, colour, tol=4 / 255, r=1) -> bool:
+    """Some pixel within r of rc has ``colour`` (each channel within tol)."""
+    row, col = rc
+    patch = img[max(row - r, 0): row + r + 1, max(col - r, 0): col + r + 1]
+    return bool((np.abs(patch - np.asarray(colour)).max(axis=-1) <= tol).any())
+
+
+def pixels_like(img, box, colour, tol=4 / 255) -> int:
+    """How many pixels inside the display-space bbox ``box`` have ``colour``."""
+    (x0, y0), (x1, y1) = box.get_points()
+    H = img.shape[0]
+    patch = img[int(H - y1) + 1: int(H - y0) - 1, int(x0) + 1: int(x1) - 1]
+    return int((np.abs(patch - np.asarray(colour)).max(axis=-1) <= tol).sum())
+
+
+# ---------------------------------------------------------------------------------------------
 # numbers
 
 
@@ -214,7 +255,8 @@ def test_plot_experiment_writes_valid_pngs(results_dir, captured):
         assert 500 <= w <= 3000 and 300 <= h <= 2000, (p.name, w, h)
     assert not [p for p in (results_dir / "plots").iterdir() if p.name.startswith(".")]  # no temporary files
 
-    texts = all_texts(captured[tour_png_name(TOUR)])
+    fig = captured[tour_png_name(TOUR)]
+    texts = all_texts(fig)
     # the missing trajectory is a column without poses, recall 0
     assert any("no poses" in t for t in texts)
     assert any("Appearance" in t and "0.0%" in t and f"(0/{N} posed)" in t for t in texts)
@@ -222,12 +264,43 @@ def test_plot_experiment_writes_valid_pngs(results_dir, captured):
     posed = N - len(MISSING)
     assert any("VideoReloc" in t and f"{100 * posed / N:.1f}%" in t and f"({posed}/{N} posed)" in t for t in texts)
 
-    bars = all_texts(captured["recall_bars.png"])
+    # the saved image: the closure column draws each estimate in the colour of 0.3 m (a yellowish
+    # green), and no estimate in any other colour of the code; the empty column draws none
+    img = read_png(paths[0])
+    top = {ax.get_title().split("\n")[0]: ax for ax in fig.axes if ax.get_title()}
+    ax = top["VideoReloc, with clip closure"]
+    gt = gt_poses()
+    want = colour_by_hand(0.3)
+    np.testing.assert_allclose(want, [0.6, 0.808, 0.0])
+    for i in (0, 50, 99, 160, 200, 239):
+        x, y = gt[i][:2, 3] + OFFSET[:2]
+        assert near(img, pixel_of(ax, x, y, img), want), i
+    assert pixels_like(img, ax.bbox, want) > 200
+    for other in (GREEN, YELLOW, RED, colour_by_hand(0.1), colour_by_hand(0.6)):
+        assert pixels_like(img, ax.bbox, other) == 0, other
+    empty = top["Appearance (SIFT + PnP), per frame"]
+    assert all(pixels_like(img, empty.bbox, c) == 0 for c in (want, GREEN, YELLOW, RED))
+
+    bars_fig = captured["recall_bars.png"]
+    bars = all_texts(bars_fig)
     assert f"{100 * posed / N:.0f}%" in bars and "0%" in bars
     # the design has day and unchanged only: no evening/night or rearranged groups
-    ticks = [t.get_text() for ax in captured["recall_bars.png"].axes for t in ax.get_xticklabels()]
+    ticks = [t.get_text() for ax in bars_fig.axes for t in ax.get_xticklabels()]
     assert "day" in ticks and "unchanged" in ticks
     assert "evening" not in ticks and "night" not in ticks and "rearranged" not in ticks
+    # each VideoReloc bar rises to its recall in the saved image: the bar's colour runs from the axis
+    # up to the pixel row of 0.75, the appearance bar (recall 0) has no height
+    img = read_png(paths[1])
+    import matplotlib
+
+    colour = np.array(matplotlib.colormaps["tab10"].colors[1])  # second row: VideoReloc
+    for bar_ax in bars_fig.axes[:2]:
+        x = bar_ax.get_xticks()[0] + 0.5 * 0.8 / 2  # the second of two bars around group 0
+        col = pixel_of(bar_ax, x, 0.0, img)[1]
+        rows = np.flatnonzero(np.abs(img[:, col] - colour).max(axis=-1) <= 4 / 255)
+        assert len(rows), bar_ax.get_title()
+        top_row, base_row = pixel_of(bar_ax, x, posed / N, img)[0], pixel_of(bar_ax, x, 0.0, img)[0]
+        assert abs(rows.min() - top_row) <= 2 and abs(rows.max() - base_row) <= 2, (rows.min(), top_row)
 
 
 def test_points_are_coloured_by_their_position_error(results_dir, captured):
@@ -252,14 +325,59 @@ def test_missing_tour_is_skipped_and_missing_map_tolerated(results_dir, capsys):
     assert TOUR2 in err and "missing.json" in err
 
 
-def test_tour_figure_with_empty_estimates_and_no_map(tmp_path):
+def test_tour_figure_with_empty_estimates_and_no_map(tmp_path, captured):
     gt = {i: T for i, T in enumerate(gt_poses(50))}
     out = plots.tour_figure(None, gt, {"nothing": {}}, tmp_path / "t.png", title="x")
     assert png_size(out)[0] > 300
+    fig = captured["t.png"]
+    top, bottom = fig.axes[0], fig.axes[1]
+    # without a map the view is the ground-truth path with a 0.4 m margin
+    P = np.array([T[:3, 3] for T in gt.values()])
+    np.testing.assert_allclose(top.get_xlim(), (P[:, 0].min() - 0.4, P[:, 0].max() + 0.4))
+    np.testing.assert_allclose(top.get_ylim(), (P[:, 1].min() - 0.4, P[:, 1].max() + 0.4))
+    assert not top.collections  # no map boxes, no estimates
+    assert bottom.get_xlim() == (0.0, 49.0) and not bottom.get_lines()[2:]  # only the two dashed thresholds
+    assert [t.get_text() for t in top.texts + bottom.texts] == ["no poses", "no poses"]
+    assert "(0/50 posed)" in top.get_title()
+    # the saved image: the grey ground-truth path passes through every third frame's position (except
+    # where the "no poses" label covers it)
+    img = read_png(out)
+    label = top.texts[0].get_bbox_patch().get_window_extent().padded(3)
+    seen = 0
+    for i in range(0, 50, 3):
+        if label.contains(*top.transData.transform(P[i, :2])):
+            continue
+        # an antialiased 0.8 pt line: its darkest pixel near each position is within 0.2 of the grey
+        assert near(img, pixel_of(top, P[i, 0], P[i, 1], img), plots.GT_COLOR, tol=0.2), i
+        seen += 1
+    assert seen >= 8
+    assert all(pixels_like(img, top.bbox, c) == 0 for c in (GREEN, YELLOW, RED))
 
 
-# ---------------------------------------------------------------------------------------------
-# report
+def test_estimates_are_green_yellow_red_by_their_error_in_the_image(tmp_path, captured):
+    """Known errors (0 m, 0.5 m, 1.2 m on three stretches of the path, each estimate moved by its error
+    in -x, which keeps it in view): each is drawn green, yellow or red in the saved PNG, where it lies."""
+    gt = {i: T for i, T in enumerate(gt_poses())}
+    err = {i: 0.0 if i < 80 else 0.5 if i < 160 else 1.2 for i in gt}
+    est = {}
+    for i, T in gt.items():
+        E = T.copy()
+        E[:3, 3] -= [err[i], 0.0, 0.0]
+        est[i] = E
+    out = plots.tour_figure(None, gt, {"known errors": est}, tmp_path / "k.png")
+    ax = captured["k.png"].axes[0]
+    img = read_png(out)
+    px = {i: np.array(pixel_of(ax, *est[i][:2, 3], img)) for i in est}
+    checked = {0.0: 0, 0.5: 0, 1.2: 0}
+    for i in range(0, N, 4):
+        # only where no estimate of another colour is drawn within 6 px
+        if any(err[j] != err[i] and np.abs(px[j] - px[i]).max() <= 6 for j in est):
+            continue
+        assert near(img, px[i], colour_by_hand(err[i])), (i, err[i], img[tuple(px[i])])
+        checked[err[i]] += 1
+    assert min(checked.values()) >= 5, checked
+    assert not [t for t in ax.texts if "outside the view" in t.get_text()]
+    assert "recall 1 m/10°: 66.7%" in ax.get_title()  # 160 of 240 frames within 1 m
 
 
 def test_split_row_and_table_to_html():
@@ -295,7 +413,9 @@ def test_report_gathers_tables_plots_and_timings(results_dir):
     for text in (MAIN_MD, FACTORS_MD):
         for line in text.strip().splitlines():
             assert line in md
-    assert md.index("Main results") < md.index("Lighting and rearrangement factors")
+    # headings: the paper's numbers and captions, in its order
+    i = md.index("### Table I: Comparison of recall and pose errors across relocalization methods")
+    assert i < md.index("### Table II: Recall at 1 m/10\u00b0 under illumination and furniture changes")
     assert "<td>VideoReloc, with clip closure</td>" in h
     assert "<td>Appearance &lt;clip-rigid&gt; †</td>" in h and "<clip-rigid>" not in h
     # every plot, by relative path; recall bars before the tour figures
