@@ -1,12 +1,13 @@
 """Detection (paper Sec. III-C): class-labelled instance masks for a frame.
 
-One interface, :class:`Detector`, with two implementations:
+One interface, :class:`Detector` (with :class:`FrameData` and :class:`Detection`, in
+:mod:`reloc.detector_base`), with two implementations:
 
 * :class:`OracleDetector` reads the rendered instance and semantic images and can degrade them
   on purpose with a seeded :class:`Corruption` model (misses, label confusion among map classes,
   mask erosion/dilation, spurious detections), so experiments can ask how much detector quality
   matters;
-* ``reloc.detection_onnx.OnnxDetector`` runs a user's ONNX instance-segmentation model with
+* :class:`reloc.detection_onnx.OnnxDetector` runs a user's ONNX instance-segmentation model with
   YOLO-style segmentation outputs.
 
 Detectors see only what a camera would give them plus, for the oracle, the rendered label
@@ -17,7 +18,6 @@ by the oracle only so that map building can stand in for a class-agnostic 3D seg
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
-from typing import Protocol
 
 import cv2
 import numpy as np
@@ -25,41 +25,12 @@ from scipy.ndimage import find_objects
 
 from synth.errors import UserError
 
-STRUCTURE_CLASSES = ("wall", "floor", "ceiling")
+from .config import DetectionConfig
+from .detection_onnx import OnnxDetector
+from .detector_base import STRUCTURE_CLASSES, Detection, Detector, FrameData
 
-
-@dataclass
-class FrameData:
-    """What a detector and the front-end get for one frame."""
-
-    index: int
-    depth: np.ndarray  # (H, W) float32 planar metres, 0 = no surface
-    K: np.ndarray  # 3x3
-    rgb: np.ndarray | None = None  # (H, W, 3) float32 linear, or None for geometry-only tours
-    instance: np.ndarray | None = None  # (H, W) uint32, rendered ground truth (oracle only)
-    semantic: np.ndarray | None = None  # (H, W) uint32, rendered ground truth (oracle only)
-
-
-@dataclass
-class Detection:
-    cls: str
-    mask: np.ndarray  # (H, W) bool
-    score: float = 1.0
-    box2d: tuple[int, int, int, int] | None = None  # x0, y0, x1, y1 (inclusive), from the mask
-    track_id: int | None = None  # oracle only; never used by the relocalizer
-    spurious: bool = False  # oracle bookkeeping: a detection the corruption model invented
-
-    def __post_init__(self):
-        if self.box2d is None and self.mask is not None and self.mask.any():
-            ys, xs = np.nonzero(self.mask)
-            self.box2d = (int(xs.min()), int(ys.min()), int(xs.max()), int(ys.max()))
-
-
-class Detector(Protocol):
-    name: str
-
-    def detect(self, frame: FrameData) -> list[Detection]:
-        ...
+__all__ = ["STRUCTURE_CLASSES", "Corruption", "Detection", "Detector", "DetectorSpec", "FrameData", "OnnxDetector",
+           "OracleDetector", "add_detector_arguments", "build_detector", "detector_record", "detector_spec_from_args"]
 
 
 @dataclass(frozen=True)
@@ -96,7 +67,7 @@ class OracleDetector:
     name = "oracle"
 
     def __init__(self, classes: dict[int, str], vocabulary=None, corruption: Corruption | None = None,
-                 min_pixels: int = 20):
+                 min_pixels: int = DetectionConfig.min_mask_pixels):
         self.classes = {int(k): str(v) for k, v in classes.items()}
         self.vocabulary = set(vocabulary) if vocabulary is not None else set(self.classes.values())
         self.corruption = corruption or Corruption()
@@ -174,15 +145,16 @@ class DetectorSpec:
     class_map: str | None = None
 
 
-def build_detector(spec: DetectorSpec, classes: dict[int, str], vocabulary=None) -> Detector:
+def build_detector(spec: DetectorSpec, classes: dict[int, str], vocabulary=None,
+                   config: DetectionConfig | None = None) -> Detector:
     """The detector a spec names: ``oracle`` (tour label images, with its corruption) or ``onnx``."""
     if spec.kind == "oracle":
-        return OracleDetector(classes, vocabulary=vocabulary, corruption=spec.corruption)
+        cfg = config or DetectionConfig()
+        return OracleDetector(classes, vocabulary=vocabulary, corruption=spec.corruption,
+                              min_pixels=cfg.min_mask_pixels)
     if spec.kind == "onnx":
         if not spec.model:
             raise UserError("--detector onnx needs --model FILE.onnx")
-        from .detection_onnx import OnnxDetector
-
         return OnnxDetector(spec.model, class_map=spec.class_map, vocabulary=vocabulary)
     raise UserError(f"unknown detector {spec.kind!r} (expected oracle or onnx)")
 

@@ -22,8 +22,9 @@ import cv2
 import numpy as np
 import yaml
 
-from reloc.detection import Detection, FrameData
+from reloc.detector_base import Detection, FrameData
 from synth.errors import UserError
+from synth.frames import srgb8
 
 PAD_VALUE = 114  # letterbox padding, out of 255 (as Ultralytics)
 MAX_NMS = 30000  # candidates kept for NMS, by score
@@ -41,9 +42,7 @@ def linear_to_srgb8(rgb: np.ndarray) -> np.ndarray:
     """Linear float RGB -> 8-bit sRGB (standard transfer curve, clipped to [0, 1])."""
     if rgb.dtype == np.uint8:
         return rgb
-    x = np.clip(np.nan_to_num(np.asarray(rgb, np.float32), nan=0.0), 0.0, 1.0)
-    s = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
-    return np.rint(s * 255.0).astype(np.uint8)
+    return srgb8(np.nan_to_num(np.asarray(rgb, np.float32), nan=0.0))
 
 
 def letterbox(img: np.ndarray, size: tuple[int, int]):

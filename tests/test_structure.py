@@ -1,0 +1,107 @@
+"""The shape of the code: no import cycles between the toolkit's modules, at any level.
+
+An import inside a function is still an import: a cycle dodged that way is a cycle. The graph is
+read from the source (AST), so this needs no Blender and imports nothing.
+"""
+
+from __future__ import annotations
+
+import ast
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+PACKAGES = ("synth", "reloc")
+
+
+def _modules() -> dict[str, Path]:
+    mods = {}
+    for pkg in PACKAGES:
+        for p in sorted((REPO / pkg).rglob("*.py")):
+            parts = p.relative_to(REPO).with_suffix("").parts
+            mods[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = p
+    return mods
+
+
+def _imports(name: str, path: Path, mods: dict[str, Path]) -> set[str]:
+    """Toolkit modules that ``name`` imports anywhere in its source (top level or in a function)."""
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            for alias in node.names:
+                sub = f"{target}.{alias.name}"
+                if sub in mods:
+                    out.add(sub)
+                elif target in mods:
+                    out.add(target)
+        elif isinstance(node, ast.Import):
+            out |= {a.name for a in node.names if a.name in mods}
+    out.discard(name)
+    return out
+
+
+def import_cycles() -> list[list[str]]:
+    """Strongly connected components of more than one module (Tarjan), i.e. the import cycles."""
+    mods = _modules()
+    graph = {m: sorted(_imports(m, p, mods)) for m, p in mods.items()}
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    sccs: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                sccs.append(sorted(comp))
+
+    for m in graph:
+        if m not in index:
+            visit(m)
+    return sccs
+
+
+def test_the_scan_sees_imports():
+    mods = _modules()
+    assert "synth.scene" in mods and "reloc.cli" in mods
+    # relative, absolute and function-level imports are all edges
+    assert "synth.geometry" in _imports("synth.scene", mods["synth.scene"], mods)
+    assert "synth.errors" in _imports("reloc.cli", mods["reloc.cli"], mods)
+
+
+def test_a_function_level_cycle_is_found(tmp_path, monkeypatch):
+    pkg = tmp_path / "synth"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "a.py").write_text("from . import b\n")
+    (pkg / "b.py").write_text("def f():\n    from .a import x\n")
+    (tmp_path / "reloc").mkdir()
+    (tmp_path / "reloc" / "__init__.py").write_text("")
+    monkeypatch.setattr(sys.modules[__name__], "REPO", tmp_path)
+    assert import_cycles() == [["synth.a", "synth.b"]]
+
+
+def test_no_import_cycles():
+    assert import_cycles() == []
