@@ -481,12 +481,13 @@ def localize_frame(amap: AppearanceMap, rgb_linear: np.ndarray, K: np.ndarray,
 
 
 def run_appearance(tour, amap: AppearanceMap, out_dir, clip_poses: dict[int, dict[int, np.ndarray]] | None = None,
-                   cfg: AppearanceConfig | None = None, progress: bool = True) -> dict:
+                   cfg: AppearanceConfig | None = None, progress: bool = True, clip_rigid=None) -> dict:
     """Localize every frame of ``tour`` that has RGB; write causal.txt (+ closure.txt), frames.json, run.json.
 
     ``clip_poses``: clip id -> {frame: V_i} (``reloc.run.load_clip_poses``) for the clip-rigid
     variant; closure.txt then covers every frame of each clip with a consensus transform and keeps
-    the frame estimates of the others. Returns the run.json summary.
+    the frame estimates of the others (``clip_rigid``: the fit's tolerances, a
+    ``reloc.config.ClipRigidConfig``; the experiment passes its config's). Returns the run.json summary.
     """
     from synth.camera import write_tum
     from synth.dataset import Tour
@@ -533,7 +534,7 @@ def run_appearance(tour, amap: AppearanceMap, out_dir, clip_poses: dict[int, dic
         "note": "frames without RGB are skipped: per-frame recall is over the frames with RGB",
     }
     if clip_poses is not None:
-        traj, stats = clip_rigid_trajectory(est, clip_poses)
+        traj, stats = clip_rigid_trajectory(est, clip_poses, clip_rigid)
         fr = sorted(traj)
         write_tum(out / "closure.txt", [traj[i] for i in fr], fps=fps, frames=fr,
                   header=f"{src}: clip-rigid trajectory (camera-to-world, OpenCV axes)")

@@ -33,8 +33,8 @@ from .config import Config
 from .frontend import ClipResult
 from .geometry import inv_T, make_T, pose_distance, rotation_between, rotation_mean
 from .map import BoxMap
-from .refinement import (Z, estimate_gravity, level, manhattan_correction, orientation_aware, wall_normals,
-                         wall_yaws)
+from .refinement import (Z, distinct_walls, estimate_gravity, level, manhattan_correction, orientation_aware,
+                         wall_normals, wall_yaws)
 from .registration import fallback_candidates
 from .surface import SurfaceScorer
 
@@ -135,7 +135,7 @@ class Backend:
         b = self.cfg.backend
         ref = dataclasses.replace(self.cfg.refinement, prior_translation_m=b.revision_prior_translation_m,
                                   prior_rotation_deg=b.revision_prior_rotation_deg)
-        grav = estimate_gravity(st.res.nodes, st.res.clip.V)
+        grav = estimate_gravity(st.res.nodes, st.res.clip.V, self.cfg.refinement)
         S, _ = orientation_aware(S0, st.res.nodes, self.map, ref, self.cfg.registration, grav)
         return S
 
@@ -210,11 +210,13 @@ class Backend:
             out = []
             nodes = st.res.nodes
             if nodes:
-                grav = estimate_gravity(nodes, st.res.clip.V)
+                grav = estimate_gravity(nodes, st.res.clip.V, self.cfg.refinement)
                 R_level = rotation_between(grav.u, Z)
-                yaws = wall_yaws(R_level, wall_normals(nodes))
-                if len(yaws) >= self.cfg.refinement.manhattan_min_normals:
+                ref = self.cfg.refinement
+                normals, walls = wall_normals(nodes)
+                if distinct_walls(R_level, normals, walls, ref.wall_min_horizontal) >= ref.manhattan_min_normals:
                     # the clip's best-supported of the four Manhattan yaws (bounded work per clip)
+                    yaws = wall_yaws(R_level, normals, ref.wall_min_horizontal)
                     out = [c.S for c in fallback_candidates(nodes, self.map, self.cfg.registration, R_level, yaws)[:1]]
             st.info["cue_variants"] = out
         return st.info["cue_variants"]
@@ -315,8 +317,9 @@ class Backend:
         nodes = st.res.nodes
         if not nodes or not self.cfg.refinement.orientation_aware:
             return S
-        grav = estimate_gravity(nodes, st.res.clip.V)
+        grav = estimate_gravity(nodes, st.res.clip.V, self.cfg.refinement)
         centroid = np.mean([nd.center for nd in nodes], axis=0)
         S = level(S, grav.u, centroid)
-        S2, info = manhattan_correction(S, wall_normals(nodes), self.map, self.cfg.refinement, centroid)
+        normals, walls = wall_normals(nodes)
+        S2, info = manhattan_correction(S, normals, self.map, self.cfg.refinement, centroid, walls)
         return S2 if info["accepted"] else S

@@ -20,15 +20,9 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from .config import ClipConfig, ObservationConfig
-from .detection import STRUCTURE_CLASSES
+from .detector_base import STRUCTURE_CLASSES
 from .geometry import farthest_point_sample
 from .observations import Observation
-
-# ours: structure fuses by plane (walls) or by a wider radius (floors, ceilings)
-WALL_NORMAL_DEG = 20.0
-WALL_OFFSET_M = 0.2
-WALL_RADIUS_M = 4.0
-FLOOR_RADIUS_M = 2.0
 
 
 @dataclass
@@ -82,7 +76,8 @@ class Clip:
 
 
 def fuse(observations: list[Observation], cfg: ObservationConfig | None = None) -> list[Node]:
-    """Connected components of nearby same-class observations (clip frame) -> nodes."""
+    """Connected components of nearby same-class observations (clip frame) -> nodes. Walls join
+    by plane (similar normals, small plane offset), floors and ceilings by a wider radius."""
     cfg = cfg or ObservationConfig()
     by_class: dict[str, list[Observation]] = {}
     for o in observations:
@@ -97,11 +92,12 @@ def fuse(observations: list[Observation], cfg: ObservationConfig | None = None) 
             has = np.linalg.norm(N, axis=1) > 0.5
             cosang = np.abs(N @ N.T)
             offset = np.abs(np.einsum("ij,ikj->ik", N, C[None, :, :] - C[:, None, :]))  # |n_i . (c_k - c_i)|
-            A = (has[:, None] & has[None, :] & (cosang >= np.cos(np.radians(WALL_NORMAL_DEG)))
-                 & (offset <= WALL_OFFSET_M) & (offset.T <= WALL_OFFSET_M) & (D <= WALL_RADIUS_M))
+            A = (has[:, None] & has[None, :] & (cosang >= np.cos(np.radians(cfg.wall_fusion_normal_deg)))
+                 & (offset <= cfg.wall_fusion_offset_m) & (offset.T <= cfg.wall_fusion_offset_m)
+                 & (D <= cfg.wall_fusion_radius_m))
             A |= (~has[:, None] | ~has[None, :]) & (D <= cfg.fusion_radius_m)
         elif cls in ("floor", "ceiling"):
-            A = D <= FLOOR_RADIUS_M
+            A = D <= cfg.floor_fusion_radius_m
         else:
             A = D <= cfg.fusion_radius_m
         n_comp, labels = connected_components(coo_matrix(A), directed=False)

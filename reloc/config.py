@@ -14,7 +14,12 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
+
+import yaml
+
+from synth.errors import UserError
 
 
 @dataclass(frozen=True)
@@ -65,7 +70,9 @@ class DetectionConfig:
     mask_box_iou: float = 0.4
     depth_check_scale: float = 0.4
     depth_check_offset_m: float = 0.5
-    min_mask_pixels: int = 20  # ours: smaller masks carry too few depth pixels to place anything
+    # ours: smaller masks carry too few depth pixels to place anything (observe() drops them; the
+    # oracle detector reports no smaller instance)
+    min_mask_pixels: int = 20
 
 
 @dataclass(frozen=True)
@@ -80,6 +87,16 @@ class ObservationConfig:
     # ours: same-class observations closer than this (centers, clip frame) join one fused node
     fusion_radius_m: float = 0.5
     max_node_samples: int = 96  # ours: per node, farthest-point subsampled when exceeded
+    # ours: structure fuses by plane (walls: normals within 20 degrees, plane offsets within
+    # 0.2 m, centers within 4 m) or by a wider radius (floors, ceilings)
+    wall_fusion_normal_deg: float = 20.0
+    wall_fusion_offset_m: float = 0.2
+    wall_fusion_radius_m: float = 4.0
+    floor_fusion_radius_m: float = 2.0
+    # ours: bounded work per mask: at most this many pixels are back-projected (grid-subsampled
+    # beyond that), and farthest-point sampling runs over about this many of them
+    max_points_per_mask: int = 4000
+    fps_pool: int = 400
 
 
 @dataclass(frozen=True)
@@ -108,9 +125,10 @@ class RegistrationConfig:
     # of instances pass the 0.5 m box-surface test
     min_graph_matches: int = 6
     min_graph_surface_fraction: float = 0.6
-    # per-frame RANSAC: poses ranked by 0.3 m box-surface inliers
+    # per-frame RANSAC: poses ranked by 0.3 m box-surface inliers (object instances)
     anchor_inlier_m: float = 0.3
     anchor_ransac_iterations: int = 200  # ours
+    anchor_refits: int = 2  # ours: the winner is refitted on its inliers' box centers this often
     anchor_min_inliers: int = 6
     anchor_max_rmse_m: float = 0.5
     max_anchors: int = 25
@@ -125,7 +143,6 @@ class RegistrationConfig:
     # odometry prediction
     fallback_inlier_m: float = 0.5
     fallback_yaw_window_deg: float = 45.0
-    seed: int = 0  # ours: the random route's generator
 
 
 @dataclass(frozen=True)
@@ -146,6 +163,15 @@ class RefinementConfig:
     # ours: plane fitting for the gravity/wall cues
     plane_min_points: int = 30
     plane_max_rms_m: float = 0.03
+    # ours: wall normals give a vertical (their common orthogonal direction) only when they span
+    # two clearly different directions (second singular value at least this fraction of the first)
+    gravity_wall_spread: float = 0.3
+    # ours: a structure-derived vertical further than this from the camera-up direction is
+    # implausible; the camera-up fallback is used instead
+    gravity_max_from_camera_up_deg: float = 60.0
+    # ours: a wall normal gives a yaw only when its horizontal part is at least this long (it is
+    # within about 45 degrees of horizontal)
+    wall_min_horizontal: float = 0.7
 
 
 @dataclass(frozen=True)
@@ -174,6 +200,16 @@ class BackendConfig:
 
 
 @dataclass(frozen=True)
+class ClipRigidConfig:
+    # ours: the clip-rigid controls of the per-frame baselines (Table I dagger rows): a candidate
+    # S_i = T_i V_i^-1 supports a frame when it predicts its position within pos_tol_m and its
+    # orientation within rot_tol_deg; a consensus needs min_support frames (its own included)
+    pos_tol_m: float = 0.25
+    rot_tol_deg: float = 5.0
+    min_support: int = 2
+
+
+@dataclass(frozen=True)
 class Config:
     map: MapConfig = field(default_factory=MapConfig)
     odometry: OdometryConfig = field(default_factory=OdometryConfig)
@@ -183,6 +219,7 @@ class Config:
     registration: RegistrationConfig = field(default_factory=RegistrationConfig)
     refinement: RefinementConfig = field(default_factory=RefinementConfig)
     backend: BackendConfig = field(default_factory=BackendConfig)
+    clip_rigid: ClipRigidConfig = field(default_factory=ClipRigidConfig)
 
     def replace(self, dotted: str, value: Any) -> "Config":
         section, _, name = dotted.partition(".")
@@ -200,35 +237,37 @@ class Config:
     def from_dict(d: dict | None, source: str = "<config>") -> "Config":
         """Overrides on top of the defaults; unknown sections or keys are errors naming them."""
         cfg = Config()
+        sections = {f.name for f in dataclasses.fields(Config)}
         for section, values in (d or {}).items():
+            if section not in sections:
+                raise ValueError(f"{source}: {section}: unknown section; known: {', '.join(sorted(sections))}")
             if not isinstance(values, dict):
                 raise ValueError(f"{source}: {section}: expected a mapping")
+            names = {f.name for f in dataclasses.fields(getattr(cfg, section))}
             for name, v in values.items():
-                try:
-                    cur = getattr(getattr(cfg, section), name)
-                except AttributeError:
-                    raise ValueError(f"{source}: {section}.{name}: unknown setting") from None
+                if name not in names:
+                    raise ValueError(f"{source}: {section}.{name}: unknown setting")
+                cur = getattr(getattr(cfg, section), name)
                 if isinstance(cur, tuple):
+                    if not isinstance(v, (list, tuple)) or not all(isinstance(x, int) and not isinstance(x, bool) for x in v):
+                        raise ValueError(f"{source}: {section}.{name}: expected a list of integers, got {v!r}")
                     v = tuple(v)
                 elif isinstance(cur, bool):
                     if not isinstance(v, bool):
                         raise ValueError(f"{source}: {section}.{name}: expected true or false, got {v!r}")
-                elif isinstance(cur, (int, float)) and (isinstance(v, bool) or not isinstance(v, (int, float))):
+                elif isinstance(cur, str):
+                    if not isinstance(v, str):
+                        raise ValueError(f"{source}: {section}.{name}: expected a name, got {v!r}")
+                elif isinstance(v, bool) or not isinstance(v, (int, float)):
                     raise ValueError(f"{source}: {section}.{name}: expected a number, got {v!r}")
-                elif isinstance(cur, int) and not isinstance(cur, bool) and isinstance(v, float) and not v.is_integer():
+                elif isinstance(cur, int) and isinstance(v, float) and not v.is_integer():
                     raise ValueError(f"{source}: {section}.{name}: expected an integer, got {v!r}")
-                cfg = cfg.replace(f"{section}.{name}", type(cur)(v) if not isinstance(cur, tuple) else v)
+                cfg = cfg.replace(f"{section}.{name}", v if isinstance(cur, tuple) else type(cur)(v))
         return cfg
 
 
 def load_config(path) -> Config:
     """A YAML/JSON file of overrides (``registration: {center_match_m: 0.4}``) on the paper's defaults."""
-    from pathlib import Path
-
-    import yaml
-
-    from synth.errors import UserError
-
     p = Path(path)
     if not p.is_file():
         raise UserError(f"{p}: config file not found")

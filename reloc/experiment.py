@@ -463,7 +463,7 @@ def run_tour_task(task: dict) -> dict:
 
         s = run_appearance(tour, _load("appearance", task["appearance_map"]), d,
                            clip_poses=load_clip_poses(task["clips"]), cfg=AppearanceConfig(**task["options"]),
-                           progress=False)
+                           clip_rigid=_config(task["config"]).clip_rigid, progress=False)
     elif method == "one_frame":
         from synth.camera import write_tum
 

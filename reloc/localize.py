@@ -60,7 +60,7 @@ def localize_clip(nodes: list[Node], frame_obs: dict[int, list[Observation]], V:
         seen = sorted({n.cls for n in nodes})
         return Placement(None, reason=f"none of the observed classes ({', '.join(seen[:5])}) occur in the map",
                          nodes=n_nodes)
-    gravity = estimate_gravity(nodes, V)
+    gravity = estimate_gravity(nodes, V, ref)
     scorer = SurfaceScorer(bmap, [n.cls for n in nodes], [n.samples for n in nodes])
     gate = gravity.gate_deg(ref)
     info: dict = {"gravity_planes": gravity.n_planes}
@@ -107,7 +107,7 @@ def localize_clip(nodes: list[Node], frame_obs: dict[int, list[Observation]], V:
     if best is None:
         t1 = time.perf_counter()
         R_level = rotation_between(gravity.u, Z)
-        yaws = wall_yaws(R_level, wall_normals(nodes))
+        yaws = wall_yaws(R_level, wall_normals(nodes)[0], ref.wall_min_horizontal)
         fb = fallback_candidates(nodes, bmap, reg, R_level, yaws, yaw_prior=yaw_prior)
         tm["fallback"] = time.perf_counter() - t1
         if fb:

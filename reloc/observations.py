@@ -13,11 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .config import DetectionConfig, ObservationConfig
-from .detection import STRUCTURE_CLASSES, Detection
+from .detector_base import STRUCTURE_CLASSES, Detection
 from .geometry import farthest_point_sample
-
-MAX_POINTS_PER_MASK = 4000  # pixels back-projected per mask (grid-subsampled beyond that)
-FPS_POOL = 400  # farthest-point sampling runs over at most about this many of them
 
 
 @dataclass
@@ -76,7 +73,8 @@ def observe(frame_index: int, depth: np.ndarray, K: np.ndarray, detections: list
             cfg: ObservationConfig | None = None, plane_min_points: int = 30,
             plane_max_rms_m: float = 0.03, boxes3d: list[Box3D] | None = None,
             det_cfg: DetectionConfig | None = None) -> list[Observation]:
-    """Observations of one frame's detections (camera frame). Masks without valid depth are skipped.
+    """Observations of one frame's detections (camera frame). Masks smaller than
+    ``det_cfg.min_mask_pixels`` or without valid depth are skipped.
 
     With ``boxes3d`` (a 3D box detector's output for the frame), an unused box replaces the mask
     center when its projection has the highest 2D IoU (> 0.4) with the detection's box and its
@@ -89,6 +87,8 @@ def observe(frame_index: int, depth: np.ndarray, K: np.ndarray, detections: list
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     out: list[Observation] = []
     for det in detections:
+        if np.count_nonzero(det.mask) < det_cfg.min_mask_pixels:
+            continue
         if det.box2d is not None:  # search the mask's bounding box only
             x0, y0, x1, y1 = det.box2d
             ys, xs = np.nonzero(det.mask[y0:y1 + 1, x0:x1 + 1] & (depth[y0:y1 + 1, x0:x1 + 1] > 0))
@@ -97,8 +97,8 @@ def observe(frame_index: int, depth: np.ndarray, K: np.ndarray, detections: list
             ys, xs = np.nonzero(det.mask & (depth > 0))
         if len(ys) < 3:
             continue
-        if len(ys) > MAX_POINTS_PER_MASK:
-            step = int(np.ceil(len(ys) / MAX_POINTS_PER_MASK))
+        if len(ys) > cfg.max_points_per_mask:
+            step = int(np.ceil(len(ys) / cfg.max_points_per_mask))
             ys, xs = ys[::step], xs[::step]
         z = depth[ys, xs].astype(np.float64)
         structure = det.cls in STRUCTURE_CLASSES
@@ -111,7 +111,7 @@ def observe(frame_index: int, depth: np.ndarray, K: np.ndarray, detections: list
                 continue
         P = np.column_stack([(xs - cx) * z / fx, (ys - cy) * z / fy, z])
         center = P.mean(axis=0)
-        sub = P[:: max(1, len(P) // FPS_POOL)]  # farthest-point sampling over a grid subsample
+        sub = P[:: max(1, len(P) // cfg.fps_pool)]  # farthest-point sampling over a grid subsample
         samples = sub[farthest_point_sample(sub, cfg.surface_samples)]
         normal = rms = None
         if structure and len(P) >= plane_min_points:

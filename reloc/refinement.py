@@ -6,7 +6,8 @@
   detectors give masks only.) A candidate passes the gravity gate when angle(R u, +Z) is at most
   30 degrees (60 for the camera-up fallback) and is then levelled about the clip centroid.
 * Manhattan yaw: levelled wall normals should point along the map's Manhattan axes; a correction
-  is accepted with at least five normals whose deviations (mod 90 degrees) have a circular MAD of
+  is accepted with normals of at least five distinct walls (fused wall nodes, not observations:
+  one wall seen five times is one wall) whose deviations (mod 90 degrees) have a circular MAD of
   at most 12 degrees; their circular median is the correction.
 * Refinement (Eq. 3): Gauss-Newton on a left perturbation about the mapped clip centroid of
   one-sided point-to-box residuals over consistent instances (each instance weighted 1/|P_k|),
@@ -47,7 +48,10 @@ def camera_up(V: dict[int, np.ndarray]) -> np.ndarray:
     return u / np.linalg.norm(u)
 
 
-def estimate_gravity(nodes: list[Node], V: dict[int, np.ndarray]) -> Gravity:
+def estimate_gravity(nodes: list[Node], V: dict[int, np.ndarray], cfg: RefinementConfig | None = None) -> Gravity:
+    """The clip-frame vertical from floor/ceiling normals and the direction orthogonal to wall
+    normals, else the camera-up direction."""
+    cfg = cfg or RefinementConfig()
     cam_u = camera_up(V)
     ups = []
     for n in nodes:
@@ -61,7 +65,7 @@ def estimate_gravity(nodes: list[Node], V: dict[int, np.ndarray]) -> Gravity:
     if len(walls) >= 2:
         W = np.array(walls)
         _, s, Vt = np.linalg.svd(W, full_matrices=False)
-        if len(s) >= 2 and s[1] > 0.3 * s[0]:  # at least two clearly different wall directions
+        if len(s) >= 2 and s[1] > cfg.gravity_wall_spread * s[0]:  # two clearly different wall directions
             w = Vt[-1] if len(Vt) == 3 else np.cross(Vt[0], Vt[1])
             w = w / np.linalg.norm(w)
             if w @ cam_u < 0:
@@ -70,7 +74,7 @@ def estimate_gravity(nodes: list[Node], V: dict[int, np.ndarray]) -> Gravity:
             n_planes += len(walls)
     if n_planes and np.linalg.norm(u) > 1e-9:
         u = u / np.linalg.norm(u)
-        if u @ cam_u > math.cos(math.radians(60.0)):  # a plausible vertical
+        if u @ cam_u > math.cos(math.radians(cfg.gravity_max_from_camera_up_deg)):  # a plausible vertical
             return Gravity(u=u, source="structure", n_planes=n_planes)
     return Gravity(u=cam_u, source="camera_up")
 
@@ -94,27 +98,52 @@ def rotate_about_z(S: np.ndarray, yaw: float, centroid: np.ndarray) -> np.ndarra
     return make_T(R2, c_map - R2 @ centroid)
 
 
-def wall_normals(nodes: list[Node]) -> np.ndarray:
-    ns = [nv for n in nodes if n.cls == "wall" and n.normals is not None for nv in n.normals]
-    return np.array(ns).reshape(-1, 3)
+def wall_normals(nodes: list[Node]) -> tuple[np.ndarray, np.ndarray]:
+    """Clip-frame plane normals of the wall observations (m, 3), and the distinct wall each was
+    seen on (m,): the index of its fused wall node. A wall seen five times gives five normals of
+    one wall."""
+    ns, ws = [], []
+    for k, n in enumerate(nodes):
+        if n.cls == "wall" and n.normals is not None:
+            ns += list(n.normals)
+            ws += [k] * len(n.normals)
+    return np.array(ns, float).reshape(-1, 3), np.array(ws, dtype=np.int64)
 
 
-def wall_yaws(R: np.ndarray, normals: np.ndarray) -> np.ndarray:
+def horizontal(R: np.ndarray, normals: np.ndarray, min_horizontal: float) -> np.ndarray:
+    """Mask of the clip-frame normals whose direction rotated by R is near horizontal (its
+    horizontal part at least ``min_horizontal``): the ones that give a yaw."""
+    if not len(normals):
+        return np.zeros(0, bool)
+    return np.linalg.norm((normals @ R.T)[:, :2], axis=1) > min_horizontal
+
+
+def wall_yaws(R: np.ndarray, normals: np.ndarray,
+              min_horizontal: float = RefinementConfig.wall_min_horizontal) -> np.ndarray:
     """Horizontal directions (radians) of clip-frame wall normals rotated by R; near-vertical ones dropped."""
     if not len(normals):
         return np.empty(0)
     m = normals @ R.T
-    h = np.linalg.norm(m[:, :2], axis=1)
-    keep = h > 0.7
+    keep = horizontal(R, normals, min_horizontal)
     return np.arctan2(m[keep, 1], m[keep, 0])
 
 
+def distinct_walls(R: np.ndarray, normals: np.ndarray, walls: np.ndarray | None, min_horizontal: float) -> int:
+    """Number of distinct walls with a normal that gives a yaw under R (``walls`` None: one wall per normal)."""
+    keep = horizontal(R, normals, min_horizontal)
+    return int(keep.sum()) if walls is None else len(np.unique(np.asarray(walls)[keep]))
+
+
 def manhattan_correction(S: np.ndarray, normals: np.ndarray, bmap: BoxMap, cfg: RefinementConfig,
-                         centroid: np.ndarray) -> tuple[np.ndarray, dict]:
-    """Yaw correction from wall normals (accepted or not) and what was measured."""
-    yaws = wall_yaws(S[:3, :3], normals)
-    info = {"normals": int(len(yaws)), "accepted": False}
-    if len(yaws) < cfg.manhattan_min_normals:
+                         centroid: np.ndarray, walls: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+    """Yaw correction from wall normals (accepted or not) and what was measured. ``walls``: the
+    distinct wall of each normal (``wall_normals``); at least ``manhattan_min_normals`` distinct
+    walls are needed, their observations' normals give the median and its MAD."""
+    R = S[:3, :3]
+    yaws = wall_yaws(R, normals, cfg.wall_min_horizontal)
+    n_walls = distinct_walls(R, normals, walls, cfg.wall_min_horizontal)
+    info = {"normals": int(len(yaws)), "walls": n_walls, "accepted": False}
+    if n_walls < cfg.manhattan_min_normals:
         return S, info
     dev = yaws - bmap.manhattan_yaw
     period = math.pi / 2
@@ -236,7 +265,8 @@ def orientation_aware(S0: np.ndarray, nodes: list[Node], bmap: BoxMap, cfg: Refi
         return S, info
     S = level(S0, gravity.u, centroid)
     S, info["refine"] = refine(S, nodes, bmap, cfg, reg, gravity, scorer)
-    S2, info["manhattan"] = manhattan_correction(S, wall_normals(nodes), bmap, cfg, centroid)
+    normals, walls = wall_normals(nodes)
+    S2, info["manhattan"] = manhattan_correction(S, normals, bmap, cfg, centroid, walls)
     if info["manhattan"]["accepted"]:
         S, info["refine2"] = refine(S2, nodes, bmap, cfg, reg, gravity, scorer)
     return S, info

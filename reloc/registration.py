@@ -2,13 +2,15 @@
 
 * Hypothesis-first registration: minimal three-pair assignments from the indexed triangle route
   (local object triangles looked up in the map's triangle index) and the random route; each gives
-  a rigid transform S_h, ranked by the number of greedy one-to-one same-class center pairs within
-  0.5 m, then their RMSE; the winner refitted on all its pairs is S_g.
-* Frame-pose anchors: per-frame RANSAC fits W_i, their clip proposals W_i V_i^-1 and a consensus
-  S_a; the anchors veto S_g when they disagree with it.
+  a rigid transform S_h. The selected h* has the most greedy one-to-one same-class center pairs
+  within 0.5 m, then the lowest RMSE, over all hypotheses (:func:`select_hypothesis`); the winner
+  refitted on all its pairs is S_g.
+* Frame-pose anchors: per-frame RANSAC fits W_i with at least six object inliers, their clip
+  proposals W_i V_i^-1 and a consensus S_a (``reloc.clip_rigid.consensus_fit``); the anchors veto
+  S_g when they disagree with it.
 * Verification: box-surface consistency kappa (Eq. 2) ranks the candidates.
-* Orientation fallback: gravity plus Manhattan yaw, four yaw candidates, translation from
-  same-class center votes.
+* Orientation fallback: gravity plus Manhattan yaw, four yaw candidates, each with the translation
+  proposal that has the most one-to-one same-class center inliers.
 
 Walls, floors and ceilings never propose centers; they take part in the surface score.
 """
@@ -21,9 +23,10 @@ from itertools import combinations
 
 import numpy as np
 
+from .clip_rigid import consensus_fit, within_sum
 from .clips import Node
 from .config import RegistrationConfig
-from .geometry import inv_T, make_T, pose_distance, rigid_fit, rigid_fit_batch, rot_z, rotation_mean, yaw_of
+from .geometry import inv_T, make_T, pose_distance, rigid_fit, rigid_fit_batch, rot_z, yaw_of
 from .map import BoxMap, _non_degenerate, circular_median_mod
 from .observations import Observation
 from .surface import SurfaceScorer, kappa, median_rho
@@ -81,10 +84,13 @@ class CenterMatcher:
         return np.linalg.norm(Z - self.Y, axis=2)  # (H, P)
 
     def upper_bound(self, d: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
-        """(number of local nodes with a pair within radius, sum of their best distances)."""
-        within = d < radius
-        hit = np.maximum.reduceat(within, self.l_start, axis=1)
-        best = np.minimum.reduceat(np.where(within, d, radius), self.l_start, axis=1)
+        """(number of local nodes with a pair within radius, sum of their best distances).
+
+        The count lets several local nodes share one map node, so it bounds the number of
+        one-to-one pairs from above."""
+        near = d < radius
+        hit = np.maximum.reduceat(near, self.l_start, axis=1)
+        best = np.minimum.reduceat(np.where(near, d, radius), self.l_start, axis=1)
         return hit.sum(axis=1), best.sum(axis=1)
 
     def greedy(self, d_row: np.ndarray, radius: float) -> list[tuple[int, int, float]]:
@@ -104,6 +110,28 @@ class CenterMatcher:
 
 def _rmse(pairs) -> float:
     return math.sqrt(sum(p[2] ** 2 for p in pairs) / len(pairs)) if pairs else math.inf
+
+
+def select_hypothesis(matcher: CenterMatcher, d: np.ndarray, radius: float) -> tuple[int, list]:
+    """h* = argmax_h (|A_h|, -e_h) over all hypotheses (rows of ``d``): the most greedy
+    one-to-one pairs within radius, then the lowest RMSE; exact ties keep the first in the
+    evaluation order. Returns (h*, A_h*), or (-1, []) without hypotheses.
+
+    Hypotheses are evaluated in decreasing order of the many-to-one count (an upper bound on
+    |A_h|), and evaluation stops once that bound falls below the best |A_h| found: no hypothesis
+    left could win, or tie and then win on RMSE."""
+    if not len(d):
+        return -1, []
+    ub, dsum = matcher.upper_bound(d, radius)
+    best_key, best_h, best_pairs = None, -1, []
+    for h in np.lexsort((dsum, -ub)):
+        if best_key is not None and ub[h] < max(best_key[0], 1):
+            break
+        pairs = matcher.greedy(d[h], radius)
+        key = (len(pairs), -_rmse(pairs))
+        if best_key is None or key > best_key:
+            best_key, best_h, best_pairs = key, int(h), pairs
+    return best_h, best_pairs
 
 
 # --------------------------------------------------------------------------------------------
@@ -228,17 +256,8 @@ def graph_candidate(nodes: list[Node], bmap: BoxMap, cfg: RegistrationConfig, rn
     Ys = np.stack([bmap.centers[m] for _, m in assign])
     Ts = rigid_fit_batch(Xs, Ys)
     matcher = CenterMatcher(bmap, U_cls, U_c)
-    d = matcher.distances(Ts)
-    ub, dsum = matcher.upper_bound(d, cfg.center_match_m)
-    top = np.lexsort((dsum, -ub))[:32]
-    best = None
-    for h in top:
-        pairs = matcher.greedy(d[h], cfg.center_match_m)
-        key = (len(pairs), -_rmse(pairs))
-        if best is None or key > best[0]:
-            best = (key, h, pairs)
-    (n_pairs, _), h, pairs = best
-    if n_pairs < 3:
+    h, pairs = select_hypothesis(matcher, matcher.distances(Ts), cfg.center_match_m)
+    if len(pairs) < 3:
         return None
     S = rigid_fit(U_c[[p[0] for p in pairs]], bmap.centers[[p[1] for p in pairs]])
     # the refit can change which centers agree: report the refitted pairs
@@ -255,12 +274,15 @@ def graph_candidate(nodes: list[Node], bmap: BoxMap, cfg: RegistrationConfig, rn
 
 def frame_anchor(frame: int, obs: list[Observation], bmap: BoxMap, cfg: RegistrationConfig,
                  rng: np.random.Generator) -> tuple[np.ndarray, int, float] | None:
-    """Per-frame RANSAC: (W camera->map, inliers, center RMSE) or None."""
+    """Per-frame RANSAC: (W camera->map, inliers, center RMSE) or None.
+
+    Inliers are object instances within ``anchor_inlier_m`` of a same-class box (box-surface
+    test); walls, floors and ceilings are not counted, so "at least six inliers" means six objects.
+    """
     objs = [o for o in obs if not o.structure and o.cls in bmap.object_classes]
     if len(objs) < 3:
         return None
-    usable = [o for o in obs if o.cls in bmap.class_set]
-    scorer = SurfaceScorer(bmap, [o.cls for o in usable], [o.samples for o in usable])
+    scorer = SurfaceScorer(bmap, [o.cls for o in objs], [o.samples for o in objs])
     cands = [np.array([j for j in bmap.nodes_of(o.cls) if bmap.is_object[j]]) for o in objs]
     C = np.array([o.center for o in objs])
     n_it = cfg.anchor_ransac_iterations
@@ -283,22 +305,19 @@ def frame_anchor(frame: int, obs: list[Observation], bmap: BoxMap, cfg: Registra
     score = (rho < cfg.anchor_inlier_m).sum(axis=1)
     h = int(np.argmax(score))
     T = Ts[h]
-    for _ in range(2):  # refit the winner on its object inliers' assigned box centers
+    for _ in range(cfg.anchor_refits):  # refit the winner on its inliers' assigned box centers
         rho1, asg1 = scorer.rho(T[None])
-        inl = [k for k, o in enumerate(usable) if rho1[0, k] < cfg.anchor_inlier_m and not o.structure]
+        inl = np.flatnonzero(rho1[0] < cfg.anchor_inlier_m)
         if len(inl) < 3:
             break
-        X1 = np.array([usable[k].center for k in inl])
-        Y1 = bmap.centers[asg1[0, inl]]
-        T = rigid_fit(X1, Y1)
+        T = rigid_fit(C[inl], bmap.centers[asg1[0, inl]])
     rho1, asg1 = scorer.rho(T[None])
-    inliers = int((rho1[0] < cfg.anchor_inlier_m).sum())
-    inl = [k for k, o in enumerate(usable) if rho1[0, k] < cfg.anchor_inlier_m and not o.structure]
+    inl = np.flatnonzero(rho1[0] < cfg.anchor_inlier_m)
     if len(inl) < 3:
         return None
-    res = (np.array([usable[k].center for k in inl]) @ T[:3, :3].T + T[:3, 3]) - bmap.centers[asg1[0, inl]]
+    res = (C[inl] @ T[:3, :3].T + T[:3, 3]) - bmap.centers[asg1[0, inl]]
     rmse = float(np.sqrt((res ** 2).sum(axis=1).mean()))
-    return T, inliers, rmse
+    return T, len(inl), rmse
 
 
 def anchors_for_clip(frame_obs: dict[int, list[Observation]], V: dict[int, np.ndarray], bmap: BoxMap,
@@ -318,23 +337,17 @@ def anchors_for_clip(frame_obs: dict[int, list[Observation]], V: dict[int, np.nd
 
 
 def anchor_candidate(anchors: list[Anchor], V: dict[int, np.ndarray], cfg: RegistrationConfig) -> Candidate | None:
+    """S_a: the proposal W_i V_i^-1 supported by the most anchors (translation distance plus
+    rotation angle below ``anchor_consensus``), refined over its supporters: a rotation average and
+    the corresponding mean translation. None with fewer than ``anchor_min_support`` supporters."""
     if len(anchors) < cfg.anchor_min_support:
         return None
-    best = None
-    for a in anchors:
-        sup = []
-        for b in anchors:
-            dt, dr = pose_distance(a.S_hat @ V[b.frame], b.W)
-            if dt + dr < cfg.anchor_consensus:
-                sup.append(b)
-        if best is None or len(sup) > len(best):
-            best = sup
-    if len(best) < cfg.anchor_min_support:
+    S, ok = consensus_fit(np.stack([a.W for a in anchors]), np.stack([V[a.frame] for a in anchors]),
+                          within_sum(cfg.anchor_consensus), cfg.anchor_min_support)
+    if S is None:
         return None
-    R = rotation_mean([b.S_hat[:3, :3] for b in best])
-    t = np.mean([b.S_hat[:3, 3] for b in best], axis=0)
-    return Candidate(S=make_T(R, t), source="anchors", matches=len(best),
-                     info={"anchors": len(anchors), "support": len(best)})
+    return Candidate(S=S, source="anchors", matches=int(ok.sum()),
+                     info={"anchors": len(anchors), "support": int(ok.sum())})
 
 
 def anchors_veto(S: np.ndarray, anchors: list[Anchor], V: dict[int, np.ndarray], cfg: RegistrationConfig) -> bool:
@@ -369,7 +382,9 @@ def score_candidates(cands: list[Candidate], nodes: list[Node], bmap: BoxMap, cf
 
 def fallback_candidates(nodes: list[Node], bmap: BoxMap, cfg: RegistrationConfig, R_level: np.ndarray,
                         wall_yaws: np.ndarray, yaw_prior: float | None = None) -> list[Candidate]:
-    """Four yaw candidates about +Z after levelling; translation from same-class center votes.
+    """Four yaw candidates about +Z after levelling; for each, every same-class local/map center
+    pair proposes a translation, and the proposal with the most one-to-one inliers (then the
+    lowest RMSE) is replaced by the mean offset over those inliers.
 
     R_level takes the clip's gravity direction to +Z; wall_yaws are the horizontal directions of
     the levelled wall normals (radians). Returns scored candidates (object instances only), best first.
@@ -397,10 +412,7 @@ def fallback_candidates(nodes: list[Node], bmap: BoxMap, cfg: RegistrationConfig
         Ts = np.tile(np.eye(4), (len(t_all), 1, 1))
         Ts[:, :3, :3] = R
         Ts[:, :3, 3] = t_all
-        d = matcher.distances(Ts)
-        ub, dsum = matcher.upper_bound(d, cfg.fallback_inlier_m)
-        h = int(np.lexsort((dsum, -ub))[0])
-        pairs = matcher.greedy(d[h], cfg.fallback_inlier_m)
+        _, pairs = select_hypothesis(matcher, matcher.distances(Ts), cfg.fallback_inlier_m)
         if not pairs:
             continue
         t = np.mean([bmap.centers[m] - R @ X[li] for li, m, _ in pairs], axis=0)
