@@ -56,8 +56,9 @@ from pathlib import Path
 from synth.errors import SceneFormatError, UserError, check_output_folder
 
 from . import tables
-from .io import write_json_atomic
-from .tables import ABLATIONS, UNIT_LENGTHS, ablation_name
+from .io import write_json_atomic, write_text_atomic
+from .tables import ABLATIONS, ablation_name
+from .units import DEFAULT_LENGTHS
 
 SPEC_KEYS = {"name", "description", "render", "tours", "out", "mapping", "query", "unchanged", "map", "methods",
              "tables", "one_frame_stride", "detector", "config", "appearance", "fpfh_icp", "workers", "seed"}
@@ -410,7 +411,7 @@ def run_map_task(task: dict) -> dict:
     out.with_name(out.name + ".done.json").unlink(missing_ok=True)
     tour = Tour(task["tour"])
     if task["kind"] == "boxes":
-        from .mapping import build_map, dumps_map, map_from_scene, write_atomic
+        from .mapping import build_map, dumps_map, map_from_scene
 
         if task["source"] == "ground-truth":
             doc = map_from_scene(tour.meta.get("layout_file") or tour.meta["layout"])
@@ -418,7 +419,7 @@ def run_map_task(task: dict) -> dict:
             doc, report = build_map(tour.root, progress=False)
             if not doc["boxes"]:
                 raise UserError(report["warnings"][0] if report["warnings"] else f"{tour.root}: no boxes built")
-        write_atomic(out, dumps_map(doc))
+        write_text_atomic(out, dumps_map(doc))
     elif task["kind"] == "appearance":
         from .appearance import AppearanceConfig, AppearanceMap
 
@@ -634,7 +635,7 @@ def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int |
                 options=spec.appearance, vr=vr_key)
         if "one_frame" in methods or "units" in spec.tables:
             add("one_frame", [], stride=spec.one_frame_stride,
-                lengths=list(UNIT_LENGTHS if "units" in spec.tables else (1,)))
+                lengths=list(DEFAULT_LENGTHS if "units" in spec.tables else (1,)))
         for v in variants:
             add(ablation_name(v), [], variant=list(v))
     runner = _Runner(workers, progress, len(tasks), f"{spec.name}: runs")

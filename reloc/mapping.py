@@ -1075,7 +1075,6 @@ def dumps_map(doc: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-write_atomic = write_text_atomic  # the name the map commands use
 
 
 def summary_line(doc: dict, size_bytes: int, errors: dict | None, report: dict | None = None) -> str:
@@ -1098,7 +1097,7 @@ def summary_line(doc: dict, size_bytes: int, errors: dict | None, report: dict |
 def cmd_from_scene(args) -> int:
     check_output_file(args.out)
     doc = map_from_scene(args.name)
-    out = write_atomic(args.out, dumps_map(doc))
+    out = write_text_atomic(args.out, dumps_map(doc))
     print(f"wrote {len(doc['boxes'])} boxes of {doc['layout']} to {out} ({out.stat().st_size / 1024:.1f} kB)")
     return 0
 
@@ -1115,7 +1114,7 @@ def cmd_build(args) -> int:
     from .map import BoxMap
 
     BoxMap(doc, source=str(args.out))  # validates what is about to be written
-    out = write_atomic(args.out, dumps_map(doc))
+    out = write_text_atomic(args.out, dumps_map(doc))
     errors = None
     try:
         from synth.dataset import Tour
@@ -1125,7 +1124,7 @@ def cmd_build(args) -> int:
     except UserError:
         pass  # no ground truth: no errors to report
     if args.report:
-        write_atomic(args.report, json.dumps({"build": report, "errors": errors}, indent=1) + "\n")
+        write_text_atomic(args.report, json.dumps({"build": report, "errors": errors}, indent=1) + "\n")
     print(f"{out}: " + summary_line(doc, out.stat().st_size, errors, report))
     return 0
 

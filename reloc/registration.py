@@ -26,7 +26,7 @@ import numpy as np
 from .clip_rigid import consensus_fit, within_sum
 from .clips import Node
 from .config import RegistrationConfig
-from .geometry import inv_T, make_T, pose_distance, rigid_fit, rigid_fit_batch, rot_z, yaw_of
+from .geometry import make_T, pose_distance, rigid_fit, rigid_fit_batch, rot_z, yaw_of
 from .map import BoxMap, _non_degenerate, circular_median_mod
 from .observations import Observation
 from .surface import SurfaceScorer, kappa, median_rho
@@ -50,7 +50,6 @@ class Candidate:
 class Anchor:
     frame: int
     W: np.ndarray  # camera -> map
-    S_hat: np.ndarray  # W V_i^-1
     inliers: int
     rmse: float
 
@@ -331,7 +330,7 @@ def anchors_for_clip(frame_obs: dict[int, list[Observation]], V: dict[int, np.nd
             continue
         W, inliers, rmse = r
         if inliers >= cfg.anchor_min_inliers and rmse <= cfg.anchor_max_rmse_m:
-            out.append(Anchor(frame=f, W=W, S_hat=W @ inv_T(V[f]), inliers=inliers, rmse=rmse))
+            out.append(Anchor(frame=f, W=W, inliers=inliers, rmse=rmse))
     out.sort(key=lambda a: (-a.inliers, a.rmse))
     return out[: cfg.max_anchors]
 

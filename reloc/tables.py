@@ -60,8 +60,6 @@ PRIMARY = {"videoreloc": "closure", "fpfh_icp": "closure", "appearance": "causal
 LABELS = {"videoreloc": "VideoReloc", "fpfh_icp": "FPFH-ICP", "appearance": "Appearance ({feature} + PnP)",
           "one_frame": "One-frame object unit"}
 
-# Table III rows: unit lengths in frames
-UNIT_LENGTHS = (1, 30, 100, 250)
 # Table IV rows, in the paper's order: (orientation-aware, run-level, adaptive); False = point-to-point
 # refinement, no run-level decision, fixed 100-frame clips. The last is VideoReloc itself.
 ABLATIONS = ((False, False, False), (True, False, False), (True, True, False), (True, False, True), (True, True, True))

@@ -249,10 +249,16 @@ class Tour:
         if extra:
             return (f"{n} poses for {len(present)} frame files in {FRAMES_DIR}/ ({len(extra)} frame files have no "
                     f"pose: {_ranges(extra)}); poses.txt was cut short or belongs to another render")
-        n_meta = self.meta.get("n_frames")
-        if isinstance(n_meta, int) and not isinstance(n_meta, bool) and n_meta != n:
+        n_meta = self.disagreeing_n_frames()
+        if n_meta is not None:
             return f"{n} poses, but {META_FILE} says the tour has {n_meta} frames (n_frames)"
         return None
+
+    def disagreeing_n_frames(self) -> int | None:
+        """meta.json's ``n_frames`` when it is given and differs from the number of poses, else None."""
+        n_meta = self.meta.get("n_frames")
+        ok = not isinstance(n_meta, int) or isinstance(n_meta, bool) or n_meta == len(self.frame_indices)
+        return None if ok else n_meta
 
     def pose(self, index: int) -> np.ndarray:
         return self.poses[self._position(index)].copy()
@@ -674,8 +680,8 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
         problems.append(f"missing frames ({len(rep['missing'])} of {N}, no EXR in {FRAMES_DIR}/): {_ranges(rep['missing'])}")
     if rep["extra_frames"]:
         problems.append(f"frames not in {POSES_FILE} ({len(rep['extra_frames'])}): {_ranges(rep['extra_frames'])}")
-    n_meta = tour.meta.get("n_frames")
-    meta_count_bad = isinstance(n_meta, int) and not isinstance(n_meta, bool) and n_meta != N
+    n_meta = tour.disagreeing_n_frames()
+    meta_count_bad = n_meta is not None
     if meta_count_bad:
         problems.append(f"{POSES_FILE} has {N} poses, but {META_FILE} says the tour has {n_meta} frames (n_frames)")
     capped([f"unreadable frame {u['frame']}: {u['error']}" for u in rep["unreadable"]])
