@@ -13,19 +13,17 @@ import statistics
 import time
 
 from .config import Config
-from .frontend import STAGES, FrontEnd
+from .frontend import STAGES, FrontEnd, default_detector, make_pose_stream, read_frame
 from .map import BoxMap
 
 
 def bench_frontend(tour, bmap: BoxMap, frames: int = 600, poses: str = "odometry", cfg: Config | None = None,
                    repeat: int = 1, progress: bool = False) -> dict:
-    from .units import default_detector, make_pose_stream, read_frame
-
     cfg = cfg or Config()
     idx = [int(i) for i in tour.frame_indices][:frames]
     runs = []
     for _ in range(repeat):
-        det = default_detector(tour, bmap)
+        det = default_detector(tour, bmap, cfg)
         fe = FrontEnd(bmap, tour.K, det, make_pose_stream(poses, tour, cfg), config=cfg)
         io = 0.0
         clips = placed = 0

@@ -375,10 +375,11 @@ def _config(spec_config: dict, variant=None):
     return cfg
 
 
-def _detector(det: dict, tour, bmap):
+def _detector(det: dict, tour, bmap, cfg):
     from .detection import Corruption, DetectorSpec, build_detector
 
-    return build_detector(DetectorSpec(corruption=Corruption(**det)), tour.class_names(), vocabulary=bmap.class_set)
+    return build_detector(DetectorSpec(corruption=Corruption(**det)), tour.class_names(), vocabulary=bmap.class_set,
+                          config=cfg.detection)
 
 
 _CACHE: dict = {}
@@ -450,7 +451,7 @@ def run_tour_task(task: dict) -> dict:
     if method == "videoreloc" or method.startswith("ablation_"):
         bmap = _load("boxes", task["map"])
         cfg = _config(task["config"], task.get("variant"))
-        s = relocalize(tour, bmap, d, cfg=cfg, detector=_detector(task["detector"], tour, bmap), seed=task["seed"],
+        s = relocalize(tour, bmap, d, cfg=cfg, detector=_detector(task["detector"], tour, bmap, cfg), seed=task["seed"],
                        progress=False)
         extra = {"fps": s["fps"], "clips": s["clips"]}
     elif method == "fpfh_icp":
@@ -473,8 +474,9 @@ def run_tour_task(task: dict) -> dict:
         bmap = _load("boxes", task["map"])
         lengths = tuple(task["lengths"])
         est: dict = {}
-        rep = run_units(tour, bmap, lengths=lengths, detector=_detector(task["detector"], tour, bmap),
-                        cfg=_config(task["config"]), one_frame_stride=task["stride"], seed=task["seed"],
+        cfg = _config(task["config"])
+        rep = run_units(tour, bmap, lengths=lengths, detector=_detector(task["detector"], tour, bmap, cfg),
+                        cfg=cfg, one_frame_stride=task["stride"], seed=task["seed"],
                         progress=False, estimates=est)
         one = est.get(1, {})
         fr = sorted(one)

@@ -22,7 +22,7 @@ import numpy as np
 
 from .clips import Clip, ClipPolicy, Node, fuse
 from .config import Config
-from .detection import Detector, FrameData
+from .detection import Detector, FrameData, OracleDetector
 from .geometry import inv_T
 from .localize import Placement, localize_clip
 from .map import BoxMap
@@ -271,3 +271,30 @@ class FrontEnd:
         self._clip = None
         self._chain_pose = {}
         return res
+
+
+# ---------------------------------------------------------------------------------------------
+# reading a tour into the front-end
+
+
+def make_pose_stream(kind: str, tour, cfg: Config) -> PoseStream:
+    """The within-clip pose source of ``reloc run`` and the units: ``odometry`` or ``gt``."""
+    if kind == "gt":
+        return GroundTruthPoses()
+    if kind == "odometry":
+        return OdometryPoses(tour.K, tour.intrinsics.width, tour.intrinsics.height, cfg.odometry)
+    raise ValueError(f"unknown pose source {kind!r} (expected odometry or gt)")
+
+
+def default_detector(tour, bmap: BoxMap, cfg: Config | None = None) -> Detector:
+    """The oracle detector (the tour's label images) over the map's classes, with ``cfg.detection``."""
+    cfg = cfg or Config()
+    return OracleDetector(tour.class_names(), vocabulary=bmap.class_set, min_pixels=cfg.detection.min_mask_pixels)
+
+
+def read_frame(tour, i: int, detector: Detector, rgb: bool) -> FrameData:
+    """Frame i of a tour as the front-end reads it (label images only for the oracle)."""
+    oracle = isinstance(detector, OracleDetector)
+    f = tour.frame(int(i), rgb=rgb, depth=True, instance=oracle, semantic=oracle)
+    depth = f.depth if f.depth is not None else np.zeros((tour.intrinsics.height, tour.intrinsics.width), np.float32)
+    return FrameData(index=int(i), depth=depth, K=tour.K, rgb=f.rgb, instance=f.instance, semantic=f.semantic)

@@ -33,12 +33,11 @@ from .backend import Backend, ClipState
 from .clips import fuse
 from .config import Config
 from .detection import Detector, detector_record
-from .frontend import FrontEnd, PoseEvent
+from .frontend import FrontEnd, PoseEvent, default_detector, make_pose_stream, read_frame
 from .geometry import inv_T
 from .io import save_npz_atomic, write_json_atomic
 from .localize import localize_clip
 from .map import BoxMap
-from .units import default_detector, make_pose_stream, read_frame
 
 
 class Relocalizer:
@@ -178,7 +177,7 @@ def relocalize(tour, bmap: BoxMap, out, cfg: Config | None = None, detector: Det
                progress: bool = True) -> dict:
     check_output_folder(out)  # before the tour is processed, not after
     cfg = cfg or Config()
-    detector = detector or default_detector(tour, bmap)
+    detector = detector or default_detector(tour, bmap, cfg)
     idx = [int(i) for i in tour.frame_indices][:frames]
     r = Relocalizer(bmap, tour.K, detector, make_pose_stream(poses, tour, cfg), cfg=cfg, budgets=budgets, seed=seed)
     bar = None
@@ -295,7 +294,8 @@ def cmd_run(args) -> int:
         cfg = cfg.replace("backend.run_level", False)
     if args.fixed_clips:
         cfg = cfg.replace("clips.adaptive", False).replace("clips.start_frames", 100)
-    det = build_detector(detector_spec_from_args(args), tour.class_names(), vocabulary=bmap.class_set)
+    det = build_detector(detector_spec_from_args(args), tour.class_names(), vocabulary=bmap.class_set,
+                         config=cfg.detection)
     s = relocalize(tour, bmap, args.out, cfg=cfg, detector=det, poses=args.poses,
                    budgets=[args.budget] if args.budget else [], frames=args.frames, seed=args.seed,
                    progress=not args.quiet)

@@ -20,33 +20,12 @@ import time
 import numpy as np
 
 from .config import Config
-from .detection import Detector, FrameData, OracleDetector, detector_record
+from .detection import Detector, detector_record
 from .evaluation import summarize
-from .frontend import FrontEnd, GroundTruthPoses, PoseStream, StaticPoses
+from .frontend import FrontEnd, StaticPoses, default_detector, make_pose_stream, read_frame
 from .map import BoxMap
 
 DEFAULT_LENGTHS = (1, 30, 100, 250)
-
-
-def make_pose_stream(kind: str, tour, cfg: Config) -> PoseStream:
-    if kind == "gt":
-        return GroundTruthPoses()
-    if kind == "odometry":
-        from .frontend import OdometryPoses
-
-        return OdometryPoses(tour.K, tour.intrinsics.width, tour.intrinsics.height, cfg.odometry)
-    raise ValueError(f"unknown pose source {kind!r} (expected odometry or gt)")
-
-
-def default_detector(tour, bmap: BoxMap) -> Detector:
-    return OracleDetector(tour.class_names(), vocabulary=bmap.class_set)
-
-
-def read_frame(tour, i: int, detector: Detector, rgb: bool) -> FrameData:
-    oracle = isinstance(detector, OracleDetector)
-    f = tour.frame(int(i), rgb=rgb, depth=True, instance=oracle, semantic=oracle)
-    depth = f.depth if f.depth is not None else np.zeros((tour.intrinsics.height, tour.intrinsics.width), np.float32)
-    return FrameData(index=int(i), depth=depth, K=tour.K, rgb=f.rgb, instance=f.instance, semantic=f.semantic)
 
 
 def run_units(tour, bmap: BoxMap, lengths=DEFAULT_LENGTHS, detector: Detector | None = None,
@@ -55,7 +34,7 @@ def run_units(tour, bmap: BoxMap, lengths=DEFAULT_LENGTHS, detector: Detector | 
     """Recall of each unit length over the tour; ``estimates`` (a dict), when given, receives
     {length: {frame: pose}} of the placed units."""
     cfg = cfg or Config()
-    detector = detector or default_detector(tour, bmap)
+    detector = detector or default_detector(tour, bmap, cfg)
     idx = [int(i) for i in tour.frame_indices]
     if frames:
         idx = idx[:frames]
@@ -170,7 +149,8 @@ def cmd_units(args) -> int:
     tour = Tour(args.tour)
     bmap = BoxMap.load(args.map)
     cfg = load_config(args.config) if args.config else Config()
-    det = build_detector(detector_spec_from_args(args), tour.class_names(), vocabulary=bmap.class_set)
+    det = build_detector(detector_spec_from_args(args), tour.class_names(), vocabulary=bmap.class_set,
+                         config=cfg.detection)
     rep = run_units(tour, bmap, lengths=_lengths(args.lengths), detector=det, poses=args.poses, cfg=cfg,
                     frames=args.frames, one_frame_stride=args.one_frame_stride, seed=args.seed,
                     progress=not args.quiet)
