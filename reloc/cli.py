@@ -15,12 +15,16 @@ from . import __version__
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from . import bench, checks, eval as eval_, experiment, mapping, run, units
+    # one module per command group, imported when the parser is built (``reloc --version`` stays fast)
+    from .backend import run
+    from .experiments import bench, checks, experiment, units
+    from .experiments import eval as eval_
+    from .map import build
 
     p = argparse.ArgumentParser(prog="reloc", description="VideoReloc: relocalization against a map of class-labelled boxes.")
     p.add_argument("--version", action="version", version=f"reloc {__version__}")
     sub = p.add_subparsers(dest="group")
-    mapping.register_cli(sub)
+    build.register_cli(sub)
     units.register_cli(sub)
     run.register_cli(sub)
     eval_.register_cli(sub)

@@ -79,12 +79,12 @@ def _truncated(world, frame: int) -> bytes:
 
 @pytest.mark.parametrize("where", ["under_file", "is_file", "proc"])
 def test_reloc_run_unwritable_out_fails_fast(world, tmp_path, blocker, capsys, monkeypatch, where):
-    import reloc.run
+    import reloc.backend.run
 
     def no_work(*a, **k):
         raise AssertionError("the tour was processed before --out was checked")
 
-    monkeypatch.setattr(reloc.run, "relocalize", no_work)
+    monkeypatch.setattr(reloc.backend.run, "relocalize", no_work)
     out = {"under_file": blocker / "run", "is_file": blocker, "proc": "/proc/forbidden"}[where]
     assert reloc_main(["run", "--map", str(world["map"]), "--tour", str(world["tour"]), "--out", str(out),
                        "--quiet"]) == 2
@@ -95,26 +95,26 @@ def test_reloc_run_unwritable_out_fails_fast(world, tmp_path, blocker, capsys, m
 
 def test_relocalize_checks_out_before_reading_frames(world, tmp_path, blocker, monkeypatch):
     """The API too: no frame is read when the output folder cannot be made."""
-    import reloc.run
-    from reloc.map import BoxMap
+    import reloc.backend.run
+    from reloc.map.boxmap import BoxMap
     from synth.errors import UserError
 
     def no_read(*a, **k):
         raise AssertionError("a frame was read before --out was checked")
 
-    monkeypatch.setattr(reloc.run, "read_frame", no_read)
+    monkeypatch.setattr(reloc.backend.run, "read_frame", no_read)
     with pytest.raises(UserError, match="a_file"):
-        reloc.run.relocalize(Tour(world["tour"]), BoxMap.load(world["map"]), blocker / "run", progress=False)
+        reloc.backend.run.relocalize(Tour(world["tour"]), BoxMap.load(world["map"]), blocker / "run", progress=False)
 
 
 @pytest.mark.parametrize("where", ["under_file", "proc"])
 def test_reloc_map_build_unwritable_out_fails_fast(world, tmp_path, blocker, capsys, monkeypatch, where):
-    import reloc.mapping
+    import reloc.map.build
 
     def no_work(*a, **k):
         raise AssertionError("the map was built before --out was checked")
 
-    monkeypatch.setattr(reloc.mapping, "build_map", no_work)
+    monkeypatch.setattr(reloc.map.build, "build_map", no_work)
     out = blocker / "map.json" if where == "under_file" else "/proc/forbidden/map.json"
     assert reloc_main(["map", "build", str(world["tour"]), "--out", str(out), "--quiet"]) == 2
     one_line_error(capsys.readouterr().err, out)
@@ -142,13 +142,13 @@ def test_reloc_map_from_scene_unwritable_out(tmp_path, blocker, capsys):
 def test_reloc_experiment_unwritable_out_fails_fast(tmp_path, blocker, capsys, monkeypatch):
     import yaml
 
-    import reloc.experiment
+    import reloc.experiments.experiment
     from test_reloc_experiment import _spec
 
     def no_work(*a, **k):
         raise AssertionError("the design was read before --out was checked")
 
-    monkeypatch.setattr(reloc.experiment, "design_tours", no_work)
+    monkeypatch.setattr(reloc.experiments.experiment, "design_tours", no_work)
     spec = _spec(tmp_path)
     out = blocker / "exp"
     assert reloc_main(["experiment", str(spec), "--out", str(out), "--quiet"]) == 2
@@ -322,9 +322,9 @@ def test_run_json_records_the_detector_and_its_corruption(world, tmp_path, capsy
 
 def test_experiment_runs_record_the_spec_detector(world, tmp_path):
     """The experiment's VideoReloc runs go through relocalize with the spec's ``detector`` settings."""
-    from reloc.experiment import _detector
-    from reloc.map import BoxMap
-    from reloc.run import relocalize
+    from reloc.experiments.experiment import _detector
+    from reloc.map.boxmap import BoxMap
+    from reloc.backend.run import relocalize
 
     t, bmap = Tour(world["tour"]), BoxMap.load(world["map"])
     det = _detector({"miss_rate": 0.1, "seed": 5}, t, bmap)

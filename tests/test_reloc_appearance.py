@@ -1,4 +1,4 @@
-"""Appearance-based per-frame baseline (reloc.appearance) and the clip-rigid protocol (reloc.clip_rigid).
+"""Appearance-based per-frame baseline (reloc.baselines.appearance) and the clip-rigid protocol (reloc.frontend.clip_rigid).
 
 The tours are a textured box room (6 x 5 x 2.6 m) ray-cast exactly at 160x120: every pixel's colour
 is a multi-scale value-noise texture of the WORLD point it sees (different per wall), so appearance is
@@ -15,8 +15,8 @@ import time
 import numpy as np
 import pytest
 
-from reloc.appearance import AppearanceConfig, AppearanceMap, localize_frame, run_appearance
-from reloc.clip_rigid import clip_rigid_trajectory, fit_clip_transform
+from reloc.baselines.appearance import AppearanceConfig, AppearanceMap, localize_frame, run_appearance
+from reloc.frontend.clip_rigid import clip_rigid_trajectory, fit_clip_transform
 from reloc.geometry import exp_so3, inv_T, make_T, pose_distance
 from synth import camera as cam
 from synth.dataset import Tour

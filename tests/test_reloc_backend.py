@@ -15,13 +15,13 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from reloc import geometry as G
-from reloc.backend import Backend
-from reloc.clips import Clip
+from reloc.backend.online import Backend
+from reloc.frontend.clips import Clip
 from reloc.config import Config
-from reloc.frontend import ClipResult
-from reloc.localize import Placement
-from reloc.map import BoxMap
-from reloc.run import relocalize
+from reloc.frontend.stream import ClipResult
+from reloc.frontend.localize import Placement
+from reloc.map.boxmap import BoxMap
+from reloc.backend.run import relocalize
 from synth.dataset import Tour
 from synth.scene import boxes_document, load_layout
 from synth.tour import TourSpec, render_tour
@@ -183,7 +183,7 @@ def test_causal_poses_do_not_depend_on_later_frames(data, tmp_path):
     b = read_tum_independently(tmp_path / "part" / "causal.txt")
     common = [i for i in b if i < 248]  # odometry on a 2-frame stride reports a frame one frame late
     assert len(common) > 200
-    # odometry is bitwise reproducible (reloc.odometry._one_thread), so "do not depend" is exact
+    # odometry is bitwise reproducible (reloc.frontend.odometry._one_thread), so "do not depend" is exact
     lines_a = {round(float(x.split()[0]) * tour.fps): x for x in open(tmp_path / "full" / "causal.txt") if x[0] != "#"}
     lines_b = {round(float(x.split()[0]) * tour.fps): x for x in open(tmp_path / "part" / "causal.txt") if x[0] != "#"}
     for i in common:
@@ -208,12 +208,12 @@ def test_ablation_switches_run(data, tmp_path, capsys, monkeypatch):
     camera travel), so 100-frame clips can only come from the fixed policy."""
     import dataclasses
 
-    import reloc.frontend
-    import reloc.run
+    import reloc.frontend.stream
+    import reloc.backend.run
     from reloc.cli import main
 
     tour, bmap = data["tour"], data["map"]
-    real_localize, real_relocalize = reloc.frontend.localize_clip, reloc.run.relocalize
+    real_localize, real_relocalize = reloc.frontend.stream.localize_clip, reloc.backend.run.relocalize
 
     def misplace_last_clip(nodes, frame_obs, V, *args, **kwargs):
         p = real_localize(nodes, frame_obs, V, *args, **kwargs)
@@ -227,8 +227,8 @@ def test_ablation_switches_run(data, tmp_path, capsys, monkeypatch):
         used[flag] = kwargs["cfg"]
         return real_relocalize(*args, **kwargs)
 
-    monkeypatch.setattr(reloc.frontend, "localize_clip", misplace_last_clip)
-    monkeypatch.setattr(reloc.run, "relocalize", record_config)
+    monkeypatch.setattr(reloc.frontend.stream, "localize_clip", misplace_last_clip)
+    monkeypatch.setattr(reloc.backend.run, "relocalize", record_config)
     never = tmp_path / "never_adaptive.yaml"
     never.write_text("clips: {min_path_m: 2000.0}\n")
     out, clips, closure = {}, {}, {}
@@ -295,9 +295,9 @@ def test_no_clip_ever_placed_gives_complete_empty_outputs(data, tmp_path, capsys
 
 def test_run_broken_at_every_frame(data):
     """Every other frame has no depth: every clip is one frame long and its own run."""
-    from reloc.detection import FrameData, OracleDetector
-    from reloc.frontend import OdometryPoses
-    from reloc.run import Relocalizer
+    from reloc.frontend.detection import FrameData, OracleDetector
+    from reloc.frontend.stream import OdometryPoses
+    from reloc.backend.run import Relocalizer
 
     tour, bmap = data["tour"], data["map"]
     cfg = Config()
@@ -333,7 +333,7 @@ def test_eval_bad_input(data, tmp_path, capsys):
 def test_cue_derived_hypothesis_overrules_a_consistently_wrong_run():
     """Every clip is placed with the same 90-degree yaw error (a repeated-layout confusion the
     clips agree on); the gravity/wall-derived variant explains more instances and wins."""
-    from reloc.clips import Node
+    from reloc.frontend.clips import Node
 
     m = room_map(n_objects=40, seed=21)
     rng = np.random.default_rng(3)

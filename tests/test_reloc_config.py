@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 
 from reloc import geometry as G
-from reloc.clip_rigid import fit_clip_transform
-from reloc.clips import Node, fuse
+from reloc.frontend.clip_rigid import fit_clip_transform
+from reloc.frontend.clips import Node, fuse
 from reloc.config import Config, load_config
-from reloc.detection import Corruption, Detection, DetectorSpec, FrameData, build_detector
-from reloc.observations import Observation, observe
-from reloc.refinement import estimate_gravity, wall_yaws
+from reloc.frontend.detection import Corruption, Detection, DetectorSpec, FrameData, build_detector
+from reloc.frontend.observations import Observation, observe
+from reloc.frontend.refinement import estimate_gravity, wall_yaws
 from synth.errors import UserError
 
 RELOC = Path(__file__).resolve().parents[1] / "reloc"

@@ -14,15 +14,15 @@ import numpy as np
 import pytest
 
 from reloc import geometry as G
-from reloc.clips import ClipPolicy, Node, fuse
+from reloc.frontend.clips import ClipPolicy, Node, fuse
 from reloc.config import ClipConfig, Config
-from reloc.map import BoxMap, circular_median_mod
-from reloc.observations import Observation, observe
-from reloc.detection import Detection
-from reloc.refinement import Gravity, estimate_gravity, manhattan_correction, orientation_aware, tilt_deg
-from reloc.registration import (anchor_candidate, anchors_for_clip, anchors_veto, fallback_candidates,
+from reloc.map.boxmap import BoxMap, circular_median_mod
+from reloc.frontend.observations import Observation, observe
+from reloc.frontend.detection import Detection
+from reloc.frontend.refinement import Gravity, estimate_gravity, manhattan_correction, orientation_aware, tilt_deg
+from reloc.frontend.registration import (anchor_candidate, anchors_for_clip, anchors_veto, fallback_candidates,
                                 graph_candidate)
-from reloc.surface import SurfaceScorer, kappa
+from reloc.frontend.surface import SurfaceScorer, kappa
 from synth.errors import UserError
 
 RNG = np.random.default_rng(1)
@@ -311,14 +311,14 @@ def _frame_observations(m, W_true, ids, rng, frame):
 
 
 def test_candidates_compare_by_identity():
-    from reloc.registration import Candidate
+    from reloc.frontend.registration import Candidate
 
     a, b = Candidate(S=np.eye(4), source="graph"), Candidate(S=np.eye(4), source="anchors")
     assert a in [a, b] and b not in [a] and [a, b].index(b) == 1  # no "truth value of an array" error
 
 
 def test_gravity_gate_rejects_a_tilted_candidate_without_crashing():
-    from reloc.localize import localize_clip
+    from reloc.frontend.localize import localize_clip
 
     m = room_map(n_objects=30, seed=5)
     rng = np.random.default_rng(2)
@@ -420,8 +420,8 @@ def test_refinement_jacobian_matches_finite_differences(monkeypatch):
     rotation and on the mapped centroid) with J by central finite differences over the step's own
     parametrization (a left rotation about the mapped centroid, then a translation of it), holding the
     iteration's assignments fixed, as a Gauss-Newton step does."""
-    from reloc import refinement
-    from reloc.refinement import refine
+    from reloc.frontend import refinement
+    from reloc.frontend.refinement import refine
 
     m = room_map(n_objects=30, seed=12)
     rng = np.random.default_rng(4)
@@ -567,7 +567,7 @@ def test_observe_back_projects_a_known_plane():
 
 
 def test_3d_box_replaces_mask_center_only_when_iou_and_depth_agree():
-    from reloc.observations import Box3D
+    from reloc.frontend.observations import Box3D
 
     H, W = 60, 80
     K = np.array([[50.0, 0, 39.5], [0, 50.0, 29.5], [0, 0, 1]])
@@ -624,8 +624,8 @@ def _clip_schedule(clip_cfg: ClipConfig, frames: int) -> tuple[list[int], list[t
     """Stream ``frames`` frames without evidence (no detections, no camera travel) through the
     front-end: the clip lengths at which it asked the policy whether to close, and each clip's
     (length, end reason)."""
-    from reloc.detection import FrameData
-    from reloc.frontend import FrontEnd, StaticPoses
+    from reloc.frontend.detection import FrameData
+    from reloc.frontend.stream import FrontEnd, StaticPoses
 
     cfg = dataclasses.replace(Config(), clips=clip_cfg)
     K = np.array([[40.0, 0, 8], [0, 40.0, 6], [0, 0, 1]])

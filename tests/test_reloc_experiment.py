@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 import yaml
 
-from reloc import tables
+from reloc.experiments import tables
 from reloc.cli import main as reloc_main
-from reloc.experiment import load_experiment
+from reloc.experiments.experiment import load_experiment
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -223,7 +223,7 @@ def tiny_design(tmp_path_factory):
 
 
 def _tum_recall(path: Path, gt_path: Path, frames: list[int]) -> float:
-    """Recall at 1 m/10 deg from TUM files, parsed and compared independently of reloc.evaluation."""
+    """Recall at 1 m/10 deg from TUM files, parsed and compared independently of reloc.experiments.evaluation."""
     from scipy.spatial.transform import Rotation
 
     def read(p):
@@ -283,7 +283,7 @@ def test_experiment_end_to_end_rerun_and_resume(tiny_design, capsys):
     pngs = sorted((exp / "plots").glob("*.png"))
     assert len(pngs) == 5 and all(p.name in report for p in pngs)
     # the clip-rigid controls used VideoReloc's clips: same partition
-    from reloc.run import load_clip_poses
+    from reloc.backend.run import load_clip_poses
 
     clips = load_clip_poses(exp / "runs" / "videoreloc" / "apt_1__night__query")
     fp = json.loads((exp / "runs" / "fpfh_icp" / "apt_1__night__query" / "clips.json").read_text())
@@ -336,7 +336,7 @@ def test_experiment_end_to_end_rerun_and_resume(tiny_design, capsys):
 def test_units_and_ablation_tables_from_run_outputs(tmp_path):
     """Table III pools the per-tour unit reports weighted by frames; Table IV lists the variants in the
     paper's order."""
-    from reloc.tables import ABLATIONS, ablation_name
+    from reloc.experiments.tables import ABLATIONS, ablation_name
 
     queries = {"apt_0__day__query": {"layout": "apt_0"}, "apt_1__day__query": {"layout": "apt_1"}}
     for name, (r1, r250, n1) in zip(queries, ((0.5, 1.0, 10), (0.2, 0.6, 30))):
@@ -400,7 +400,7 @@ def _table_results(lightings=("day", "night")) -> dict:
 
 
 def test_tables_are_numbered_and_titled_as_in_the_paper(tmp_path):
-    from reloc.report import TABLE_ORDER
+    from reloc.experiments.report import TABLE_ORDER
 
     res = _table_results()
     made = tables.make_tables(res)
@@ -430,7 +430,7 @@ def test_factors_table_columns_line_up(lightings):
 
 
 def _copy_sources(root: Path, files) -> None:
-    from reloc.experiment import SOURCE_ROOT
+    from reloc.experiments.experiment import SOURCE_ROOT
 
     for f in files:
         dst = root / f.relative_to(SOURCE_ROOT)
@@ -448,7 +448,7 @@ def _flip_one_byte(path: Path) -> None:
 @pytest.fixture
 def fresh_fingerprint():
     """code_fingerprint is computed once per process: forget it before and after a test that moves it."""
-    from reloc.experiment import code_fingerprint
+    from reloc.experiments.experiment import code_fingerprint
 
     code_fingerprint.cache_clear()
     yield
@@ -456,7 +456,7 @@ def fresh_fingerprint():
 
 
 def test_code_fingerprint_covers_reloc_and_the_synth_modules_it_imports(tmp_path, fresh_fingerprint):
-    from reloc import experiment as E
+    from reloc.experiments import experiment as E
 
     files = E.code_files()
     rel = {f.relative_to(E.SOURCE_ROOT).as_posix() for f in files}
@@ -487,7 +487,7 @@ def test_code_fingerprint_covers_reloc_and_the_synth_modules_it_imports(tmp_path
 
 def test_project_packages_are_the_ones_pyproject_ships():
     """The fingerprint follows imports into PROJECT_PACKAGES only: every top-level package is there."""
-    from reloc.experiment import PROJECT_PACKAGES
+    from reloc.experiments.experiment import PROJECT_PACKAGES
 
     import tomllib
 
@@ -523,7 +523,7 @@ def _done_markers(exp: Path) -> dict:
 
 @pytest.mark.slow
 def test_a_code_change_recomputes_every_result(fast_design, capsys, monkeypatch, tmp_path, fresh_fingerprint):
-    from reloc import experiment as E
+    from reloc.experiments import experiment as E
 
     exp = fast_design / "exp"
     argv = ["experiment", str(fast_design / "exp.yaml"), "--quiet", "--no-plots"]

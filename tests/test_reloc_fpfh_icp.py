@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from reloc.fpfh_icp import FpfhConfig, PointMap, clip_frames, constraint, register_clip, run_fpfh_icp
+from reloc.baselines.fpfh_icp import FpfhConfig, PointMap, clip_frames, constraint, register_clip, run_fpfh_icp
 from synth import camera as cam
 from synth.camera_paths import load_path
 from synth.dataset import Tour
@@ -231,7 +231,7 @@ def test_run_with_no_registered_clip_writes_an_empty_closure(world, tmp_path):
 
 
 def test_command_line(world, tmp_path, capsys):
-    from reloc.fpfh_icp import main
+    from reloc.baselines.fpfh_icp import main
 
     assert main(["map", "--tour", str(world["mapping"].root), "--out", str(tmp_path / "m.npz"), "--stride", "4",
                  "--quiet"]) == 0

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from reloc.config import Config
-from reloc.detection import Corruption, FrameData, OracleDetector
-from reloc.evaluation import summarize
-from reloc.frontend import FrontEnd, GroundTruthPoses
+from reloc.frontend.detection import Corruption, FrameData, OracleDetector
+from reloc.experiments.evaluation import summarize
+from reloc.frontend.stream import FrontEnd, GroundTruthPoses
 from reloc.geometry import pose_distance
-from reloc.map import BoxMap
-from reloc.units import format_units, run_units
+from reloc.map.boxmap import BoxMap
+from reloc.experiments.units import format_units, run_units
 from synth.dataset import Tour
 from synth.scene import boxes_document, load_layout
 from synth.tour import TourSpec, render_tour
@@ -195,7 +195,7 @@ def test_gt_pose_stream_gives_identity_at_clip_start(tours):
 
 
 def run_frontend_odometry(tour, bmap, mutate=None, frames=None):
-    from reloc.frontend import OdometryPoses
+    from reloc.frontend.stream import OdometryPoses
 
     det = OracleDetector(tour.class_names(), vocabulary=bmap.class_set)
     cfg = Config()

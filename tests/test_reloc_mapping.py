@@ -1,4 +1,4 @@
-"""Map construction (reloc.mapping): box fitting, building a map from a rendered mapping tour,
+"""Map construction (reloc.map.build): box fitting, building a map from a rendered mapping tour,
 errors against ground truth, the ``map`` CLI group and bad input.
 
 The tour tests render their own small geometry-only tour (apt_0, mapping path, fast renderer,
@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from reloc.detection import Corruption, OracleDetector
-from reloc.map import BoxMap
-from reloc.mapping import (
+from reloc.frontend.detection import Corruption, OracleDetector
+from reloc.map.boxmap import BoxMap
+from reloc.map.build import (
     MappingSettings,
     box_errors,
     build_map,

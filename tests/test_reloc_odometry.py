@@ -1,4 +1,4 @@
-"""RGB-D odometry (reloc.odometry): chained poses against ground truth, gates, bad depth, stride
+"""RGB-D odometry (reloc.frontend.odometry): chained poses against ground truth, gates, bad depth, stride
 interpolation.
 
 A small geometry-only tour (160x120, fast renderer, the built-in apartment's query path: the
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from reloc.config import OdometryConfig
-from reloc.odometry import (
+from reloc.frontend.odometry import (
     ChainPose,
     Odometry,
     OdometryChain,

@@ -25,8 +25,8 @@ import onnx
 import pytest
 from onnx import TensorProto, helper, numpy_helper
 
-from reloc.detection import FrameData
-from reloc.detection_onnx import OnnxDetector
+from reloc.frontend.detection import FrameData
+from reloc.frontend.detection_onnx import OnnxDetector
 from synth.errors import UserError
 
 NAMES = {0: "chair", 1: "couch", 2: "tv"}

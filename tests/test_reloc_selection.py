@@ -18,12 +18,12 @@ import math
 import numpy as np
 
 from reloc import geometry as G
-from reloc.clips import Node
+from reloc.frontend.clips import Node
 from reloc.config import Config
-from reloc.map import BoxMap
-from reloc.observations import Observation
-from reloc.refinement import Gravity, orientation_aware
-from reloc.registration import anchors_for_clip, fallback_candidates, frame_anchor, graph_candidate
+from reloc.map.boxmap import BoxMap
+from reloc.frontend.observations import Observation
+from reloc.frontend.refinement import Gravity, orientation_aware
+from reloc.frontend.registration import anchors_for_clip, fallback_candidates, frame_anchor, graph_candidate
 
 SINGLETONS = {"sofa": (-3.0, 2.0), "table": (2.5, -1.5), "lamp": (-1.0, -2.5), "plant": (3.5, 2.5),
               "tv": (0.0, 3.5)}
@@ -165,7 +165,7 @@ def test_manhattan_yaw_counts_distinct_walls():
 
 def test_pruned_selection_equals_brute_force():
     """The many-to-one bound stops the evaluation early but never changes the winner."""
-    from reloc.registration import CenterMatcher, _rmse, select_hypothesis
+    from reloc.frontend.registration import CenterMatcher, _rmse, select_hypothesis
 
     rng = np.random.default_rng(11)
     classes = ["chair", "book", "lamp"]

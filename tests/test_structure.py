@@ -105,3 +105,40 @@ def test_a_function_level_cycle_is_found(tmp_path, monkeypatch):
 
 def test_no_import_cycles():
     assert import_cycles() == []
+
+
+# what each stage of reloc may import (besides reloc.config, reloc.geometry, reloc.io and synth)
+MAY_IMPORT = {
+    "reloc.map.boxmap": set(),
+    "reloc.frontend": {"reloc.map.boxmap", "reloc.frontend"},
+    "reloc.map.build": {"reloc.map", "reloc.frontend.detection", "reloc.frontend.detector_base"},
+    "reloc.backend": {"reloc.map.boxmap", "reloc.frontend", "reloc.backend"},
+    "reloc.baselines": {"reloc.map.boxmap", "reloc.frontend", "reloc.backend", "reloc.baselines"},
+}
+
+
+def _stage(module: str) -> str | None:
+    for s in sorted(MAY_IMPORT, key=len, reverse=True):
+        if module == s or module.startswith(s + "."):
+            return s
+    return None
+
+
+def test_stages_import_one_way():
+    """map format <- front-end <- back-end <- baselines <- experiments; nothing imports the experiments."""
+    mods = _modules()
+    shared = {"reloc", "reloc.config", "reloc.geometry", "reloc.io"}
+    bad = []
+    for m, p in mods.items():
+        if not m.startswith("reloc."):
+            continue
+        stage = _stage(m)
+        for t in _imports(m, p, mods):
+            if not t.startswith("reloc") or t in shared:
+                continue
+            if t.startswith("reloc.experiments") and not (m.startswith("reloc.experiments") or m == "reloc.cli"):
+                bad.append((m, t))
+            elif stage is not None and not any(t == a or t.startswith(a + ".") for a in MAY_IMPORT[stage]):
+                bad.append((m, t))
+    assert bad == []
+    assert _stage("reloc.frontend.odometry") == "reloc.frontend" and _stage("reloc.map.build") == "reloc.map.build"

@@ -27,7 +27,7 @@ import numpy as np
 
 from synth.errors import SceneFormatError, UserError
 
-from .config import MapConfig
+from ..config import MapConfig
 
 MAP_FORMAT = "videoreloc-boxes/1"
 STRUCTURE_KINDS = ("wall", "floor", "ceiling")

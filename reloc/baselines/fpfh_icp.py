@@ -21,8 +21,8 @@ Clip-rigid protocol: VideoReloc's clip partition and within-clip odometry (``cli
   and inlier RMSE). It returns the clip-to-map S (``T_i = S V_i``) or None with a reason.
 * ``run_fpfh_icp``: every clip of a run; writes ``closure.txt``, ``clips.json`` and ``run.json``.
 
-Command line (for experiments): ``python -m reloc.fpfh_icp map --tour MAPPING_TOUR --out map.npz``
-and ``python -m reloc.fpfh_icp run --map map.npz --tour QUERY_TOUR --clips VIDEORELOC_RUN --out DIR``.
+Command line (for experiments): ``python -m reloc.baselines.fpfh_icp map --tour MAPPING_TOUR --out map.npz``
+and ``python -m reloc.baselines.fpfh_icp run --map map.npz --tour QUERY_TOUR --clips VIDEORELOC_RUN --out DIR``.
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ from scipy.spatial import cKDTree
 from synth.camera import write_tum
 from synth.errors import UserError
 
-from .io import save_npz_atomic, write_json_atomic
+from ..io import save_npz_atomic, write_json_atomic
 
 FORMAT = "videoreloc-fpfh-map/1"
 reg = o3d.pipelines.registration
@@ -324,7 +324,7 @@ class PointMap:
         """A saved map; a missing, corrupt or inconsistent file is a UserError naming it."""
         path = Path(path)
         if not path.is_file():
-            raise UserError(f"{path}: point-cloud map not found (make one with 'python -m reloc.fpfh_icp map')")
+            raise UserError(f"{path}: point-cloud map not found (make one with 'python -m reloc.baselines.fpfh_icp map')")
         names = ("points", "normals", "keypoints", "features", "meta")
         try:
             with np.load(path, allow_pickle=False) as z:
@@ -667,9 +667,9 @@ def main(argv=None) -> int:
     from synth.dataset import Tour
     from synth.errors import run_command
 
-    from .run import load_clip_poses
+    from ..backend.run import load_clip_poses
 
-    ap = argparse.ArgumentParser(prog="python -m reloc.fpfh_icp", description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m reloc.baselines.fpfh_icp", description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
     m = sub.add_parser("map", help="build the 5 cm FPFH point-cloud map of a mapping tour (ground-truth poses)")
     m.add_argument("--tour", required=True)
@@ -698,7 +698,7 @@ def main(argv=None) -> int:
               f"{s['seconds']} s ({s['seconds_per_clip']} s/clip) -> {a.out}")
         return 0
 
-    return run_command("reloc.fpfh_icp", cmd_map if args.cmd == "map" else cmd_run, args)
+    return run_command("reloc.baselines.fpfh_icp", cmd_map if args.cmd == "map" else cmd_run, args)
 
 
 if __name__ == "__main__":

@@ -56,9 +56,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .config import OdometryConfig
-from .geometry import exp_so3 as _exp_so3
-from .geometry import log_so3 as _log_so3
+from ..config import OdometryConfig
+from ..geometry import exp_so3 as _exp_so3
+from ..geometry import log_so3 as _log_so3
 
 # ours: a level's Gauss-Newton loop stops once an update moves less than this
 _CONVERGED_TRANSLATION_M = 1e-5

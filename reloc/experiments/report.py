@@ -24,7 +24,7 @@ from pathlib import Path
 
 from synth.errors import SceneFormatError, UserError
 
-from .io import write_text_atomic
+from ..io import write_text_atomic
 from .tables import PAPER_TABLES, table_title
 
 __all__ = ["write_report", "build_markdown", "markdown_to_html", "table_to_html", "split_row", "TABLE_ORDER"]

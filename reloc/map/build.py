@@ -5,7 +5,7 @@ segments get open-vocabulary labels, and stores one gravity-aligned box per segm
 walls, floors and ceilings. Here detector masks stand in for that pipeline:
 
 * every ``stride``-th frame of the mapping tour is run through a detector (by default the
-  :class:`~reloc.detection.OracleDetector` of the tour's classes);
+  :class:`~reloc.frontend.detection.OracleDetector` of the tour's classes);
 * the depth-consistent pixels of each mask (valid depth; not on the far side of a depth
   discontinuity; near the mask's edge, within the depth range of the mask's interior around them;
   for objects, within a band around the mask's median depth) are back-projected with the frame's
@@ -54,7 +54,7 @@ import numpy as np
 from synth.atomic import write_text_atomic
 from synth.errors import UserError, check_output_file
 
-from .detection import STRUCTURE_CLASSES, FrameData, OracleDetector
+from ..frontend.detection import STRUCTURE_CLASSES, FrameData, OracleDetector
 
 MAP_FORMAT = "videoreloc-boxes/1"
 FRAME_TEXT = "world: right-handed, Z up, metres; yaw about +Z in radians"
@@ -1111,7 +1111,7 @@ def cmd_build(args) -> int:
         print(f"warning: {w}", file=sys.stderr)
     if not doc["boxes"]:
         raise UserError(report["warnings"][0] if report["warnings"] else f"{args.tour}: no boxes built")
-    from .map import BoxMap
+    from .boxmap import BoxMap
 
     BoxMap(doc, source=str(args.out))  # validates what is about to be written
     out = write_text_atomic(args.out, dumps_map(doc))
@@ -1130,7 +1130,7 @@ def cmd_build(args) -> int:
 
 
 def cmd_show(args) -> int:
-    from .map import BoxMap
+    from .boxmap import BoxMap
 
     s = BoxMap.load(args.file).summary()
     for k, v in s.items():

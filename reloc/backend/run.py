@@ -29,15 +29,15 @@ import numpy as np
 from synth.camera import write_tum
 from synth.errors import check_output_folder
 
-from .backend import Backend, ClipState
-from .clips import fuse
-from .config import Config
-from .detection import Detector, detector_record
-from .frontend import FrontEnd, PoseEvent, default_detector, make_pose_stream, read_frame
-from .geometry import inv_T
-from .io import save_npz_atomic, write_json_atomic
-from .localize import localize_clip
-from .map import BoxMap
+from .online import Backend, ClipState
+from ..frontend.clips import fuse
+from ..config import Config
+from ..frontend.detection import Detector, detector_record
+from ..frontend.stream import FrontEnd, PoseEvent, default_detector, make_pose_stream, read_frame
+from ..geometry import inv_T
+from ..io import save_npz_atomic, write_json_atomic
+from ..frontend.localize import localize_clip
+from ..map.boxmap import BoxMap
 
 
 class Relocalizer:
@@ -281,8 +281,8 @@ def load_clip_poses(run_dir) -> dict[int, dict[int, np.ndarray]]:
 def cmd_run(args) -> int:
     from synth.dataset import Tour
 
-    from .config import load_config
-    from .detection import build_detector, detector_spec_from_args
+    from ..config import load_config
+    from ..frontend.detection import build_detector, detector_spec_from_args
 
     check_output_folder(args.out)
     tour = Tour(args.tour)
@@ -308,7 +308,7 @@ def cmd_run(args) -> int:
 
 
 def register_cli(subparsers) -> None:
-    from .detection import add_detector_arguments
+    from ..frontend.detection import add_detector_arguments
 
     p = subparsers.add_parser("run", help="relocalize a tour: causal.txt, closure.txt, frames.json, clips.json")
     p.add_argument("--map", required=True, help="map file (videoreloc-boxes/1 JSON)")

@@ -1,7 +1,7 @@
-"""Odometry speed/drift trade-off (``python -m reloc.bench_odometry TOUR``).
+"""Odometry speed/drift trade-off (``python -m reloc.experiments.bench_odometry TOUR``).
 
 For each setting (odometry width, frame stride, method) the frames of a rendered tour are fed
-through :class:`reloc.odometry.OdometryChain` in windows of a clip-like length (300 frames by
+through :class:`reloc.frontend.odometry.OdometryChain` in windows of a clip-like length (300 frames by
 default) starting at several offsets, each window a fresh chain (as a clip starts without a
 motion prior). Depths are read before the clock starts; the wall time covers everything the
 front-end pays per frame (subsampling, pyramids, solves, gates, interpolation).
@@ -30,8 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import OdometryConfig
-from .odometry import OdometryChain, rotation_deg
+from ..config import OdometryConfig
+from ..frontend.odometry import OdometryChain, rotation_deg
 
 DEFAULT_SETTINGS = [(w, s, "point_to_plane") for w in (640, 320, 160, 80) for s in (1, 2, 3)]
 
@@ -186,7 +186,7 @@ def format_table(rows: list[dict]) -> str:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m reloc.bench_odometry",
+    p = argparse.ArgumentParser(prog="python -m reloc.experiments.bench_odometry",
                                 description="odometry speed / drift trade-off on a rendered tour")
     p.add_argument("tour", help="tour directory")
     p.add_argument("--frames", type=int, default=900, help="frames to load (default 900)")

@@ -19,11 +19,11 @@ import time
 
 import numpy as np
 
-from .config import Config
-from .detection import Detector, detector_record
+from ..config import Config
+from ..frontend.detection import Detector, detector_record
 from .evaluation import summarize
-from .frontend import FrontEnd, StaticPoses, default_detector, make_pose_stream, read_frame
-from .map import BoxMap
+from ..frontend.stream import FrontEnd, StaticPoses, default_detector, make_pose_stream, read_frame
+from ..map.boxmap import BoxMap
 
 DEFAULT_LENGTHS = (1, 30, 100, 250)
 
@@ -142,9 +142,9 @@ def cmd_units(args) -> int:
 
     from synth.dataset import Tour
 
-    from .config import Config, load_config
-    from .detection import build_detector, detector_spec_from_args
-    from .io import write_json_atomic
+    from ..config import Config, load_config
+    from ..frontend.detection import build_detector, detector_spec_from_args
+    from ..io import write_json_atomic
 
     tour = Tour(args.tour)
     bmap = BoxMap.load(args.map)
@@ -161,7 +161,7 @@ def cmd_units(args) -> int:
 
 
 def register_cli(subparsers) -> None:
-    from .detection import add_detector_arguments
+    from ..frontend.detection import add_detector_arguments
 
     p = subparsers.add_parser("units",
                               help="the paper's Table III: independent 1/30/100/250-frame units, recall per length")

@@ -13,7 +13,7 @@ tour, the query path, the unchanged layout, the methods and the optional tables:
     methods: [videoreloc, fpfh_icp, appearance, one_frame]
     tables: [units, ablation]          # optional: Tables III and IV (Tables I and II, main and factors, always)
     one_frame_stride: 15               # one-frame units on every k-th frame (one registration each)
-    detector: {miss_rate: 0.1}         # optional oracle corruption (reloc.detection.Corruption)
+    detector: {miss_rate: 0.1}         # optional oracle corruption (reloc.frontend.detection.Corruption)
     config: {}                         # VideoReloc threshold overrides (reloc/config.py sections)
     appearance: {}                     # AppearanceConfig overrides
     fpfh_icp: {}                       # FpfhConfig overrides
@@ -33,7 +33,7 @@ The clip-rigid controls reuse VideoReloc's clip partition and within-clip odomet
 Resumable: every (method, tour) result and every map is written atomically and marked done with
 a key of what it depends on: its input files' content, its settings and the code that computes it
 (``code_fingerprint``); a rerun does only what is missing or changed. Results, tables, plots and
-the report go to ``out`` (layout in ``results.json``, see :mod:`reloc.tables`).
+the report go to ``out`` (layout in ``results.json``, see :mod:`reloc.experiments.tables`).
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ from pathlib import Path
 from synth.errors import SceneFormatError, UserError, check_output_folder
 
 from . import tables
-from .io import write_json_atomic, write_text_atomic
+from ..io import write_json_atomic, write_text_atomic
 from .tables import ABLATIONS, ablation_name
 from .units import DEFAULT_LENGTHS
 
@@ -113,8 +113,8 @@ def load_experiment(path) -> ExperimentSpec:
     """Read and validate an experiment spec; every error names the file and the key."""
     from synth.scene import read_yaml
 
-    from .config import Config
-    from .detection import Corruption
+    from ..config import Config
+    from ..frontend.detection import Corruption
 
     src = Path(path)
     if not src.is_file():
@@ -173,11 +173,11 @@ def load_experiment(path) -> ExperimentSpec:
     app = _mapping_of(doc.get("appearance"), src, "appearance")
     fp = _mapping_of(doc.get("fpfh_icp"), src, "fpfh_icp")
     if app:
-        from .appearance import AppearanceConfig
+        from ..baselines.appearance import AppearanceConfig
 
         _check_overrides(AppearanceConfig, app, src, "appearance")
     if fp:
-        from .fpfh_icp import FpfhConfig
+        from ..baselines.fpfh_icp import FpfhConfig
 
         _check_overrides(FpfhConfig, fp, src, "fpfh_icp")
     tours_root = Path(doc["tours"]) if doc.get("tours") else Path(job.out)
@@ -361,7 +361,7 @@ def _mark_done(d: Path, key: str, seconds: float, extra: dict | None = None) -> 
 
 
 def _config(spec_config: dict, variant=None):
-    from .config import Config
+    from ..config import Config
 
     cfg = Config.from_dict(spec_config)
     if variant is not None:
@@ -376,7 +376,7 @@ def _config(spec_config: dict, variant=None):
 
 
 def _detector(det: dict, tour, bmap, cfg):
-    from .detection import Corruption, DetectorSpec, build_detector
+    from ..frontend.detection import Corruption, DetectorSpec, build_detector
 
     return build_detector(DetectorSpec(corruption=Corruption(**det)), tour.class_names(), vocabulary=bmap.class_set,
                           config=cfg.detection)
@@ -389,15 +389,15 @@ def _load(kind: str, path: str):
     k = (kind, path, os.stat(path).st_mtime_ns)
     if k not in _CACHE:
         if kind == "boxes":
-            from .map import BoxMap
+            from ..map.boxmap import BoxMap
 
             _CACHE[k] = BoxMap.load(path)
         elif kind == "appearance":
-            from .appearance import AppearanceMap
+            from ..baselines.appearance import AppearanceMap
 
             _CACHE[k] = AppearanceMap.load(path)
         else:
-            from .fpfh_icp import PointMap
+            from ..baselines.fpfh_icp import PointMap
 
             _CACHE[k] = PointMap.load(path)
     return _CACHE[k]
@@ -412,7 +412,7 @@ def run_map_task(task: dict) -> dict:
     out.with_name(out.name + ".done.json").unlink(missing_ok=True)
     tour = Tour(task["tour"])
     if task["kind"] == "boxes":
-        from .mapping import build_map, dumps_map, map_from_scene
+        from ..map.build import build_map, dumps_map, map_from_scene
 
         if task["source"] == "ground-truth":
             doc = map_from_scene(tour.meta.get("layout_file") or tour.meta["layout"])
@@ -422,11 +422,11 @@ def run_map_task(task: dict) -> dict:
                 raise UserError(report["warnings"][0] if report["warnings"] else f"{tour.root}: no boxes built")
         write_text_atomic(out, dumps_map(doc))
     elif task["kind"] == "appearance":
-        from .appearance import AppearanceConfig, AppearanceMap
+        from ..baselines.appearance import AppearanceConfig, AppearanceMap
 
         AppearanceMap.build(tour, cfg=AppearanceConfig(**task["options"])).save(out)
     else:
-        from .fpfh_icp import FpfhConfig, PointMap
+        from ..baselines.fpfh_icp import FpfhConfig, PointMap
 
         PointMap.build(tour, cfg=FpfhConfig(**task["options"])).save(out)
     s = time.perf_counter() - t0
@@ -439,7 +439,7 @@ def run_tour_task(task: dict) -> dict:
     """One method on one query tour; writes its trajectories into ``task['dir']`` and marks it done."""
     from synth.dataset import Tour
 
-    from .run import load_clip_poses, relocalize
+    from ..backend.run import load_clip_poses, relocalize
 
     t0 = time.perf_counter()
     d = Path(task["dir"])
@@ -455,13 +455,13 @@ def run_tour_task(task: dict) -> dict:
                        progress=False)
         extra = {"fps": s["fps"], "clips": s["clips"]}
     elif method == "fpfh_icp":
-        from .fpfh_icp import FpfhConfig, run_fpfh_icp
+        from ..baselines.fpfh_icp import FpfhConfig, run_fpfh_icp
 
         s = run_fpfh_icp(tour, _load("fpfh", task["fpfh_map"]), load_clip_poses(task["clips"]), d,
                          cfg=FpfhConfig(**task["options"]), progress=False)
         extra = {k: s[k] for k in ("clips", "registered") if k in s}
     elif method == "appearance":
-        from .appearance import AppearanceConfig, run_appearance
+        from ..baselines.appearance import AppearanceConfig, run_appearance
 
         s = run_appearance(tour, _load("appearance", task["appearance_map"]), d,
                            clip_poses=load_clip_poses(task["clips"]), cfg=AppearanceConfig(**task["options"]),

@@ -13,9 +13,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .clips import Node
-from .config import Config
-from .geometry import rotation_between, yaw_of
-from .map import BoxMap
+from ..config import Config
+from ..geometry import rotation_between, yaw_of
+from ..map.boxmap import BoxMap
 from .observations import Observation
 from .refinement import Z, estimate_gravity, orientation_aware, tilt_deg, wall_normals, wall_yaws
 from .registration import (Candidate, anchor_candidate, anchors_for_clip, anchors_veto, fallback_candidates,

@@ -15,7 +15,7 @@ inliers; the pose is accepted with enough inliers (``AppearanceConfig.inlier_thr
 ``run_appearance`` localizes every frame of a query tour that has RGB and writes ``causal.txt``
 (per-frame estimates: a per-frame method is causal by construction) and, given the clip partition
 and odometry of a VideoReloc run, ``closure.txt`` from the clip-rigid protocol
-(``reloc.clip_rigid``). Frames without RGB are skipped, so the per-frame recall is measured over
+(``reloc.frontend.clip_rigid``). Frames without RGB are skipped, so the per-frame recall is measured over
 the frames with RGB (the experiment runner takes care of that).
 
 Map file: one ``.npz`` (``FORMAT``), written atomically; its size is ``AppearanceMap.nbytes(path)``.
@@ -36,7 +36,7 @@ import numpy as np
 from synth.errors import UserError
 from synth.frames import FrameFileError
 
-from .io import save_npz_atomic
+from ..io import save_npz_atomic
 
 FORMAT = "videoreloc-appearance/1"
 
@@ -484,7 +484,7 @@ def run_appearance(tour, amap: AppearanceMap, out_dir, clip_poses: dict[int, dic
                    cfg: AppearanceConfig | None = None, progress: bool = True, clip_rigid=None) -> dict:
     """Localize every frame of ``tour`` that has RGB; write causal.txt (+ closure.txt), frames.json, run.json.
 
-    ``clip_poses``: clip id -> {frame: V_i} (``reloc.run.load_clip_poses``) for the clip-rigid
+    ``clip_poses``: clip id -> {frame: V_i} (``reloc.backend.run.load_clip_poses``) for the clip-rigid
     variant; closure.txt then covers every frame of each clip with a consensus transform and keeps
     the frame estimates of the others (``clip_rigid``: the fit's tolerances, a
     ``reloc.config.ClipRigidConfig``; the experiment passes its config's). Returns the run.json summary.
@@ -492,8 +492,8 @@ def run_appearance(tour, amap: AppearanceMap, out_dir, clip_poses: dict[int, dic
     from synth.camera import write_tum
     from synth.dataset import Tour
 
-    from .clip_rigid import clip_rigid_trajectory
-    from .io import write_json_atomic
+    from ..frontend.clip_rigid import clip_rigid_trajectory
+    from ..io import write_json_atomic
 
     cfg = cfg or amap.cfg
     _check_cfg(cfg)

@@ -5,7 +5,7 @@ experiments that isolate registration) gives each frame its pose in the current 
 a chain break (capture gap, inconsistent odometry) ends the clip. Every fifth frame of a clip and
 its last frame are detected and observed; at each checkpoint (100, 150, ... 600 frames) the
 observations are fused and the clip closes once it has enough nodes and camera travel. A closed
-clip is localized (:func:`reloc.localize.localize_clip`) and returned as a :class:`ClipResult`.
+clip is localized (:func:`reloc.frontend.localize.localize_clip`) and returned as a :class:`ClipResult`.
 
 Within one chain, consecutive clips are connected by boundary odometry
 ``O_c = chain_pose(p)^-1 chain_pose(q)`` between the last frame p of clip c and the first frame q
@@ -21,11 +21,11 @@ from typing import Callable, Protocol
 import numpy as np
 
 from .clips import Clip, ClipPolicy, Node, fuse
-from .config import Config
+from ..config import Config
 from .detection import Detector, FrameData, OracleDetector
-from .geometry import inv_T
+from ..geometry import inv_T
 from .localize import Placement, localize_clip
-from .map import BoxMap
+from ..map.boxmap import BoxMap
 from .observations import observe
 
 STAGES = ("io", "odometry", "detection", "observation", "registration", "refinement")
@@ -65,7 +65,7 @@ class GroundTruthPoses:
 
 
 class OdometryPoses:
-    """Within-clip poses from RGB-D odometry (:class:`reloc.odometry.OdometryChain`)."""
+    """Within-clip poses from RGB-D odometry (:class:`reloc.frontend.odometry.OdometryChain`)."""
 
     name = "odometry"
 

@@ -6,7 +6,7 @@
   within 0.5 m, then the lowest RMSE, over all hypotheses (:func:`select_hypothesis`); the winner
   refitted on all its pairs is S_g.
 * Frame-pose anchors: per-frame RANSAC fits W_i with at least six object inliers, their clip
-  proposals W_i V_i^-1 and a consensus S_a (``reloc.clip_rigid.consensus_fit``); the anchors veto
+  proposals W_i V_i^-1 and a consensus S_a (``reloc.frontend.clip_rigid.consensus_fit``); the anchors veto
   S_g when they disagree with it.
 * Verification: box-surface consistency kappa (Eq. 2) ranks the candidates.
 * Orientation fallback: gravity plus Manhattan yaw, four yaw candidates, each with the translation
@@ -25,9 +25,9 @@ import numpy as np
 
 from .clip_rigid import consensus_fit, within_sum
 from .clips import Node
-from .config import RegistrationConfig
-from .geometry import make_T, pose_distance, rigid_fit, rigid_fit_batch, rot_z, yaw_of
-from .map import BoxMap, _non_degenerate, circular_median_mod
+from ..config import RegistrationConfig
+from ..geometry import make_T, pose_distance, rigid_fit, rigid_fit_batch, rot_z, yaw_of
+from ..map.boxmap import BoxMap, _non_degenerate, circular_median_mod
 from .observations import Observation
 from .surface import SurfaceScorer, kappa, median_rho
 

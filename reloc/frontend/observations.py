@@ -12,9 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .config import DetectionConfig, ObservationConfig
+from ..config import DetectionConfig, ObservationConfig
 from .detector_base import STRUCTURE_CLASSES, Detection
-from .geometry import farthest_point_sample
+from ..geometry import farthest_point_sample
 
 
 @dataclass

@@ -1,13 +1,13 @@
 """Detection (paper Sec. III-C): class-labelled instance masks for a frame.
 
 One interface, :class:`Detector` (with :class:`FrameData` and :class:`Detection`, in
-:mod:`reloc.detector_base`), with two implementations:
+:mod:`reloc.frontend.detector_base`), with two implementations:
 
 * :class:`OracleDetector` reads the rendered instance and semantic images and can degrade them
   on purpose with a seeded :class:`Corruption` model (misses, label confusion among map classes,
   mask erosion/dilation, spurious detections), so experiments can ask how much detector quality
   matters;
-* :class:`reloc.detection_onnx.OnnxDetector` runs a user's ONNX instance-segmentation model with
+* :class:`reloc.frontend.detection_onnx.OnnxDetector` runs a user's ONNX instance-segmentation model with
   YOLO-style segmentation outputs.
 
 Detectors see only what a camera would give them plus, for the oracle, the rendered label
@@ -25,7 +25,7 @@ from scipy.ndimage import find_objects
 
 from synth.errors import UserError
 
-from .config import DetectionConfig
+from ..config import DetectionConfig
 from .detection_onnx import OnnxDetector
 from .detector_base import STRUCTURE_CLASSES, Detection, Detector, FrameData
 

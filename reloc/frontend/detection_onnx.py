@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 import yaml
 
-from reloc.detector_base import Detection, FrameData
+from reloc.frontend.detector_base import Detection, FrameData
 from synth.errors import UserError
 from synth.frames import srgb8
 
@@ -176,7 +176,7 @@ def _bilinear(m: np.ndarray, ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
 
 
 class OnnxDetector:
-    """A :class:`reloc.detection.Detector` running a YOLO-style ONNX segmentation model.
+    """A :class:`reloc.frontend.detection.Detector` running a YOLO-style ONNX segmentation model.
 
     ``model``: the .onnx file. ``class_map``: see :func:`load_class_map`; without one the model's
     ``names`` metadata is used. ``vocabulary``: class names to report (others are dropped), None =

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .map import BoxMap
+from ..map.boxmap import BoxMap
 
 
 class SurfaceScorer:

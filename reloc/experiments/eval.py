@@ -14,7 +14,7 @@ from synth.camera import read_tum
 from synth.errors import SceneFormatError, UserError
 
 from .evaluation import summarize
-from .io import write_json_atomic
+from ..io import write_json_atomic
 
 TRAJECTORIES = ("causal", "closure")
 

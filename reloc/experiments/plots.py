@@ -183,7 +183,7 @@ def tour_figure(bmap, gt: dict, estimates: dict, out_png, title: str = "", windo
                 dpi: float = DPI) -> Path:
     """One figure for a query tour: a column per method (label -> {frame: 4x4 camera-to-world}).
 
-    ``bmap`` is a ``reloc.map.BoxMap`` (or None: no map drawn); ``gt`` maps frame -> 4x4 ground
+    ``bmap`` is a ``reloc.map.boxmap.BoxMap`` (or None: no map drawn); ``gt`` maps frame -> 4x4 ground
     truth. A label whose estimates are empty or None shows "no poses". Estimated positions outside
     the view (map and ground-truth path) are clipped and counted in the panel. Returns the PNG path."""
     from matplotlib.ticker import LogLocator, NullLocator
@@ -394,7 +394,7 @@ def plot_experiment(results_dir) -> list[Path]:
     is skipped with a message on stderr; a missing map leaves the boxes out."""
     from synth.dataset import Tour
 
-    from .map import BoxMap
+    from ..map.boxmap import BoxMap
 
     results_dir = Path(results_dir)
     results = _load_results(results_dir)

@@ -2,7 +2,7 @@
 
 For each closed clip, in order:
 
-1. *Tracking* (inside the front-end, :func:`reloc.localize.localize_clip` with a prediction):
+1. *Tracking* (inside the front-end, :func:`reloc.frontend.localize.localize_clip` with a prediction):
    the previous clip's placement carried over by boundary odometry,
    ``S_pred = S_c V_p O_c V_q^-1 = S_c C_c^-1 C_{c+1}``, is accepted and refined when the new
    clip's box-surface support suffices; otherwise the clip is localized afresh.
@@ -29,14 +29,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .config import Config
-from .frontend import ClipResult
-from .geometry import inv_T, make_T, pose_distance, rotation_between, rotation_mean
-from .map import BoxMap
-from .refinement import (Z, distinct_walls, estimate_gravity, level, manhattan_correction, orientation_aware,
+from ..config import Config
+from ..frontend.stream import ClipResult
+from ..geometry import inv_T, make_T, pose_distance, rotation_between, rotation_mean
+from ..map.boxmap import BoxMap
+from ..frontend.refinement import (Z, distinct_walls, estimate_gravity, level, manhattan_correction, orientation_aware,
                          wall_normals, wall_yaws)
-from .registration import fallback_candidates
-from .surface import SurfaceScorer
+from ..frontend.registration import fallback_candidates
+from ..frontend.surface import SurfaceScorer
 
 
 @dataclass

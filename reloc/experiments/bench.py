@@ -12,9 +12,9 @@ import json
 import statistics
 import time
 
-from .config import Config
-from .frontend import STAGES, FrontEnd, default_detector, make_pose_stream, read_frame
-from .map import BoxMap
+from ..config import Config
+from ..frontend.stream import STAGES, FrontEnd, default_detector, make_pose_stream, read_frame
+from ..map.boxmap import BoxMap
 
 
 def bench_frontend(tour, bmap: BoxMap, frames: int = 600, poses: str = "odometry", cfg: Config | None = None,
@@ -75,7 +75,7 @@ def format_frontend(rep: dict) -> str:
 def cmd_frontend(args) -> int:
     from synth.dataset import Tour
 
-    from .config import load_config
+    from ..config import load_config
 
     tour = Tour(args.tour)
     bmap = BoxMap.load(args.map)

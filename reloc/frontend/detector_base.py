@@ -1,6 +1,6 @@
 """What every detector takes and gives (paper Sec. III-C): a frame in, class-labelled masks out.
 
-Shared by :mod:`reloc.detection` (the oracle, the factory) and :mod:`reloc.detection_onnx` (a
+Shared by :mod:`reloc.frontend.detection` (the oracle, the factory) and :mod:`reloc.frontend.detection_onnx` (a
 user's ONNX model), so that neither imports the other's module for these types.
 """
 

@@ -1,5 +1,5 @@
 """One clip-to-map transform from per-frame map poses: the consensus fit that VideoReloc's frame
-anchors (``reloc.registration.anchor_candidate``) and the per-frame baselines' clip-rigid controls
+anchors (``reloc.frontend.registration.anchor_candidate``) and the per-frame baselines' clip-rigid controls
 share.
 
 A clip is a run of frames whose within-clip odometry V_i is known; its map poses are T_i = S_c V_i for
@@ -20,8 +20,8 @@ from typing import Callable
 
 import numpy as np
 
-from .config import ClipRigidConfig
-from .geometry import make_T, rotation_mean
+from ..config import ClipRigidConfig
+from ..geometry import make_T, rotation_mean
 
 # accept(position errors m, rotation errors rad) -> (inlier mask, per-frame error for ties)
 Tolerance = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
@@ -106,7 +106,7 @@ def clip_rigid_trajectory(frame_poses: dict[int, np.ndarray], clip_poses: dict[i
                           cfg: ClipRigidConfig | None = None) -> tuple[dict[int, np.ndarray], dict]:
     """Clip-rigid trajectory: frame -> pose, and statistics.
 
-    Per clip (``clip_poses``: clip id -> {frame: V_i}, e.g. ``reloc.run.load_clip_poses``): with a
+    Per clip (``clip_poses``: clip id -> {frame: V_i}, e.g. ``reloc.backend.run.load_clip_poses``): with a
     consensus S every frame of the clip gets S V_i; without one the clip's frames keep their
     per-frame estimates (frames without an estimate stay without a pose). Estimated frames that
     belong to no clip keep their estimates too.

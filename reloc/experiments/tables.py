@@ -30,7 +30,7 @@ import numpy as np
 from synth.camera import read_tum
 
 from .evaluation import summarize
-from .io import write_json_atomic, write_text_atomic
+from ..io import write_json_atomic, write_text_atomic
 
 FORMAT = "videoreloc-experiment/1"
 LIGHTINGS = ("day", "evening", "night")
@@ -126,7 +126,7 @@ def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: li
                         valid: set | None = None) -> dict:
     """Every row on every tour; ``valid``: the (method, tour) runs that finished with the current
     inputs (others, failed or stale, count as no poses)."""
-    from .appearance import AppearanceConfig
+    from ..baselines.appearance import AppearanceConfig
 
     feature = str(spec.appearance.get("feature", AppearanceConfig().feature)).upper()
     gts = {n: _gt(t["dir"]) for n, t in queries.items()}

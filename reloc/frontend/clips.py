@@ -19,9 +19,9 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from .config import ClipConfig, ObservationConfig
+from ..config import ClipConfig, ObservationConfig
 from .detector_base import STRUCTURE_CLASSES
-from .geometry import farthest_point_sample
+from ..geometry import farthest_point_sample
 from .observations import Observation
 
 

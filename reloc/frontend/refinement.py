@@ -23,9 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .clips import Node
-from .config import RefinementConfig, RegistrationConfig
-from .geometry import exp_so3, log_so3, make_T, rigid_fit, rot_z, rotation_between
-from .map import BoxMap, circular_mad_mod, circular_median_mod
+from ..config import RefinementConfig, RegistrationConfig
+from ..geometry import exp_so3, log_so3, make_T, rigid_fit, rot_z, rotation_between
+from ..map.boxmap import BoxMap, circular_mad_mod, circular_median_mod
 from .surface import SurfaceScorer
 
 Z = np.array([0.0, 0.0, 1.0])

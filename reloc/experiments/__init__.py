@@ -1,0 +1,2 @@
+"""Experiments over rendered designs: evaluation, the unit experiment, the paper's tables, plots,
+the report, robustness checks and benchmarks."""
