@@ -153,43 +153,98 @@ def level(R: np.ndarray, u_clip: np.ndarray) -> np.ndarray:
 # gravity-aligned boxes
 
 
-def to_box_frame(points: np.ndarray, center: np.ndarray, yaw: float) -> np.ndarray:
-    c, s = math.cos(yaw), math.sin(yaw)
-    d = points - center
-    return np.stack([c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1], d[..., 2]], axis=-1)
-
-
 def from_box_frame(local: np.ndarray, center: np.ndarray, yaw: float) -> np.ndarray:
+    """Box-frame coordinates (..., 3) of a box with ``center`` and ``yaw`` -> map coordinates."""
     c, s = math.cos(yaw), math.sin(yaw)
     return np.stack([c * local[..., 0] - s * local[..., 1], s * local[..., 0] + c * local[..., 1], local[..., 2]], axis=-1) + center
 
 
-def point_box_distance(points: np.ndarray, center, size, yaw: float) -> np.ndarray:
-    """Distance of each point to a solid box (0 inside)."""
-    local = to_box_frame(points, np.asarray(center, float), yaw)
-    d = np.maximum(np.abs(local) - np.asarray(size, float) / 2.0, 0.0)
-    return np.linalg.norm(d, axis=-1)
+class BoxSet:
+    """Solid gravity-aligned boxes with half sizes and yaw cosines/sines precomputed: the one
+    point-to-box implementation (surface consistency, refinement residuals, tests).
 
+    The boxes have a batch shape N: ``(B,)`` when built, ``()`` for one box ``boxes[j]``, any
+    shape for ``boxes[idx]``. Query points ``(..., *N, 3)`` are paired with the boxes element-wise
+    by broadcasting; for every point against every box pass ``points[:, None, :]`` (-> ``(P, B)``).
+    Distances count 0 inside a box.
+    """
 
-def closest_point_on_box(points: np.ndarray, center, size, yaw: float) -> np.ndarray:
-    """Closest point of the solid box to each point (the point itself when inside)."""
-    center = np.asarray(center, float)
-    local = to_box_frame(points, center, yaw)
-    h = np.asarray(size, float) / 2.0
-    return from_box_frame(np.clip(local, -h, h), center, yaw)
+    __slots__ = ("centers", "half", "cos", "sin", "_nsin", "_hx", "_hy", "_hz")
+
+    def __init__(self, centers, sizes, yaws):
+        centers = np.asarray(centers, float)
+        yaws = np.asarray(yaws, float)
+        self._set(centers, np.asarray(sizes, float) / 2.0, np.cos(yaws), np.sin(yaws))
+
+    def _set(self, centers, half, cos, sin) -> None:
+        self.centers, self.half, self.cos, self.sin = centers, half, cos, sin
+        self._nsin = -sin
+        # contiguous per-axis half sizes for the hot path
+        self._hx, self._hy, self._hz = (half[..., i].copy() for i in range(3))
+
+    def __len__(self) -> int:
+        return len(self.cos)
+
+    def __getitem__(self, idx) -> "BoxSet":
+        out = BoxSet.__new__(BoxSet)
+        out._set(self.centers[idx], self.half[idx], self.cos[idx], self.sin[idx])
+        return out
+
+    def local(self, points: np.ndarray) -> np.ndarray:
+        """Box-frame coordinates of the points (..., *N, 3)."""
+        d = np.asarray(points, float) - self.centers
+        return np.stack([self.cos * d[..., 0] + self.sin * d[..., 1],
+                         self._nsin * d[..., 0] + self.cos * d[..., 1], d[..., 2]], axis=-1)
+
+    def excess(self, points: np.ndarray) -> np.ndarray:
+        """Signed per-axis excess over the box in its frame (..., *N, 3): the box-frame displacement
+        from the closest point of the box, 0 on the axes whose slab holds the point."""
+        local = self.local(points)
+        return local - np.clip(local, -self.half, self.half)
+
+    def rotation(self) -> np.ndarray:
+        """Box-to-map rotations (*N, 3, 3) (box frame = map frame rotated by the yaw about +Z)."""
+        R = np.zeros(np.shape(self.cos) + (3, 3))
+        R[..., 0, 0] = self.cos
+        R[..., 0, 1] = self._nsin
+        R[..., 1, 0] = self.sin
+        R[..., 1, 1] = self.cos
+        R[..., 2, 2] = 1.0
+        return R
+
+    def sq_distance(self, points: np.ndarray) -> np.ndarray:
+        """Squared distances of the points to their solid boxes (..., *N); the hot path of the
+        surface score, so it works in place on one buffer per axis."""
+        d = np.asarray(points, float) - self.centers
+        dx, dy = d[..., 0], d[..., 1]
+        acc = np.multiply(self.cos, dx, out=np.empty(d.shape[:-1]))  # box-frame x, then its squared excess
+        acc += self.sin * dy
+        np.abs(acc, out=acc)
+        acc -= self._hx
+        np.maximum(acc, 0.0, out=acc)
+        acc *= acc
+        t = np.multiply(self._nsin, dx, out=np.empty(d.shape[:-1]))  # box-frame y
+        t += self.cos * dy
+        np.abs(t, out=t)
+        t -= self._hy
+        np.maximum(t, 0.0, out=t)
+        t *= t
+        acc += t
+        np.abs(d[..., 2], out=t)  # z
+        t -= self._hz
+        np.maximum(t, 0.0, out=t)
+        t *= t
+        acc += t
+        return acc
+
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        """Distances of the points to their solid boxes (..., *N)."""
+        return np.sqrt(self.sq_distance(points))
 
 
 def point_boxes_distance(points: np.ndarray, centers: np.ndarray, sizes: np.ndarray, yaws: np.ndarray) -> np.ndarray:
     """Distances of P points to B solid boxes: (P, B)."""
-    c, s = np.cos(yaws), np.sin(yaws)
-    d = points[:, None, :] - centers[None, :, :]
-    lx = c * d[..., 0] + s * d[..., 1]
-    ly = -s * d[..., 0] + c * d[..., 1]
-    h = sizes / 2.0
-    ex = np.maximum(np.abs(lx) - h[:, 0], 0.0)
-    ey = np.maximum(np.abs(ly) - h[:, 1], 0.0)
-    ez = np.maximum(np.abs(d[..., 2]) - h[:, 2], 0.0)
-    return np.sqrt(ex * ex + ey * ey + ez * ez)
+    return BoxSet(centers, sizes, yaws).distance(np.asarray(points, float)[:, None, :])
 
 
 def farthest_point_sample(points: np.ndarray, k: int, start: int | None = None) -> np.ndarray:

@@ -23,6 +23,7 @@ from reloc.frontend.refinement import Gravity, estimate_gravity, manhattan_corre
 from reloc.frontend.registration import (anchor_candidate, anchors_for_clip, anchors_veto, fallback_candidates,
                                 graph_candidate)
 from reloc.frontend.surface import SurfaceScorer, kappa
+
 from synth.errors import UserError
 
 RNG = np.random.default_rng(1)
@@ -122,20 +123,82 @@ def test_so3_log_exp_round_trip_and_angle():
         assert np.allclose(G.exp_so3(G.log_so3(R)), R, atol=1e-6)
 
 
+# boxes of several yaws (one a quarter turn, one past pi), checked all at once
+BOX_CENTERS = np.array([[1.0, -2.0, 0.5], [-3.0, 0.5, 1.2], [0.2, 4.0, -0.7], [2.5, 2.5, 0.0]])
+BOX_SIZES = np.array([[2.0, 1.0, 0.6], [0.4, 1.8, 1.1], [1.2, 1.2, 0.3], [0.7, 2.5, 1.6]])
+BOX_YAWS = np.array([0.7, -2.3, math.pi / 2, 3.6])
+
+
 def test_point_box_distance_matches_brute_force():
+    """The production BoxSet (surface score, refinement) against the nearest of dense samples of
+    each solid box (surface and interior), every point against every box in one call."""
     rng = np.random.default_rng(5)
-    c, s, yaw = np.array([1.0, -2.0, 0.5]), np.array([2.0, 1.0, 0.6]), 0.7
-    # dense sampling of the solid box, independent of the analytic formula
-    g = np.stack(np.meshgrid(*[np.linspace(-0.5, 0.5, 31)] * 3, indexing="ij"), -1).reshape(-1, 3) * s
-    solid = G.from_box_frame(g, c, yaw)
-    pts = c + rng.normal(scale=1.5, size=(50, 3))
-    brute = np.min(np.linalg.norm(pts[:, None] - solid[None], axis=2), axis=1)
-    d = G.point_box_distance(pts, c, s, yaw)
-    assert np.all(np.abs(d - brute) < 0.03)
-    q = G.closest_point_on_box(pts, c, s, yaw)
-    assert np.allclose(np.linalg.norm(pts - q, axis=1), d)
-    dd = G.point_boxes_distance(pts, c[None], s[None], np.array([yaw]))[:, 0]
-    assert np.allclose(dd, d)
+    boxes = G.BoxSet(BOX_CENTERS, BOX_SIZES, BOX_YAWS)
+    g = np.stack(np.meshgrid(*[np.linspace(-0.5, 0.5, 31)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    pts = np.concatenate([c + rng.normal(scale=1.5, size=(40, 3)) for c in BOX_CENTERS]
+                         + [(rng.uniform(-0.45, 0.45, (5, 3)) * s) @ G.rot_z(yaw).T + c
+                            for c, s, yaw in zip(BOX_CENTERS, BOX_SIZES, BOX_YAWS)])  # and some inside
+    brute = np.empty((len(pts), len(boxes)))
+    for j, (c, s, yaw) in enumerate(zip(BOX_CENTERS, BOX_SIZES, BOX_YAWS)):
+        solid = (g * s) @ G.rot_z(yaw).T + c  # rotation matrix, not the box code's cos/sin
+        brute[:, j] = np.min(np.linalg.norm(pts[:, None] - solid[None], axis=2), axis=1)
+    d = boxes.distance(pts[:, None, :])  # (P, B)
+    assert d.shape == brute.shape
+    spacing = np.linalg.norm(BOX_SIZES / 30 / 2, axis=1)  # farthest any box point is from a sample
+    assert np.all(d <= brute + 1e-12) and np.all(brute - d <= spacing + 1e-12)
+    assert (d == 0).sum() >= 20 and (d > 0).sum() >= 100  # inside and outside points were drawn
+    assert np.array_equal(G.point_boxes_distance(pts, BOX_CENTERS, BOX_SIZES, BOX_YAWS), d)
+    assert np.allclose(boxes.sq_distance(pts[:, None, :]), d**2, rtol=1e-12, atol=1e-15)
+    # the refinement's excess: leads back to a point of the box at exactly that distance
+    e = boxes.excess(pts[:, None, :])  # (P, B, 3) box frame
+    q = pts[:, None, :] - np.einsum("bij,pbj->pbi", boxes.rotation(), e)
+    assert np.allclose(np.linalg.norm(e, axis=2), d, rtol=1e-12, atol=1e-12)
+    assert np.all(boxes.distance(q) < 1e-9)
+    # element-wise pairing with a batch (the scorer's (H, E) layout), and single boxes
+    idx = rng.integers(0, len(boxes), (3, 25))
+    X = rng.normal(scale=3.0, size=(3, 25, 3))
+    dd = boxes[idx].distance(X)
+    for h in range(3):
+        for i in range(25):
+            j = idx[h, i]
+            assert np.isclose(dd[h, i], boxes[j].distance(X[h, i]), rtol=1e-12, atol=1e-12)
+            brute1 = np.min(np.linalg.norm((g * BOX_SIZES[j]) @ G.rot_z(BOX_YAWS[j]).T + BOX_CENTERS[j] - X[h, i], axis=1))
+            assert dd[h, i] <= brute1 + 1e-12 and brute1 - dd[h, i] <= spacing[j] + 1e-12
+
+
+def test_point_box_distance_closed_form_inside_faces_corners():
+    """Points built from a known closest box point q plus an offset in q's outward normal cone are
+    at exactly |offset|: inside (0), on faces (0), off faces, off edges, off and near corners."""
+    rng = np.random.default_rng(6)
+    boxes = G.BoxSet(BOX_CENTERS, BOX_SIZES, BOX_YAWS)
+    for j, (c, s, yaw) in enumerate(zip(BOX_CENTERS, BOX_SIZES, BOX_YAWS)):
+        h = s / 2
+        local, offsets = [], []
+        for _ in range(60):  # strictly inside and on a face
+            p = rng.uniform(-0.99, 0.99, 3) * h
+            local.append(p.copy()), offsets.append(np.zeros(3))
+            a = rng.integers(3)
+            p[a] = rng.choice([-1, 1]) * h[a]
+            local.append(p), offsets.append(np.zeros(3))
+        for _ in range(200):  # q on a face, an edge or a corner; offset along its outward normals
+            n_ext = rng.integers(1, 4)  # 1 face, 2 edge, 3 corner
+            axes = rng.permutation(3)[:n_ext]
+            sign = rng.choice([-1.0, 1.0], 3)
+            q = rng.uniform(-1, 1, 3) * h
+            q[axes] = sign[axes] * h[axes]
+            off = np.zeros(3)
+            off[axes] = sign[axes] * rng.choice([1e-6, 1e-3, 0.05, 0.7, 3.0], n_ext)
+            local.append(q + off), offsets.append(off)
+        local, offsets = np.array(local), np.array(offsets)
+        want = np.sqrt(np.sum(offsets**2, axis=1))
+        pts = local @ G.rot_z(yaw).T + c
+        d = boxes[j].distance(pts)
+        assert np.allclose(d, want, rtol=1e-9, atol=1e-12)
+        assert np.all(d[want == 0] <= 1e-12)
+        # the same points through the all-boxes call, column j
+        assert np.array_equal(boxes.distance(pts[:, None, :])[:, j], d)
+        # the refinement's per-axis excess in the box frame: the offset itself
+        assert np.allclose(boxes[j].excess(pts), offsets, rtol=1e-9, atol=1e-12)
 
 
 def test_farthest_point_sample_spreads_out():

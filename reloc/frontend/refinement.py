@@ -24,7 +24,7 @@ import numpy as np
 
 from .clips import Node
 from ..config import RefinementConfig, RegistrationConfig
-from ..geometry import exp_so3, log_so3, make_T, rigid_fit, rot_z, rotation_between
+from ..geometry import BoxSet, exp_so3, log_so3, make_T, rigid_fit, rot_z, rotation_between
 from ..map.boxmap import BoxMap, circular_mad_mod, circular_median_mod
 from .surface import SurfaceScorer
 
@@ -178,6 +178,7 @@ def refine(S0: np.ndarray, nodes: list[Node], bmap: BoxMap, cfg: RefinementConfi
     sig_r = math.radians(cfg.prior_rotation_deg)
     sig_t = cfg.prior_translation_m
     R0, c0 = S0[:3, :3], S0[:3, :3] @ centroid + S0[:3, 3]
+    boxes = BoxSet(bmap.centers, bmap.sizes, bmap.yaws)
     S = S0.copy()
     used = 0
     for it in range(cfg.iterations):
@@ -189,17 +190,14 @@ def refine(S0: np.ndarray, nodes: list[Node], bmap: BoxMap, cfg: RefinementConfi
         Js, rs = [], []
         for k in consistent:
             P = nodes[k].samples @ S[:3, :3].T + S[:3, 3]
-            j = int(asg[k])
-            ctr, size, yaw = bmap.centers[j], bmap.sizes[j], bmap.yaws[j]
-            cy, sy = math.cos(yaw), math.sin(yaw)
-            Rb = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
-            local = (P - ctr) @ Rb
-            h = size / 2.0
-            out = np.abs(local) > h
+            box = boxes[int(asg[k])]
+            e = box.excess(P)  # box-frame displacement from the closest box point, zero on free axes
+            out = e != 0.0
             outside = out.any(axis=1)
             if not outside.any():
                 continue
-            r = (local - np.clip(local, -h, h))[outside]  # box-frame displacement, zero on free axes
+            r = e[outside]
+            Rb = box.rotation()
             w = 1.0 / (sig_f * math.sqrt(len(P)))
             Pw = P[outside]
             Jw = np.concatenate([-_skew(Pw - c_map), np.broadcast_to(np.eye(3), (len(Pw), 3, 3))], axis=2)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry import BoxSet
 from ..map.boxmap import BoxMap
 
 
@@ -48,11 +49,8 @@ class SurfaceScorer:
         self.slot_box = np.full((max(self.K, 1), jmax), -1, dtype=np.int64)
         for k, boxes in enumerate(slot_box):
             self.slot_box[k, : len(boxes)] = boxes
-        if len(self.e_box):
-            self._c = bmap.centers[self.e_box]
-            self._h = bmap.sizes[self.e_box] / 2.0
-            self._cos = np.cos(bmap.yaws[self.e_box])
-            self._sin = np.sin(bmap.yaws[self.e_box])
+        # the box of each (point, box) pair, paired element-wise with the mapped points in rho
+        self._boxes = BoxSet(bmap.centers[self.e_box], bmap.sizes[self.e_box], bmap.yaws[self.e_box])
 
     def rho(self, Ts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Best same-class rms distance (H, K) (inf without a same-class box) and its box (-1)."""
@@ -63,13 +61,7 @@ class SurfaceScorer:
         if not len(self.e_pt) or self.K == 0:
             return best, assign
         X = np.einsum("hij,pj->hpi", Ts[:, :3, :3], self.points[self.e_pt]) + Ts[:, None, :3, 3]
-        d = X - self._c
-        lx = self._cos * d[..., 0] + self._sin * d[..., 1]
-        ly = -self._sin * d[..., 0] + self._cos * d[..., 1]
-        ex = np.maximum(np.abs(lx) - self._h[:, 0], 0.0)
-        ey = np.maximum(np.abs(ly) - self._h[:, 1], 0.0)
-        ez = np.maximum(np.abs(d[..., 2]) - self._h[:, 2], 0.0)
-        d2 = ex * ex + ey * ey + ez * ez
+        d2 = self._boxes.sq_distance(X)  # (H, E)
         rms = np.sqrt(np.add.reduceat(d2, self.g_start, axis=1) / self.g_n)  # (H, G)
         grid = np.full((H, self.K, self.jmax), np.inf)
         grid[:, self.g_k, self.g_slot] = rms
