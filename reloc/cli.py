@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from synth.errors import run_command
+from formats.errors import run_command
 
 from . import __version__
 
@@ -19,12 +19,12 @@ def build_parser() -> argparse.ArgumentParser:
     from .backend import run
     from .experiments import bench, checks, experiment, units
     from .experiments import eval as eval_
-    from .map import build
+    from .map import cli as map_cli
 
     p = argparse.ArgumentParser(prog="reloc", description="VideoReloc: relocalization against a map of class-labelled boxes.")
     p.add_argument("--version", action="version", version=f"reloc {__version__}")
     sub = p.add_subparsers(dest="group")
-    build.register_cli(sub)
+    map_cli.register_cli(sub)
     units.register_cli(sub)
     run.register_cli(sub)
     eval_.register_cli(sub)

@@ -19,7 +19,10 @@ from typing import Any
 
 import yaml
 
-from synth.errors import UserError
+from formats.errors import UserError
+
+
+
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,9 @@ from typing import Callable
 import numpy as np
 import trimesh
 
-from .errors import UnknownNameError
+from formats.errors import UnknownNameError
+
+
 
 __all__ = [
     "MATERIALS",

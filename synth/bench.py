@@ -19,7 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .camera import Intrinsics, write_tum
+from formats.camera import Intrinsics, write_tum
+
 from .render_settings import QUALITY
 
 SIZES = ((320, 240), (640, 480))
@@ -70,7 +71,7 @@ def bench_blender(layout_file: Path, pass_: str, poses, intr: Intrinsics, qualit
 
 def run_bench(frames: int = 5, qualities=tuple(QUALITY), sizes=SIZES, layout_name: str = "apt_0", path: str = "query",
               progress: bool = True) -> list[dict]:
-    from .camera_paths import load_path
+    from .paths.files import load_path
     from .scene import load_layout, resolve_layout_path
 
     layout_file = resolve_layout_path(layout_name).resolve()

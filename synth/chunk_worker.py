@@ -13,8 +13,9 @@ import sys
 import time
 from pathlib import Path
 
-from . import frames as fr
-from .atomic import temp_name
+from formats import frames as fr
+from formats.atomic import temp_name
+
 from .chunks import emit, worker_main
 
 
@@ -38,7 +39,7 @@ def run(job: dict) -> int:
         return 0
     if job["pass"] != "fast":
         raise ValueError(f"unknown pass {job['pass']!r}")
-    from .camera import Intrinsics, read_tum
+    from formats.camera import Intrinsics, read_tum
     from .fast_render import FastRenderer
     from .scene import load_layout
 

@@ -15,7 +15,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-from . import frames as fr
+from formats import frames as fr
+
+
 
 BLENDER_PASSES = ("geometry", "rgb")
 PLAIN_PASSES = ("fast", "copy")

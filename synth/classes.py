@@ -9,7 +9,8 @@ from pathlib import Path
 
 import yaml
 
-from .errors import SceneFormatError, UnknownNameError
+from formats.errors import SceneFormatError, UnknownNameError
+
 from .resources import classes_file
 
 SUPPORTS = ("floor", "surface", "wall", "ceiling")

@@ -11,8 +11,9 @@ import sys
 from collections import Counter
 from pathlib import Path
 
-from .atomic import write_json_atomic
-from .errors import UserError, check_output_file, run_command
+from formats.atomic import write_json_atomic
+from formats.errors import UserError, check_output_file, run_command
+
 
 
 def _print_json(obj) -> None:
@@ -363,9 +364,10 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--quiet", action="store_true")
     a.set_defaults(fn=cmd_tour_render)
     # stages with their own subcommands register them here
-    from . import bench, camera_paths, dataset, jobs
+    from . import bench, dataset, jobs
+    from .paths import cli as paths_cli
 
-    camera_paths.register_cli(sub)  # synth path plan|show|check|preview|generate
+    paths_cli.register_cli(sub)  # synth path plan|show|check|preview|generate
     jobs.register_cli(sub)  # synth render SPEC.yaml
     dataset.register_cli(sub)  # synth dataset check|show
     bench.register_cli(sub)  # synth bench

@@ -1,17 +1,17 @@
-"""Rendered tours on disk: read them frame by frame, check them, look at one frame.
+"""Rendered tours on disk: check them, look at one frame (the reader is ``formats.tour.Tour``).
 
-A tour directory, as the renderers write it::
+A tour directory, as the renderers write it (the format is ``formats.tour``)::
 
     TOUR/
-      camera.json    {"width", "height", "K", "fx", "fy", "cx", "cy", "fps", + synth.camera.CAMERA_DOC keys}
+      camera.json    {"width", "height", "K", "fx", "fy", "cx", "cy", "fps", + formats.camera.CAMERA_DOC keys}
       poses.txt      TUM, camera-to-world, OpenCV axes; frame index = round(t * fps); one line per frame
-      objects.json   ground-truth boxes of the tour's layout (videoreloc-boxes/1, ``synth.scene.boxes_document``)
+      objects.json   ground-truth boxes of the tour's layout (``formats.boxes``: videoreloc-boxes/1)
       meta.json      {"toolkit", "layout", "lighting" (null: geometry-only tour), "path", "renderer", "seed",
                       "settings", "frames": [first, last], "wall_time_s", ...}
-      frames/NNNNNN.exr   one per frame (synth.frames: R, G, B half; Z; instance; semantic)
+      frames/NNNNNN.exr   one per frame (formats.frames: R, G, B half; Z; instance; semantic)
       previews/NNNNNN.png optional 8-bit sRGB previews
 
-``Tour`` reads the small files up front and the frames lazily, one EXR at a time. ``check_tour``
+``check_tour``
 is ``synth dataset check``: completeness, readability, channels, sizes, depth values, ids against
 objects.json, pose sanity and a multi-view depth consistency test between neighbouring frames
 (it catches shifted or wrong poses, camera axes in the wrong convention and depth stored as ray
@@ -26,29 +26,17 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import sys
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 
-from . import frames as fr
-from .camera import Intrinsics, read_tum
-from .errors import SceneFormatError, UserError
-from .scene import CEILING_ID_BASE, FLOOR_ID_BASE, WALL_ID_BASE
-
-CAMERA_FILE = "camera.json"
-POSES_FILE = "poses.txt"
-OBJECTS_FILE = "objects.json"
-META_FILE = "meta.json"
-FRAMES_DIR = "frames"
-PREVIEWS_DIR = "previews"
-
-# instance ids of room structure: walls 1000+k, floors 2000+k, ceilings 3000+k
-STRUCTURE_ID_MIN, STRUCTURE_ID_MAX = WALL_ID_BASE, CEILING_ID_BASE + 999
-STRUCTURE_CLASSES = ((WALL_ID_BASE, "wall"), (FLOOR_ID_BASE, "floor"), (CEILING_ID_BASE, "ceiling"))
+from formats import frames as fr
+from formats.boxes import STRUCTURE_CLASSES, STRUCTURE_ID_MAX, STRUCTURE_ID_MIN
+from formats.camera import Intrinsics
+from formats.errors import UserError
+from formats.tour import (CAMERA_FILE, FRAMES_DIR, META_FILE, OBJECTS_FILE, POSES_FILE, PREVIEWS_DIR, Tour,
+                          images_from_channels, ranges_text, read_split_channels, scan_dir, tonemap)
 
 # depth consistency between neighbouring frames
 CONSISTENCY_ABS_TOL_M = 0.02  # a pixel agrees within max(2 cm, 1 % of its depth)
@@ -64,277 +52,6 @@ PAIR_MAX_MOVE_M, PAIR_MAX_TURN_DEG = 1.0, 30.0  # ... but the views still overla
 CLASS_MISMATCH_FRACTION = 0.005  # instance/semantic pairs disagreeing with objects.json on > 0.5 % of a frame
 ROTATION_TOL = 1e-4
 PROBLEM_LINES_PER_KIND = 20  # text report: at most this many lines per kind of problem
-
-
-@dataclass
-class Frame:
-    index: int
-    rgb: np.ndarray | None  # (H, W, 3) float32, linear
-    depth: np.ndarray | None  # (H, W) float32, planar metres, 0 = no surface
-    instance: np.ndarray | None  # (H, W) uint32
-    semantic: np.ndarray | None  # (H, W) uint32
-    pose: np.ndarray  # 4x4 camera-to-world, OpenCV axes
-    K: np.ndarray  # 3x3
-
-    @property
-    def position(self) -> np.ndarray:
-        return self.pose[:3, 3]
-
-
-# ---------------------------------------------------------------------------------------------
-# reading
-
-
-def _read_json(path: Path, what: str) -> dict:
-    if not path.is_file():
-        raise SceneFormatError(path, None, f"{what} not found")
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as e:
-        raise SceneFormatError(path, f"line {e.lineno}", f"not valid JSON ({e.msg})") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise SceneFormatError(path, None, f"cannot read ({e})") from None
-    if not isinstance(data, dict):
-        raise SceneFormatError(path, None, f"expected a JSON object, got {type(data).__name__}")
-    return data
-
-
-def _number(d: dict, key: str, path: Path, positive: bool = False, integer: bool = False) -> float:
-    if key not in d:
-        raise SceneFormatError(path, key, "missing")
-    v = d[key]
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise SceneFormatError(path, key, f"expected a finite number, got {v!r}")
-    if integer and v != int(v):
-        raise SceneFormatError(path, key, f"expected an integer, got {v!r}")
-    if positive and v <= 0:
-        raise SceneFormatError(path, key, f"expected a positive number, got {v!r}")
-    return int(v) if integer else float(v)
-
-
-def _parse_camera(path: Path) -> tuple[Intrinsics, float, dict]:
-    d = _read_json(path, "camera file")
-    w = _number(d, "width", path, positive=True, integer=True)
-    h = _number(d, "height", path, positive=True, integer=True)
-    fx = _number(d, "fx", path, positive=True)
-    fy = _number(d, "fy", path, positive=True)
-    cx = _number(d, "cx", path)
-    cy = _number(d, "cy", path)
-    fps = _number(d, "fps", path, positive=True)
-    intr = Intrinsics(w, h, fx, fy, cx, cy)
-    if "K" in d:
-        try:
-            K = np.asarray(d["K"], dtype=float)
-            good_shape = K.shape == (3, 3)
-        except (TypeError, ValueError):
-            good_shape = False
-        if not good_shape:
-            raise SceneFormatError(path, "K", f"expected a 3x3 matrix, got {d['K']!r}")
-        if not np.allclose(K, intr.K, rtol=1e-6, atol=1e-6):
-            raise SceneFormatError(path, "K", f"does not match fx, fy, cx, cy ({K.tolist()} vs {intr.K.tolist()})")
-    return intr, fps, d
-
-
-def _split_channels(ch: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """Channels by their EXR names; interleaved RGB(A) arrays (OpenEXR's default read) split into R, G, B(, A)."""
-    out: dict[str, np.ndarray] = {}
-    for name, a in ch.items():
-        if name in ("RGB", "RGBA") and a.ndim == 3 and a.shape[2] == len(name):
-            for k, c in enumerate(name):
-                out[c] = a[..., k]
-        else:
-            out[name] = a
-    return out
-
-
-def _images(ch: dict[str, np.ndarray], rgb=True, depth=True, instance=True, semantic=True) -> fr.FrameImages:
-    out = fr.FrameImages()
-    if rgb and all(c in ch for c in fr.RGB_CHANNELS):
-        out.rgb = np.stack([ch[c].astype(np.float32) for c in fr.RGB_CHANNELS], axis=-1)
-    if depth and fr.DEPTH_CHANNEL in ch:
-        out.depth = ch[fr.DEPTH_CHANNEL].astype(np.float32, copy=False)
-    if instance and fr.INSTANCE_CHANNEL in ch:
-        out.instance = ch[fr.INSTANCE_CHANNEL].astype(np.uint32, copy=False)
-    if semantic and fr.SEMANTIC_CHANNEL in ch:
-        out.semantic = ch[fr.SEMANTIC_CHANNEL].astype(np.uint32, copy=False)
-    return out
-
-
-def _read_channels(path: Path) -> dict[str, np.ndarray]:
-    """All channels of one frame file by EXR name (FrameFileError naming the file when unreadable)."""
-    return _split_channels(fr.read_channels(path))
-
-
-def _channel_names(path: Path) -> list[str]:
-    """Channel names from the EXR header only (cheap)."""
-    import OpenEXR
-
-    try:
-        with OpenEXR.File(str(path), header_only=True) as f:
-            return sorted(c.name for c in f.header()["channels"])
-    except Exception as e:
-        raise fr.FrameFileError(f"{path}: corrupt or unreadable EXR ({e or type(e).__name__})") from None
-
-
-class Tour:
-    """A rendered tour directory. The small files are read here; frames are read when asked for.
-
-    A tour whose poses.txt and frame files disagree is refused (``SceneFormatError`` naming
-    poses.txt and both counts): frame files without a pose (poses.txt cut short: reading it
-    would silently shorten the tour), or a meta.json ``n_frames`` other than the number of poses.
-    Fewer frame files than poses is allowed: a partly rendered (or resumed) tour has them, and a
-    missing frame is a ``FrameFileError`` naming its file when read. ``strict=False`` (what
-    ``check_tour`` uses) accepts either, to report it.
-    """
-
-    def __init__(self, root, strict: bool = True):
-        self.root = Path(root)
-        if not self.root.is_dir():
-            raise UserError(f"{self.root}: tour directory not found")
-        self.camera_file = self.root / CAMERA_FILE
-        self.intrinsics, self.fps, self.camera = _parse_camera(self.camera_file)
-        poses_file = self.root / POSES_FILE
-        self.frame_indices, self.poses = read_tum(poses_file, fps=self.fps)
-        if len(self.frame_indices) == 0:
-            raise SceneFormatError(poses_file, None, "no poses (a tour has one line per frame)")
-        uniq, counts = np.unique(self.frame_indices, return_counts=True)
-        if (counts > 1).any():
-            dup = int(uniq[counts > 1][0])
-            raise SceneFormatError(poses_file, None, f"frame {dup} appears {int(counts[counts > 1][0])} times "
-                                   f"(frame = round(t * fps), fps {self.fps:g} from {CAMERA_FILE})")
-        self._row = {int(i): k for k, i in enumerate(self.frame_indices)}
-        self.meta = _read_json(self.root / META_FILE, "tour metadata")
-        self._objects: dict | None = None
-        if strict:
-            why = self.count_problem()
-            if why:
-                raise SceneFormatError(poses_file, None, why)
-
-    # -- basics --------------------------------------------------------------------------------
-
-    @property
-    def name(self) -> str:
-        return self.root.resolve().name
-
-    @property
-    def K(self) -> np.ndarray:
-        return self.intrinsics.K
-
-    @property
-    def frames_dir(self) -> Path:
-        return self.root / FRAMES_DIR
-
-    def __len__(self) -> int:
-        return len(self.frame_indices)
-
-    def __repr__(self) -> str:
-        return f"Tour({str(self.root)!r}, {len(self)} frames, {self.intrinsics.width}x{self.intrinsics.height})"
-
-    def frame_path(self, index: int) -> Path:
-        return self.frames_dir / fr.frame_name(int(index))
-
-    def frame_files(self) -> list[int]:
-        """Indices of the frame files on disk (``frames/NNNNNN.exr``), sorted; one directory listing."""
-        return sorted(int(e.name[:-4]) for e in _scan_dir(self.frames_dir)
-                      if e.name.endswith(".exr") and e.name[:-4].isdigit())
-
-    def count_problem(self, frame_files: list[int] | None = None) -> str | None:
-        """Why poses.txt, the frame files and meta.json's ``n_frames`` disagree, or None.
-
-        Frame files without a pose, or ``n_frames`` other than the number of poses, disagree;
-        fewer frame files than poses (a partly rendered tour) does not."""
-        present = self.frame_files() if frame_files is None else frame_files
-        n = len(self.frame_indices)
-        extra = sorted(set(present) - set(self._row))
-        if extra:
-            return (f"{n} poses for {len(present)} frame files in {FRAMES_DIR}/ ({len(extra)} frame files have no "
-                    f"pose: {_ranges(extra)}); poses.txt was cut short or belongs to another render")
-        n_meta = self.disagreeing_n_frames()
-        if n_meta is not None:
-            return f"{n} poses, but {META_FILE} says the tour has {n_meta} frames (n_frames)"
-        return None
-
-    def disagreeing_n_frames(self) -> int | None:
-        """meta.json's ``n_frames`` when it is given and differs from the number of poses, else None."""
-        n_meta = self.meta.get("n_frames")
-        ok = not isinstance(n_meta, int) or isinstance(n_meta, bool) or n_meta == len(self.frame_indices)
-        return None if ok else n_meta
-
-    def pose(self, index: int) -> np.ndarray:
-        return self.poses[self._position(index)].copy()
-
-    def _position(self, index: int) -> int:
-        try:
-            return self._row[int(index)]
-        except KeyError:
-            fi = self.frame_indices
-            raise UserError(f"{self.root / POSES_FILE}: frame {index} is not in this tour "
-                            f"({len(fi)} frames, {int(fi.min())}..{int(fi.max())})") from None
-
-    # -- frames --------------------------------------------------------------------------------
-
-    def frame(self, index: int, rgb: bool = True, depth: bool = True, instance: bool = True,
-              semantic: bool = True) -> Frame:
-        """One frame (reads its EXR); channels not asked for, or absent from the file, are None."""
-        k = self._position(index)
-        img = _images(_read_channels(self.frame_path(index)), rgb, depth, instance, semantic)
-        return Frame(int(index), img.rgb, img.depth, img.instance, img.semantic, self.poses[k].copy(), self.K)
-
-    def __iter__(self) -> Iterator[Frame]:
-        """Frames in poses.txt order, reading one EXR at a time."""
-        for i in self.frame_indices:
-            yield self.frame(int(i))
-
-    def has_rgb(self) -> bool:
-        """Whether the frames carry R, G, B (a geometry-only tour has none).
-
-        Asks the first frame file's header; without any frame file, meta.json's ``lighting``
-        (null for geometry-only tours) decides.
-        """
-        for i in self.frame_indices:
-            p = self.frame_path(int(i))
-            if p.is_file():
-                try:
-                    names = _channel_names(p)
-                except fr.FrameFileError:
-                    continue
-                return all(c in names for c in fr.RGB_CHANNELS)
-        return self.meta.get("lighting") is not None
-
-    @property
-    def rgb_every(self) -> int:
-        """RGB is rendered on frames 0, k, 2k, ... (a render job's ``rgb_every``; 1: every frame)."""
-        k = (self.meta.get("settings") or {}).get("rgb_every")
-        return int(k) if isinstance(k, int) and k > 0 else 1
-
-    def objects(self) -> dict:
-        """objects.json (videoreloc-boxes/1), read on first use."""
-        if self._objects is None:
-            path = self.root / OBJECTS_FILE
-            d = _read_json(path, "ground-truth boxes")
-            if not isinstance(d.get("boxes"), list):
-                raise SceneFormatError(path, "boxes", "expected a list of boxes")
-            if not isinstance(d.get("classes"), dict):
-                raise SceneFormatError(path, "classes", "expected a mapping of class name -> semantic id")
-            for k, b in enumerate(d["boxes"]):
-                if not isinstance(b, dict) or isinstance(b.get("id"), bool) or not isinstance(b.get("id"), int):
-                    raise SceneFormatError(path, f"boxes[{k}].id", f"expected an integer id, got {b!r:.80}")
-            for name, v in d["classes"].items():
-                if isinstance(v, bool) or not isinstance(v, int):
-                    raise SceneFormatError(path, f"classes.{name}", f"expected an integer id, got {v!r}")
-            self._objects = d
-        return self._objects
-
-    def class_names(self) -> dict[int, str]:
-        """semantic id -> class name from objects.json (empty when it cannot be read)."""
-        try:
-            return {int(v): k for k, v in self.objects()["classes"].items()}
-        except UserError:
-            return {}
-
-
-# ---------------------------------------------------------------------------------------------
-# check
 
 
 def _pose_problem(T: np.ndarray) -> str | None:
@@ -472,31 +189,6 @@ def depth_consistency(depth_i, T_i, depth_j, T_j, intr: Intrinsics, rays: np.nda
     }
 
 
-def _ranges(values) -> str:
-    """'3, 10-19, 25' for sorted integers."""
-    vals = sorted(int(v) for v in values)
-    parts, start, prev = [], None, None
-    for v in vals:
-        if start is None:
-            start = prev = v
-        elif v == prev + 1:
-            prev = v
-        else:
-            parts.append(f"{start}" if start == prev else f"{start}-{prev}")
-            start = prev = v
-    if start is not None:
-        parts.append(f"{start}" if start == prev else f"{start}-{prev}")
-    return ", ".join(parts)
-
-
-def _scan_dir(d: Path) -> list[os.DirEntry]:
-    try:
-        with os.scandir(d) as it:
-            return list(it)
-    except (FileNotFoundError, NotADirectoryError):
-        return []
-
-
 def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -> dict:
     """Check a rendered tour (``synth dataset check``); returns a JSON-serialisable report.
 
@@ -541,7 +233,7 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
     expected = {int(i) for i in tour.frame_indices}
     present: set[int] = set()
     for d in (tour.root, tour.frames_dir, tour.root / PREVIEWS_DIR):
-        for e in _scan_dir(d):
+        for e in scan_dir(d):
             if e.name.startswith(".") and e.name.endswith(".tmp"):
                 rep["stray_temp_files"].append(str(Path(e.path).relative_to(tour.root)))
             elif d == tour.root and e.name.startswith(".jobs_") and e.is_dir():
@@ -596,7 +288,7 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
             continue
         path = tour.frame_path(idx)
         try:
-            ch = _read_channels(path)
+            ch = read_split_channels(path)
         except fr.FrameFileError as e:
             rep["unreadable"].append({"frame": idx, "file": str(path), "error": str(e)})
             continue
@@ -607,7 +299,7 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
         if shapes != {(H, W)}:
             rep["shape_mismatch"].append({"frame": idx, "shape": [list(s) for s in sorted(shapes)], "expected": [H, W]})
             continue
-        img = _images(ch)
+        img = images_from_channels(ch)
         del ch
         # depth
         if img.depth is not None:
@@ -677,9 +369,9 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
 
     problems.extend(rep["errors"])
     if rep["missing"]:
-        problems.append(f"missing frames ({len(rep['missing'])} of {N}, no EXR in {FRAMES_DIR}/): {_ranges(rep['missing'])}")
+        problems.append(f"missing frames ({len(rep['missing'])} of {N}, no EXR in {FRAMES_DIR}/): {ranges_text(rep['missing'])}")
     if rep["extra_frames"]:
-        problems.append(f"frames not in {POSES_FILE} ({len(rep['extra_frames'])}): {_ranges(rep['extra_frames'])}")
+        problems.append(f"frames not in {POSES_FILE} ({len(rep['extra_frames'])}): {ranges_text(rep['extra_frames'])}")
     n_meta = tour.disagreeing_n_frames()
     meta_count_bad = n_meta is not None
     if meta_count_bad:
@@ -813,21 +505,6 @@ def format_report(rep: dict) -> str:
 
 # ---------------------------------------------------------------------------------------------
 # contact sheet
-
-
-def tonemap(rgb: np.ndarray, exposure: float | None = None) -> tuple[np.ndarray, float]:
-    """Simple display transform: scale (auto: the 97th luminance percentile to 0.9), sRGB gamma, clip.
-
-    Returns (image in [0, 1], the scale used).
-    """
-    rgb = np.nan_to_num(np.asarray(rgb, dtype=np.float32), nan=0.0, posinf=0.0, neginf=0.0)
-    if exposure is None:
-        lum = rgb @ np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
-        p = float(np.percentile(lum, 97)) if lum.size else 0.0
-        scale = 0.9 / p if p > 1e-8 else 1.0
-    else:
-        scale = float(exposure)
-    return fr.srgb_encode(rgb * scale).astype(np.float32), scale
 
 
 def id_colors(ids, salt: int = 0) -> np.ndarray:
@@ -974,7 +651,7 @@ def contact_sheet(tour: Tour, index: int, out, exposure: float | None = None, dp
     fig.suptitle(f"{tour.name}  |  frame {index}  |  camera at ({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f}) m"
                  + (f"\n{sub}" if sub else ""), fontsize=12, y=1 - 0.1 / fig.get_figheight(), va="top")
 
-    from .preview import save_figure
+    from formats.atomic import save_figure
 
     return save_figure(fig, out, dpi)
 

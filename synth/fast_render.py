@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 import open3d as o3d
 
-from .camera import Intrinsics
+from formats.camera import Intrinsics
+
 from .meshes import layout_parts
 from .scene import Layout
 

@@ -33,12 +33,14 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from . import frames as fr
-from .atomic import write_json_atomic, write_text_atomic
+from formats import frames as fr
+from formats.atomic import write_json_atomic, write_text_atomic
+from formats.design import tour_name, write_design
+from formats.errors import SceneFormatError, UserError, check_output_folder
+from formats.yamlfile import read_yaml
+
 from .chunks import chunk_job, run_chunk_process
-from .errors import SceneFormatError, UserError, check_output_folder
 from .render_settings import DEVICES, quality
-from .scene import read_yaml
 from .tour import TourSpec, make_output_folder, prepare, tour_meta, write_static_files
 
 STATE_FILE = "job_state.json"
@@ -213,19 +215,6 @@ class Plan:
         return sum(len(c.frames) for c in self.chunks)
 
 
-def _short(name: str) -> str:
-    """A layout, lighting or path given as a file stands for its stem in tour names (a path in the
-    name would put the tour outside the job's folder)."""
-    p = Path(name)
-    if "/" in name or "\\" in name or p.suffix.lower() in (".yaml", ".yml", ".json", ".txt", ".tum"):
-        return p.stem
-    return name
-
-
-def tour_name(layout: str, lighting: str | None, path: str) -> str:
-    return f"{_short(layout)}__{_short(lighting) if lighting else 'geometry'}__{_short(path)}"
-
-
 def _out_error(spec: JobSpec, from_cli: bool, e: UserError):
     """An unusable output folder, named as the spec's ``out`` or as the ``--out`` that overrides it."""
     if from_cli:
@@ -238,8 +227,9 @@ def validate_names(spec: JobSpec, check_clearance: bool = False) -> None:
     asked for; a UserError names the spec file and the field (``designs[0].layouts[1]``).
 
     With ``check_clearance``, a path rendered through a layout it was not planned on must keep its
-    declared clearance there (``synth.camera_paths.render_clearance_problem``)."""
-    from .camera_paths import load_path, render_clearance_problem
+    declared clearance there (``synth.paths.clearance.render_clearance_problem``)."""
+    from .paths.clearance import render_clearance_problem
+    from .paths.files import load_path
     from .lighting import load_lighting
     from .scene import load_layout, resolve_layout_path
 
@@ -559,6 +549,10 @@ def run_job(spec: JobSpec, out: Path | None = None, workers: int = 1, backend: s
         if p.geometry_dir:
             make_output_folder(p.geometry_dir)
         write_static_files(p)
+    # the planned tours, before any frame: readers of the design know what is still missing
+    write_design(plan.out, spec.name, spec.source, {
+        name: {"layout": p.layout_name, "lighting": p.lighting_name, "path": p.path_name, "n_frames": len(p.frame_ids)}
+        for name, p in plan.tours.items()})
     todo = []
     for c in plan.chunks:
         if c.missing():
@@ -624,7 +618,7 @@ def calibrate(plan: Plan, frames: int = 1) -> dict:
     """Seconds per frame of each chunk kind, measured on ``frames`` frames of the first tour."""
     import tempfile
 
-    from .camera import write_tum
+    from formats.camera import write_tum
 
     spec = plan.spec
     p = next(iter(plan.tours.values()))

@@ -18,9 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import SceneFormatError, UnknownNameError
+from formats.errors import SceneFormatError, UnknownNameError
+from formats.yamlfile import read_yaml
+
 from .resources import scenes_dir
-from .scene import Layout, read_yaml
+from .scene import Layout
 
 
 def lighting_dir() -> Path:

@@ -21,10 +21,12 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
+from formats.boxes import CEILING_ID_BASE, FLOOR_ID_BASE, STRUCT_SLAB, WALL_ID_BASE
+
 from . import assets
 from . import geometry as geo
 from .classes import class_table
-from .scene import CEILING_ID_BASE, FLOOR_ID_BASE, STRUCT_SLAB, WALL_ID_BASE, Layout, ObjectInstance, Stage
+from .scene import Layout, ObjectInstance, Stage
 
 ROOM_FLOOR_MATERIAL = {"bathroom": "floor_tile", "kitchen": "floor_tile"}  # others: floor_wood
 

@@ -38,9 +38,10 @@ from matplotlib.patches import Arc, FancyArrowPatch, Patch, Polygon, Rectangle
 from matplotlib.ticker import MultipleLocator
 from matplotlib.transforms import Bbox
 
-from .atomic import replacing
+from formats.atomic import save_figure
+from formats.errors import UserError
+
 from . import geometry as geo
-from .errors import UserError
 from .scene import Layout, Stage, Wall, object_box
 
 __all__ = ["plot_layout", "diff_layouts", "figure_size", "class_color", "room_color", "LABEL_MIN_AREA", "BIG_MOVE"]
@@ -485,23 +486,6 @@ def plot_layout(layout: Layout, out_path, ref: Layout | None = None, title: str 
     _draw(fig, ax, layout, ref, diff, plan, title, labels)
 
     return save_figure(fig, out, dpi)
-
-
-def save_figure(fig, out_path, dpi: float) -> Path:
-    """Write a matplotlib figure atomically (temporary name next to the target, then rename).
-
-    The format follows the extension (no extension: png); an unsupported one is a UserError.
-    Metadata that changes on every run (dates, software) is left out, so reruns give equal files.
-    """
-    out = Path(out_path)
-    fmt = out.suffix.lower().lstrip(".") or "png"
-    supported = fig.canvas.get_supported_filetypes()
-    if fmt not in supported:
-        raise UserError(f"{out}: cannot write '.{fmt}' plots; use one of: {', '.join(sorted(supported))}")
-    meta = {"png": {"Software": None}, "pdf": {"CreationDate": None, "Producer": None}, "svg": {"Date": None}}.get(fmt)
-    with replacing(out) as tmp:
-        fig.savefig(tmp, format=fmt, dpi=dpi, facecolor="white", metadata=meta)
-    return out
 
 
 def _draw(fig, ax, layout: Layout, ref: Layout | None, diff: dict | None, plan: _Plan, title: str | None, labels: bool):

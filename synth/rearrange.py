@@ -64,7 +64,7 @@ WALKWAY_FRAMES = 1500
 
 def reference_walkway(ref: Layout, seed: int = 0) -> np.ndarray:
     """(N, 2) points of a walk through every room of ``ref`` that variants must keep free."""
-    from .camera_paths import plan_query_path
+    from .paths.query import plan_query_path
 
     path = plan_query_path([ref], frames=WALKWAY_FRAMES, seed=seed, clearance=WALKWAY_CLEARANCE, obstacles="all", name="walkway")
     return path.poses[::3, :2, 3].copy()

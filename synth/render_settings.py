@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from .errors import UnknownNameError
+from formats.errors import UnknownNameError
+
+
 
 # Cycles settings per quality preset. Geometry passes (depth, ids) ignore these: they are traced with
 # one sample through each pixel centre.

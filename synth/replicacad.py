@@ -61,9 +61,11 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from formats.boxes import MAX_OBJECT_ID
+from formats.errors import SceneFormatError, UnknownNameError
+
 from .classes import ClassTable, class_table
-from .errors import SceneFormatError, UnknownNameError
-from .scene import MAX_OBJECT_ID, Layout, ObjectInstance, Stage
+from .scene import Layout, ObjectInstance, Stage
 
 log = logging.getLogger(__name__)
 

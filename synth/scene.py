@@ -32,15 +32,16 @@ from typing import Any
 import numpy as np
 import yaml
 
+from formats.atomic import write_text_atomic
+from formats.boxes import BOXES_FORMAT, CEILING_ID_BASE, FLOOR_ID_BASE, FRAME_TEXT, MAX_OBJECT_ID, STRUCT_SLAB, WALL_ID_BASE
+from formats.errors import SceneFormatError, UnknownNameError
+from formats.yamlfile import read_yaml
+
 from . import geometry as geo
-from .atomic import write_text_atomic
 from .classes import ClassTable, class_table
-from .errors import SceneFormatError, UnknownNameError
 from .resources import layouts_dir
 
 FORMAT = "synth-layout/1"
-MAX_OBJECT_ID = 999
-WALL_ID_BASE, FLOOR_ID_BASE, CEILING_ID_BASE = 1000, 2000, 3000
 
 # --------------------------------------------------------------------------------------------
 # stored precision
@@ -295,8 +296,6 @@ def object_box(obj: ObjectInstance) -> geo.OrientedBox:
     return geo.OrientedBox(obj.id, obj.cls, tuple(float(v) for v in c), tuple(float(v) for v in hi - lo), yaw)
 
 
-STRUCT_SLAB = 0.1  # thickness of floor and ceiling boxes (m)
-
 
 def structure_boxes(stage: Stage) -> list[geo.OrientedBox]:
     """Boxes of every wall segment and of the floor and ceiling of every room."""
@@ -326,9 +325,6 @@ def layout_boxes(layout: Layout, structure: bool = True) -> list[geo.OrientedBox
     return boxes
 
 
-BOXES_FORMAT = "videoreloc-boxes/1"
-
-
 def boxes_document(layout: Layout, classes: ClassTable | None = None) -> dict:
     """The box file the relocalizer's map reads (``synth scene export-boxes``)."""
     classes = classes or class_table()
@@ -344,7 +340,7 @@ def boxes_document(layout: Layout, classes: ClassTable | None = None) -> dict:
     return {
         "format": BOXES_FORMAT,
         "layout": layout.name,
-        "frame": "world: right-handed, Z up, metres; yaw about +Z in radians",
+        "frame": FRAME_TEXT,
         "classes": {c: classes.id_of(c) for c in used},
         "boxes": out,
     }
@@ -640,23 +636,6 @@ def dump_yaml(doc) -> str:
 def save_layout(layout: Layout, path: str | Path) -> Path:
     """Write the layout as YAML (atomically: temporary file, then rename)."""
     return write_text_atomic(path, dump_yaml(layout_to_dict(layout)))
-
-
-def read_yaml(path: Path):
-    if not path.exists():
-        raise SceneFormatError(path, None, "file not found")
-    try:
-        text = path.read_text()
-    except OSError as e:
-        raise SceneFormatError(path, None, f"cannot read: {e.strerror}") from None
-    try:
-        if path.suffix == ".json":
-            import json
-
-            return json.loads(text)
-        return yaml.safe_load(text)
-    except (yaml.YAMLError, ValueError) as e:
-        raise SceneFormatError(path, None, "malformed " + ("JSON" if path.suffix == ".json" else "YAML") + ": " + str(e).replace("\n", " ")) from None
 
 
 def resolve_layout_path(name_or_path: str | Path) -> Path:

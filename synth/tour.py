@@ -26,12 +26,13 @@ from pathlib import Path
 
 import numpy as np
 
+from formats import frames as fr
+from formats.atomic import temp_name, write_json_atomic
+from formats.camera import CAMERA_DOC, Intrinsics, write_tum
+from formats.errors import UserError, check_output_folder
+
 from . import __version__
-from . import frames as fr
-from .atomic import temp_name, write_json_atomic
 from .chunks import chunk_job, missing_frames, run_chunk_process, split
-from .camera import CAMERA_DOC, Intrinsics, write_tum
-from .errors import UserError, check_output_folder
 from .render_settings import DEVICES, quality
 from .scene import boxes_document, load_layout, resolve_layout_path
 
@@ -60,7 +61,7 @@ class TourSpec:
     threads: int = 0  # Cycles threads per worker (0 = all)
     geometry_cache: str | None = None  # default: <out parent>/_geometry
     # refuse a path whose declared clearance the layout breaks (layouts the path was not planned
-    # on only; synth.camera_paths.render_clearance_problem); False: --allow-clearance-breach
+    # on only; synth.paths.clearance.render_clearance_problem); False: --allow-clearance-breach
     check_clearance: bool = True
 
 
@@ -102,7 +103,7 @@ def prepare(spec: TourSpec, create: bool = True) -> Prepared:
     """Validate everything before anything is written; raise a UserError naming what is wrong.
 
     With ``create`` the output and geometry-cache folders are created (and proven writable)."""
-    from .camera_paths import load_path
+    from .paths.files import load_path
     from .lighting import load_lighting
 
     if spec.renderer not in ("blender", "fast"):
@@ -132,7 +133,7 @@ def prepare(spec: TourSpec, create: bool = True) -> Prepared:
             raise UserError(f"--frames {spec.frames} exceeds the {n} frames of camera path '{cpath.name}'")
         n = spec.frames
     if spec.check_clearance:
-        from .camera_paths import render_clearance_problem
+        from .paths.clearance import render_clearance_problem
 
         why = render_clearance_problem(cpath, layout, layout_file, spec.layout, n)
         if why:

@@ -15,12 +15,14 @@ import numpy as np
 import pytest
 
 from reloc.cli import main as reloc_main
-from synth.camera import write_tum
+
+from formats.camera import write_tum
+from formats.frames import FrameFileError, read_channels
+from formats.tour import Tour
 from synth.cli import main as synth_main
-from synth.dataset import Tour
-from synth.frames import FrameFileError, read_channels
 from synth.scene import boxes_document, load_layout
 from synth.tour import TourSpec, render_tour
+
 
 W, H, N = 64, 48, 30
 
@@ -97,7 +99,7 @@ def test_relocalize_checks_out_before_reading_frames(world, tmp_path, blocker, m
     """The API too: no frame is read when the output folder cannot be made."""
     import reloc.backend.run
     from reloc.map.boxmap import BoxMap
-    from synth.errors import UserError
+    from formats.errors import UserError
 
     def no_read(*a, **k):
         raise AssertionError("a frame was read before --out was checked")
@@ -109,12 +111,12 @@ def test_relocalize_checks_out_before_reading_frames(world, tmp_path, blocker, m
 
 @pytest.mark.parametrize("where", ["under_file", "proc"])
 def test_reloc_map_build_unwritable_out_fails_fast(world, tmp_path, blocker, capsys, monkeypatch, where):
-    import reloc.map.build
+    import reloc.map.cli
 
     def no_work(*a, **k):
         raise AssertionError("the map was built before --out was checked")
 
-    monkeypatch.setattr(reloc.map.build, "build_map", no_work)
+    monkeypatch.setattr(reloc.map.cli, "build_map", no_work)
     out = blocker / "map.json" if where == "under_file" else "/proc/forbidden/map.json"
     assert reloc_main(["map", "build", str(world["tour"]), "--out", str(out), "--quiet"]) == 2
     one_line_error(capsys.readouterr().err, out)
@@ -132,9 +134,9 @@ def test_reloc_map_build_out_is_a_folder(world, tmp_path, capsys):
     assert "it is a folder" in one_line_error(capsys.readouterr().err, tmp_path / "maps")
 
 
-def test_reloc_map_from_scene_unwritable_out(tmp_path, blocker, capsys):
+def test_reloc_map_ground_truth_unwritable_out(world, tmp_path, blocker, capsys):
     out = blocker / "gt.json"
-    assert reloc_main(["map", "from-scene", "apt_0", "--out", str(out)]) == 2
+    assert reloc_main(["map", "ground-truth", str(world["tour"]), "--out", str(out)]) == 2
     one_line_error(capsys.readouterr().err, out)
     nothing_left(tmp_path, keep={"a_file"})
 
@@ -173,7 +175,7 @@ def test_synth_export_boxes_unwritable_out(tmp_path, blocker, capsys, where):
 
 
 def test_output_checks_create_nothing(tmp_path):
-    from synth.errors import check_output_file, check_output_folder
+    from formats.errors import check_output_file, check_output_folder
 
     check_output_folder(tmp_path / "a" / "b")
     check_output_file(tmp_path / "c" / "d.json")
@@ -290,7 +292,7 @@ def test_eval_tolerates_float_print_noise(world, tmp_path, capsys):
 
 def test_read_tum_strict_off_by_default(tmp_path):
     """Other readers (paths, render jobs) keep reading any time as its nearest frame."""
-    from synth.camera import read_tum
+    from formats.camera import read_tum
 
     p = tmp_path / "t.txt"
     p.write_text("1.65 0 0 0 0 0 0 1\n1.65 0 0 0 0 0 0 1\n")
@@ -326,8 +328,11 @@ def test_experiment_runs_record_the_spec_detector(world, tmp_path):
     from reloc.map.boxmap import BoxMap
     from reloc.backend.run import relocalize
 
+    from reloc.config import Config
+
     t, bmap = Tour(world["tour"]), BoxMap.load(world["map"])
-    det = _detector({"miss_rate": 0.1, "seed": 5}, t, bmap)
+    det = _detector({"miss_rate": 0.1, "seed": 5}, t, bmap, Config().replace("detection.min_mask_pixels", 7))
+    assert det.min_pixels == 7  # the config's detection settings reach the detector
     relocalize(t, bmap, tmp_path / "run", detector=det, poses="gt", frames=6, progress=False)
     c = json.loads((tmp_path / "run" / "run.json").read_text())["detector"]["corruption"]
     assert c["miss_rate"] == 0.1 and c["seed"] == 5 and c["active"] is True

@@ -22,12 +22,16 @@ import pytest
 import yaml
 
 from reloc.cli import main as reloc_main
-from synth.camera_paths import CameraPath, load_path, path_clearance, save_path
+
+from formats.errors import SceneFormatError
+from formats.frames import FrameFileError, write_frame
+from formats.tour import Tour
 from synth.checks import check_layout
 from synth.cli import main as synth_main
-from synth.dataset import Tour, check_tour
-from synth.errors import SceneFormatError
-from synth.frames import FrameFileError, write_frame
+from synth.dataset import check_tour
+from synth.paths.clearance import path_clearance
+from synth.paths.files import load_path, save_path
+from synth.paths.model import CameraPath
 from synth.scene import load_layout, object_box, save_layout
 from synth.stats import PAPER_RANGES, change_stats
 from synth.tour import TourSpec, render_tour
@@ -77,7 +81,7 @@ def test_poses_cut_short_is_refused_by_every_reader(tour, tmp_path, capsys):
     assert synth_main(["dataset", "show", str(tour), "--out", str(tmp_path / "s.png")]) == 2
     err = one_line_error(capsys)
     assert "poses.txt" in err and "10 poses for 24 frame files" in err
-    # reloc reads tours through synth.dataset.Tour: no silently shortened map
+    # reloc reads tours through formats.tour.Tour: no silently shortened map
     assert reloc_main(["map", "build", str(tour), "--out", str(tmp_path / "m.json"), "--quiet"]) == 2
     err = one_line_error(capsys)
     assert "poses.txt" in err and "10 poses for 24 frame files" in err
@@ -323,7 +327,7 @@ def test_path_check_names_frames_and_object(variant, capsys):
 
 
 def test_path_check_is_cheap(variant):
-    from synth.camera_paths import clearance_report
+    from synth.paths.clearance import clearance_report
 
     query, lay = load_path("query"), load_layout(variant)
     clearance_report(query, lay)  # warm-up (imports)

@@ -12,10 +12,16 @@ import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
-from synth import camera_paths as cp
+from formats.errors import SceneFormatError, UnknownNameError, UserError
 from synth.cli import main as synth_main
-from synth.errors import SceneFormatError, UnknownNameError, UserError
+from synth.paths.clearance import path_clearance
+from synth.paths.files import load_path, save_path
+from synth.paths.mapping import plan_mapping_path
+from synth.paths.model import CameraPath
+from synth.paths.query import plan_query_path
+from synth.paths.shipped import replan
 from synth.scene import load_layout, object_box
+
 
 BUILTIN = [f"apt_{i}" for i in range(6)]
 ROOMS = {"living", "kitchen", "bedroom", "bathroom", "hallway"}
@@ -28,12 +34,12 @@ def layouts():
 
 @pytest.fixture(scope="module")
 def query():
-    return cp.load_path("query")
+    return load_path("query")
 
 
 @pytest.fixture(scope="module")
 def mapping():
-    return cp.load_path("mapping")
+    return load_path("mapping")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -183,7 +189,7 @@ def test_query_clear_of_objects_and_walls_in_every_layout(query, layouts):
     worst = check_clearance(query, layouts, c)
     assert worst < c + 0.1  # the check is not vacuous: the path does get close to things
     for lay in layouts:  # the module's own measure agrees it is clear
-        assert cp.path_clearance(query, lay).min() >= c
+        assert path_clearance(query, lay).min() >= c
 
 
 def test_query_visits_every_room(query, layouts):
@@ -196,11 +202,11 @@ def test_query_visits_every_room(query, layouts):
 def test_infeasible_clearance_says_why(layouts):
     # 0.6 m from everything cannot pass 0.8 m doors: the error names the rooms and what is possible
     with pytest.raises(UserError, match=r"cannot be reached with 0.6 m clearance.*most these layouts allow is about 0\.[34]"):
-        cp.plan_query_path(layouts, frames=60, clearance=0.6)
+        plan_query_path(layouts, frames=60, clearance=0.6)
 
 
 def test_short_query_path(layouts):
-    p = cp.plan_query_path(layouts[:2], frames=60, seed=3)
+    p = plan_query_path(layouts[:2], frames=60, seed=3)
     assert len(p) == 60
     check_motion(p)
     check_clearance(p, layouts[:2], 0.3)
@@ -227,12 +233,12 @@ def test_mapping_covers_every_room_from_several_directions(mapping, layouts):
 
 def test_mapping_keeps_all_rooms_when_short():
     apt0 = load_layout("apt_0")
-    p = cp.plan_mapping_path(apt0, frames=2700, seed=1)
+    p = plan_mapping_path(apt0, frames=2700, seed=1)
     assert len(p) == 2700
     assert p.meta["planner"]["sweep_spacing_m"] > 1.0  # sparser sweeps instead of dropping rooms
     assert {r for r in rooms_of(p.positions, apt0.stage) if r} == ROOMS
     with pytest.raises(UserError, match="cannot cover every room"):
-        cp.plan_mapping_path(apt0, frames=300)
+        plan_mapping_path(apt0, frames=300)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -241,7 +247,7 @@ def test_mapping_keeps_all_rooms_when_short():
 
 def test_shipped_paths_are_what_the_planner_makes(query, mapping):
     for saved in (query, mapping):
-        again = cp.replan(saved)
+        again = replan(saved)
         assert len(again) == len(saved)
         assert np.abs(again.poses[:, :3, 3] - saved.poses[:, :3, 3]).max() < 2e-6, saved.name
         assert np.abs(again.poses[:, :3, :3] - saved.poses[:, :3, :3]).max() < 1e-6, saved.name
@@ -259,39 +265,39 @@ def test_shipped_paths_are_what_the_planner_makes(query, mapping):
 
 
 def test_save_load_round_trip(tmp_path, query):
-    short = cp.CameraPath("q60", query.poses[:60].copy(), 30.0, dict(query.meta))
-    f = cp.save_path(short, tmp_path / "sub" / "q60.txt")
+    short = CameraPath("q60", query.poses[:60].copy(), 30.0, dict(query.meta))
+    f = save_path(short, tmp_path / "sub" / "q60.txt")
     assert f.exists() and f.with_suffix(".yaml").exists()
-    back = cp.load_path(f)
+    back = load_path(f)
     assert back.name == "q60" and back.fps == 30.0 and len(back) == 60
     assert np.abs(back.poses - short.poses).max() < 1e-6
     assert back.meta["layouts"] == BUILTIN and back.meta["seed"] == 0
     assert back.meta["planner"] == query.meta["planner"]
-    assert cp.load_path(f.with_suffix(".yaml")).name == "q60"  # the sidecar names the same path
+    assert load_path(f.with_suffix(".yaml")).name == "q60"  # the sidecar names the same path
     # fps from the sidecar sets the timestamps
-    p24 = cp.CameraPath("p24", query.poses[:10].copy(), 24.0, {})
-    back24 = cp.load_path(cp.save_path(p24, tmp_path / "p24.txt"))
+    p24 = CameraPath("p24", query.poses[:10].copy(), 24.0, {})
+    back24 = load_path(save_path(p24, tmp_path / "p24.txt"))
     assert back24.fps == 24.0 and np.abs(back24.poses - p24.poses).max() < 1e-6
 
 
 def test_unknown_name_lists_known_paths():
     with pytest.raises(UnknownNameError) as e:
-        cp.load_path("no_such_path")
+        load_path("no_such_path")
     msg = str(e.value)
     assert "no_such_path" in msg and "query" in msg and "mapping" in msg
 
 
 def test_malformed_files_name_file_and_line(tmp_path, query):
-    f = cp.save_path(cp.CameraPath("bad", query.poses[:5].copy(), 30.0, {}), tmp_path / "bad.txt")
+    f = save_path(CameraPath("bad", query.poses[:5].copy(), 30.0, {}), tmp_path / "bad.txt")
     lines = f.read_text().splitlines()
     lines[4] = "0.1 1.0 2.0 oops 0 0 0 1"  # the third pose (after two comment lines)
     f.write_text("\n".join(lines) + "\n")
     with pytest.raises(SceneFormatError) as e:
-        cp.load_path(f)
+        load_path(f)
     assert "bad.txt" in str(e.value) and "line 5" in str(e.value)
     f.with_suffix(".yaml").write_text("format: synth-camera-path/1\nname: bad\nfps: fast\n")
     with pytest.raises(SceneFormatError, match=r"bad\.yaml: fps"):
-        cp.load_path(f)
+        load_path(f)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -316,15 +322,15 @@ def test_cli_plan(tmp_path, capsys):
     out = tmp_path / "m.txt"
     assert synth_main(["path", "plan", "query", "--layouts", "apt_0", "apt_3", "--frames", "90", "--clearance", "0.25",
                        "--seed", "2", "--out", str(out)]) == 0
-    p = cp.load_path(out)
+    p = load_path(out)
     assert len(p) == 90 and p.meta["layouts"] == ["apt_0", "apt_3"] and p.meta["seed"] == 2
     assert synth_main(["path", "plan", "mapping", "--layout", "apt_0", "--frames", "100", "--out", str(out)]) == 2
     assert "cannot cover every room" in capsys.readouterr().err
 
 
 def test_deterministic_given_seed(layouts):
-    a = cp.plan_query_path(layouts[:1], frames=120, seed=5)
-    b = cp.plan_query_path(layouts[:1], frames=120, seed=5)
-    c = cp.plan_query_path(layouts[:1], frames=120, seed=6)
+    a = plan_query_path(layouts[:1], frames=120, seed=5)
+    b = plan_query_path(layouts[:1], frames=120, seed=5)
+    c = plan_query_path(layouts[:1], frames=120, seed=6)
     assert np.array_equal(a.poses, b.poses)
     assert not np.allclose(a.poses, c.poses)

@@ -14,8 +14,10 @@ import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
-import synth.frames as frames_mod
-from synth import camera as cam
+import formats.frames as frames_mod
+from formats import camera as cam
+from formats.errors import SceneFormatError, UserError
+from formats.frames import FrameFileError, write_frame
 from synth.cli import main as synth_main
 from synth.dataset import (
     Tour,
@@ -27,8 +29,6 @@ from synth.dataset import (
     id_colors,
     tonemap,
 )
-from synth.errors import SceneFormatError, UserError
-from synth.frames import FrameFileError, write_frame
 
 ROOM_LO = np.array([0.0, 0.0, 0.0])
 ROOM_HI = np.array([6.0, 5.0, 2.6])

@@ -15,6 +15,8 @@ import types
 import numpy as np
 import pytest
 
+import formats.camera
+import formats.yamlfile
 import synth.apartment
 import synth.geometry
 import synth.placement
@@ -78,7 +80,7 @@ def one_ulp_off(monkeypatch):
         fake_math = types.SimpleNamespace(**{k: getattr(math, k) for k in dir(math) if not k.startswith("_")})
         for name in ("sin", "cos", "atan2", "hypot", "sqrt"):
             setattr(fake_math, name, _nudged(getattr(math, name)))
-        for mod in (synth.apartment, synth.placement, synth.rearrange, synth.geometry, synth.scene):
+        for mod in (synth.apartment, synth.placement, synth.rearrange, synth.geometry, synth.scene, formats.camera):
             monkeypatch.setattr(mod, "math", fake_math)
         for name in ("yaw_to_quat", "matrix_to_quat", "rot_z", "quat_to_matrix", "quat_yaw"):
             monkeypatch.setattr(synth.geometry, name, _nudged(getattr(synth.geometry, name)))
@@ -129,7 +131,7 @@ def test_quantising_is_idempotent_and_keeps_rotations_unit():
 
 def test_shipped_layouts_are_stored_quantised():
     for p in sorted(layouts_dir().glob("apt_*.yaml")):
-        doc = synth.scene.read_yaml(p)
+        doc = formats.yamlfile.read_yaml(p)
         again = dump_yaml(layout_to_dict(layout_from_dict(doc, source=str(p))))
         assert again == p.read_text(), p.name
         for o in doc["objects"]:

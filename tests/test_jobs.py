@@ -14,10 +14,12 @@ import numpy as np
 import pytest
 import yaml
 
+from formats.tour import Tour
 from synth import jobs
 from synth.cli import main as synth_main
-from synth.dataset import Tour
 from synth.resources import REPO_ROOT
+
+
 
 SMOKE = REPO_ROOT / "render_jobs" / "smoke.yaml"
 

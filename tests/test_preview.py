@@ -9,11 +9,13 @@ import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
+from formats.errors import UserError
 from synth import geometry as geo
 from synth.classes import class_table
-from synth.errors import UserError
 from synth.preview import class_color, diff_layouts, figure_size, plot_layout
 from synth.scene import Layout, ObjectInstance, Opening, Room, Stage, Wall
+
+
 
 DPI = 60
 

@@ -18,10 +18,12 @@ import pytest
 from reloc.baselines.appearance import AppearanceConfig, AppearanceMap, localize_frame, run_appearance
 from reloc.frontend.clip_rigid import clip_rigid_trajectory, fit_clip_transform
 from reloc.geometry import exp_so3, inv_T, make_T, pose_distance
-from synth import camera as cam
-from synth.dataset import Tour
-from synth.errors import UserError
-from synth.frames import frame_name, write_frame
+
+from formats import camera as cam
+from formats.errors import UserError
+from formats.frames import frame_name, write_frame
+from formats.tour import Tour
+
 
 ROOM_LO = np.array([0.0, 0.0, 0.0])
 ROOM_HI = np.array([6.0, 5.0, 2.6])

@@ -2,7 +2,7 @@
 
 Synthetic runs check the decisions against transforms chosen here; rendered tours check the
 outputs against the tours' ground truth, read back with an independent TUM parser (scipy's
-quaternion conversion, not synth.camera.read_tum).
+quaternion conversion, not formats.camera.read_tum).
 """
 
 from __future__ import annotations
@@ -22,11 +22,13 @@ from reloc.frontend.stream import ClipResult
 from reloc.frontend.localize import Placement
 from reloc.map.boxmap import BoxMap
 from reloc.backend.run import relocalize
-from synth.dataset import Tour
+
+from test_reloc_core import nodes_from_map, room_map, yaw_T
+
+from formats.tour import Tour
 from synth.scene import boxes_document, load_layout
 from synth.tour import TourSpec, render_tour
 
-from test_reloc_core import nodes_from_map, room_map, yaw_T
 
 W, H = 160, 120
 # a level camera (OpenCV axes: y down, z forward) in a Z-up clip frame: camera -y is +Z

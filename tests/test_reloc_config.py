@@ -18,7 +18,9 @@ from reloc.config import Config, load_config
 from reloc.frontend.detection import Corruption, Detection, DetectorSpec, FrameData, build_detector
 from reloc.frontend.observations import Observation, observe
 from reloc.frontend.refinement import estimate_gravity, wall_yaws
-from synth.errors import UserError
+
+from formats.errors import UserError
+
 
 RELOC = Path(__file__).resolve().parents[1] / "reloc"
 
@@ -122,3 +124,22 @@ def test_clip_rigid_tolerances(tmp_path):
     cfg = _load(tmp_path, "clip_rigid:\n  pos_tol_m: 1.0\n  min_support: 11\n")
     S2, n_wide = fit_clip_transform(est, V, cfg.clip_rigid)
     assert n_default < 10 and n_wide == 10 and S2 is None  # all ten support it, eleven are required
+
+
+def test_detection_min_mask_pixels_reaches_the_oracle_everywhere():
+    """detection.min_mask_pixels was accepted and ignored; now reloc run, units, experiments and the
+    bench build their oracle with it (default_detector, build_detector)."""
+    from reloc.frontend.detection import DetectorSpec, build_detector
+    from reloc.frontend.stream import default_detector
+
+    class FakeTour:
+        def class_names(self):
+            return {1: "chair", 2: "wall"}
+
+    class FakeMap:
+        class_set = {"chair", "wall"}
+
+    cfg = Config().replace("detection.min_mask_pixels", 3)
+    assert default_detector(FakeTour(), FakeMap(), cfg).min_pixels == 3
+    assert default_detector(FakeTour(), FakeMap()).min_pixels == Config().detection.min_mask_pixels == 20
+    assert build_detector(DetectorSpec(), {1: "chair"}, config=cfg.detection).min_pixels == 3

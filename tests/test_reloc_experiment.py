@@ -14,6 +14,8 @@ from reloc.experiments import tables
 from reloc.cli import main as reloc_main
 from reloc.experiments.experiment import load_experiment
 
+from formats.design import write_design
+
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -180,7 +182,22 @@ def test_bad_experiment_specs_are_one_line_exit_2(tmp_path, capsys, changes, mes
     assert not (tmp_path / "exp").exists()
 
 
+def _planned_design(tmp_path) -> Path:
+    """design.json as ``synth render render_jobs/demo.yaml`` writes it before any frame is rendered."""
+    from synth.jobs import expand, load_spec
+
+    plan = expand(load_spec(REPO / "render_jobs" / "demo.yaml"), out=tmp_path / "tours")
+    write_design(plan.out, plan.spec.name, plan.spec.source,
+                 {n: {"layout": p.layout_name, "lighting": p.lighting_name, "path": p.path_name,
+                      "n_frames": len(p.frame_ids)} for n, p in plan.tours.items()})
+    return plan.out
+
+
 def test_unrendered_design_names_the_missing_tours_and_the_command(tmp_path, capsys):
+    assert reloc_main(["experiment", str(_spec(tmp_path)), "--quiet"]) == 2  # nothing on disk at all
+    err = capsys.readouterr().err.strip()
+    assert "no rendered design" in err and "synth render" in err and len(err.splitlines()) == 1, err
+    _planned_design(tmp_path)  # planned, nothing rendered yet
     assert reloc_main(["experiment", str(_spec(tmp_path)), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "10 tour(s) not rendered" in err and "synth render" in err and "--resume" in err
@@ -188,13 +205,22 @@ def test_unrendered_design_names_the_missing_tours_and_the_command(tmp_path, cap
 
 
 def test_wrong_names_in_the_design(tmp_path, capsys):
+    _planned_design(tmp_path)
     assert reloc_main(["experiment", str(_spec(tmp_path, unchanged="apt_2")), "--quiet"]) == 2
     assert "unchanged: layout 'apt_2' has no query tour" in capsys.readouterr().err
     assert reloc_main(["experiment", str(_spec(tmp_path, query="walk")), "--quiet"]) == 2
-    assert "query: demo.yaml has no tours of path 'walk'" in capsys.readouterr().err
+    assert "has no tours of path 'walk'" in capsys.readouterr().err
     assert reloc_main(["experiment", str(_spec(tmp_path, mapping={"layout": "apt_1", "lighting": "day",
                                                                   "path": "mapping"})), "--quiet"]) == 2
     assert "has no tour apt_1__day__mapping" in capsys.readouterr().err
+
+
+def test_malformed_design_file_is_one_line(tmp_path, capsys):
+    root = _planned_design(tmp_path)
+    (root / "design.json").write_text('{"format": "videoreloc-design/1", "tours": [1]')
+    assert reloc_main(["experiment", str(_spec(tmp_path)), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "design.json: malformed JSON" in err and len(err.splitlines()) == 1, err
 
 
 # ---------------------------------------------------------------------------------------------
@@ -455,15 +481,15 @@ def fresh_fingerprint():
     code_fingerprint.cache_clear()
 
 
-def test_code_fingerprint_covers_reloc_and_the_synth_modules_it_imports(tmp_path, fresh_fingerprint):
+def test_code_fingerprint_covers_reloc_and_the_format_modules_it_imports(tmp_path, fresh_fingerprint):
     from reloc.experiments import experiment as E
 
     files = E.code_files()
     rel = {f.relative_to(E.SOURCE_ROOT).as_posix() for f in files}
-    # every module of reloc, and the synth modules that reloc reads tours with, directly or not
+    # every module of reloc, and the format modules that reloc reads tours with, directly or not
     assert {p.relative_to(REPO).as_posix() for p in (REPO / "reloc").rglob("*.py")} <= rel
-    assert {"synth/__init__.py", "synth/dataset.py", "synth/camera.py", "synth/frames.py", "synth/errors.py"} <= rel
-    assert not any(r.startswith("synth/blender/") for r in rel)  # Blender-side code computes no result here
+    assert {"formats/__init__.py", "formats/tour.py", "formats/camera.py", "formats/frames.py", "formats/errors.py"} <= rel
+    assert not any(r.startswith("synth/") for r in rel)  # reloc computes nothing with synth's code
     outside = sorted(p for p in (REPO / "synth").rglob("*.py") if p.relative_to(REPO).as_posix() not in rel)
     assert outside
     # a copy of the sources gives the same fingerprint; one byte changed in any covered file changes it
@@ -471,14 +497,14 @@ def test_code_fingerprint_covers_reloc_and_the_synth_modules_it_imports(tmp_path
     _copy_sources(copy, files + outside)
     fp = E.code_fingerprint()
     assert E.source_fingerprint(copy) == fp == E.code_fingerprint() and len(fp) == 16
-    for name in ("reloc/tables.py", "synth/dataset.py"):
+    for name in ("reloc/experiments/tables.py", "formats/frames.py"):
         _flip_one_byte(copy / name)
         changed = E.source_fingerprint(copy)
         assert changed != fp, name
         (copy / name).write_bytes((REPO / name).read_bytes())
     assert E.source_fingerprint(copy) == fp
     # a file outside (not imported by reloc) does not count; a library version does
-    _flip_one_byte(copy / outside[0].relative_to(REPO))
+    _flip_one_byte(copy / next(p for p in outside if b"#" in p.read_bytes()).relative_to(REPO))
     assert E.source_fingerprint(copy) == fp
     versions = E.library_versions()
     assert {"python", "numpy", "scipy", "open3d"} <= set(versions)
@@ -541,13 +567,13 @@ def test_a_code_change_recomputes_every_result(fast_design, capsys, monkeypatch,
     outside = [p for p in (REPO / "synth").rglob("*.py") if p not in set(files)]
     copy = tmp_path / "src"
     _copy_sources(copy, files + outside)
-    _flip_one_byte(copy / outside[0].relative_to(REPO))
+    _flip_one_byte(copy / next(p for p in outside if b"#" in p.read_bytes()).relative_to(REPO))
     monkeypatch.setattr(E, "SOURCE_ROOT", copy)
     E.code_fingerprint.cache_clear()
     assert reloc_main(argv) == 0
     assert "0 runs and 0 maps computed now" in capsys.readouterr().out
     # one byte of one covered module changed: every map and run is computed again, and says with what
-    _flip_one_byte(copy / "synth" / "dataset.py")
+    _flip_one_byte(copy / "formats" / "frames.py")
     E.code_fingerprint.cache_clear()
     changed = E.code_fingerprint()
     assert changed != marks["runs/videoreloc/apt_0__geometry__query/done.json"]["code"]

@@ -14,12 +14,13 @@ import numpy as np
 import pytest
 
 from reloc.baselines.fpfh_icp import FpfhConfig, PointMap, clip_frames, constraint, register_clip, run_fpfh_icp
-from synth import camera as cam
-from synth.camera_paths import load_path
-from synth.dataset import Tour
-from synth.errors import UserError
+
+from formats import camera as cam
+from formats.errors import UserError
+from formats.frames import write_frame
+from formats.tour import Tour
 from synth.fast_render import FastRenderer
-from synth.frames import write_frame
+from synth.paths.files import load_path
 from synth.scene import load_layout
 
 INTR = cam.Intrinsics.from_fov(96, 72, 75.0)

@@ -16,9 +16,11 @@ from reloc.frontend.stream import FrontEnd, GroundTruthPoses
 from reloc.geometry import pose_distance
 from reloc.map.boxmap import BoxMap
 from reloc.experiments.units import format_units, run_units
-from synth.dataset import Tour
+
+from formats.tour import Tour
 from synth.scene import boxes_document, load_layout
 from synth.tour import TourSpec, render_tour
+
 
 W, H = 160, 120
 

@@ -1,4 +1,4 @@
-"""Map construction (reloc.map.build): box fitting, building a map from a rendered mapping tour,
+"""Map construction (reloc.map): box fitting, building a map from a rendered mapping tour,
 errors against ground truth, the ``map`` CLI group and bad input.
 
 The tour tests render their own small geometry-only tour (apt_0, mapping path, fast renderer,
@@ -21,20 +21,18 @@ import pytest
 
 from reloc.frontend.detection import Corruption, OracleDetector
 from reloc.map.boxmap import BoxMap
-from reloc.map.build import (
-    MappingSettings,
-    box_errors,
-    build_map,
-    fit_box,
-    map_from_scene,
-    register_cli,
-    voxel_keys,
-    _moments,
-    _reduce,
-)
-from synth.dataset import Tour
-from synth.errors import UserError
-from synth.frames import write_frame
+from reloc.map.build import build_map
+from reloc.map.cli import register_cli
+from reloc.map.document import map_from_tour
+from synth.scene import boxes_document, load_layout
+from reloc.map.fitting import fit_box
+from reloc.map.scoring import box_errors
+from reloc.map.segmentation import _moments, _reduce, voxel_keys
+from reloc.map.settings import MappingSettings
+
+from formats.errors import UserError
+from formats.frames import write_frame
+from formats.tour import Tour
 
 TOUR_FRAMES = 600
 REPO = Path(__file__).resolve().parents[1]
@@ -166,9 +164,9 @@ def _boxes_by_hand(layout_file) -> dict[int, tuple]:
     return out
 
 
-def test_from_scene_round_trip_equals_the_ground_truth(tmp_path, capsys, tour):
+def test_ground_truth_map_equals_the_layout_by_hand(tmp_path, capsys, tour):
     out = tmp_path / "gt.json"
-    code, stdout, _ = run_cli(["map", "from-scene", "apt_0", "--out", str(out)], capsys)
+    code, stdout, _ = run_cli(["map", "ground-truth", str(tour.root), "--out", str(out)], capsys)
     assert code == 0 and "apt_0" in stdout
     m = BoxMap.load(out)
     want = _boxes_by_hand(REPO / "scenes" / "layouts" / "apt_0.yaml")
@@ -181,14 +179,13 @@ def test_from_scene_round_trip_equals_the_ground_truth(tmp_path, capsys, tour):
         np.testing.assert_allclose(m.centers[j], center, rtol=0, atol=1.5e-4, err_msg=str(i))
         np.testing.assert_allclose(m.sizes[j], size, rtol=0, atol=1e-4, err_msg=str(i))
         assert abs(math.remainder(m.yaws[j] - yaw, 2 * math.pi)) < 1e-6, (i, m.yaws[j], yaw)
-    # the renderer's copy of the ground truth (the tour's objects.json) is the same map
-    assert json.loads(out.read_text())["boxes"] == tour.objects()["boxes"]
-    assert map_from_scene("apt_0") == json.loads(out.read_text())
+    # the layout's box file as synth exports it is the same map
+    assert boxes_document(load_layout("apt_0")) == json.loads(out.read_text()) == map_from_tour(tour.root)
 
 
-def test_from_scene_unknown_layout_is_a_user_error(tmp_path, capsys):
-    code, _, err = run_cli(["map", "from-scene", "no_such_layout", "--out", str(tmp_path / "x.json")], capsys)
-    assert code == 2 and "no_such_layout" in err and len(err.strip().splitlines()) == 1
+def test_ground_truth_of_a_missing_tour_is_a_user_error(tmp_path, capsys):
+    code, _, err = run_cli(["map", "ground-truth", str(tmp_path / "no_tour"), "--out", str(tmp_path / "x.json")], capsys)
+    assert code == 2 and "no_tour" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "x.json").exists()
 
 

@@ -15,6 +15,8 @@ import numpy as np
 import pytest
 
 from reloc.config import OdometryConfig
+from formats.tour import Tour
+from synth.tour import TourSpec, render_tour
 from reloc.frontend.odometry import (
     ChainPose,
     Odometry,
@@ -25,8 +27,6 @@ from reloc.frontend.odometry import (
     rotation_deg,
     scaled_intrinsics,
 )
-from synth.dataset import Tour
-from synth.tour import TourSpec, render_tour
 
 W, H = 160, 120
 N_FRAMES = 150

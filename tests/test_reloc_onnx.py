@@ -27,7 +27,9 @@ from onnx import TensorProto, helper, numpy_helper
 
 from reloc.frontend.detection import FrameData
 from reloc.frontend.detection_onnx import OnnxDetector
-from synth.errors import UserError
+
+from formats.errors import UserError
+
 
 NAMES = {0: "chair", 1: "couch", 2: "tv"}
 NM, MH, MW = 2, 16, 16

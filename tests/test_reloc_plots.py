@@ -17,7 +17,9 @@ import pytest
 import reloc.experiments.plots as plots
 from reloc.experiments.plots import box_corners, error_colors, per_frame, plot_experiment, rolling_median, tour_png_name
 from reloc.experiments.report import markdown_to_html, split_row, table_to_html, write_report
-from synth import camera as cam
+
+from formats import camera as cam
+
 
 FPS = 30.0
 N = 240

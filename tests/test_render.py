@@ -14,14 +14,16 @@ import OpenEXR
 import pytest
 from scipy import ndimage
 
-from synth import frames as fr
-from synth.camera import Intrinsics, pose_from_ypr, read_tum, write_tum
-from synth.camera_paths import load_path
+from formats import frames as fr
+from formats.camera import Intrinsics, pose_from_ypr, read_tum, write_tum
+from formats.tour import Tour
 from synth.cli import main as synth_main
-from synth.dataset import Tour, check_tour
+from synth.dataset import check_tour
 from synth.fast_render import FastRenderer
+from synth.paths.files import load_path
 from synth.scene import load_layout
 from synth.tour import TourSpec, render_tour
+
 
 
 def spread_path(tmp_path, n: int, name: str = "query") -> str:

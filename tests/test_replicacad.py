@@ -14,10 +14,12 @@ import pytest
 import trimesh
 from scipy.spatial.transform import Rotation
 
+from formats.errors import SceneFormatError, UnknownNameError
 from synth.classes import parse_class_table
-from synth.errors import SceneFormatError, UnknownNameError
 from synth.replicacad import Y_UP_TO_Z_UP, list_scenes, load_asset_mesh, load_replicacad
 from synth.scene import load_layout, object_box, save_layout
+
+
 
 C = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # written out by hand, not imported
 S45 = math.sqrt(0.5)

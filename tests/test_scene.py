@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 import yaml
 
+from formats.errors import SceneFormatError, UnknownNameError
 from synth import geometry as geo
 from synth.cli import main as synth_main
-from synth.errors import SceneFormatError, UnknownNameError
 from synth.scene import (
     FLOOR_ID_BASE,
     WALL_ID_BASE,

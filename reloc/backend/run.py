@@ -26,8 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
-from synth.camera import write_tum
-from synth.errors import check_output_folder
+from formats.atomic import save_npz_atomic, write_json_atomic
+from formats.camera import write_tum
+from formats.errors import check_output_folder
 
 from .online import Backend, ClipState
 from ..frontend.clips import fuse
@@ -35,7 +36,6 @@ from ..config import Config
 from ..frontend.detection import Detector, detector_record
 from ..frontend.stream import FrontEnd, PoseEvent, default_detector, make_pose_stream, read_frame
 from ..geometry import inv_T
-from ..io import save_npz_atomic, write_json_atomic
 from ..frontend.localize import localize_clip
 from ..map.boxmap import BoxMap
 
@@ -266,7 +266,7 @@ def write_clip_poses(path: Path, clips) -> None:
 
 def load_clip_poses(run_dir) -> dict[int, dict[int, np.ndarray]]:
     """clip id -> {frame: V_i} from a ``reloc run`` output (the clip partition and odometry)."""
-    from synth.errors import UserError
+    from formats.errors import UserError
 
     path = Path(run_dir) / CLIP_POSES
     if not path.is_file():
@@ -279,7 +279,7 @@ def load_clip_poses(run_dir) -> dict[int, dict[int, np.ndarray]]:
 
 
 def cmd_run(args) -> int:
-    from synth.dataset import Tour
+    from formats.tour import Tour
 
     from ..config import load_config
     from ..frontend.detection import build_detector, detector_spec_from_args

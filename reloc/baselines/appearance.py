@@ -33,10 +33,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from synth.errors import UserError
-from synth.frames import FrameFileError
+from formats.atomic import save_npz_atomic
+from formats.errors import UserError
+from formats.frames import FrameFileError
 
-from ..io import save_npz_atomic
+
+
+
 
 FORMAT = "videoreloc-appearance/1"
 
@@ -118,7 +121,7 @@ def rgb_frames(tour, frames: list[int], counts: dict, depth: bool):
 
 def to_gray8(rgb_linear: np.ndarray) -> np.ndarray:
     """Linear radiance -> auto-exposed sRGB -> 8-bit grey (what a camera with auto-exposure delivers)."""
-    from synth.dataset import tonemap
+    from formats.tour import tonemap
 
     srgb, _ = tonemap(rgb_linear, exposure=None)
     img = np.clip(srgb * 255.0 + 0.5, 0, 255).astype(np.uint8)
@@ -231,8 +234,8 @@ class AppearanceMap:
     @classmethod
     def build(cls, tour, stride: int | None = None, cfg: AppearanceConfig | None = None,
               progress: bool = False) -> "AppearanceMap":
-        """Map from a mapping tour (``synth.dataset.Tour`` or its directory) with ground-truth poses."""
-        from synth.dataset import Tour
+        """Map from a mapping tour (``formats.tour.Tour`` or its directory) with ground-truth poses."""
+        from formats.tour import Tour
 
         cfg = cfg or AppearanceConfig()
         _check_cfg(cfg)
@@ -489,11 +492,11 @@ def run_appearance(tour, amap: AppearanceMap, out_dir, clip_poses: dict[int, dic
     the frame estimates of the others (``clip_rigid``: the fit's tolerances, a
     ``reloc.config.ClipRigidConfig``; the experiment passes its config's). Returns the run.json summary.
     """
-    from synth.camera import write_tum
-    from synth.dataset import Tour
+    from formats.camera import write_tum
+    from formats.tour import Tour
 
     from ..frontend.clip_rigid import clip_rigid_trajectory
-    from ..io import write_json_atomic
+    from formats.atomic import write_json_atomic
 
     cfg = cfg or amap.cfg
     _check_cfg(cfg)

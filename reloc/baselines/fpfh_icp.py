@@ -39,10 +39,13 @@ import numpy as np
 import open3d as o3d
 from scipy.spatial import cKDTree
 
-from synth.camera import write_tum
-from synth.errors import UserError
+from formats.atomic import save_npz_atomic, write_json_atomic
+from formats.camera import write_tum
+from formats.errors import UserError
 
-from ..io import save_npz_atomic, write_json_atomic
+
+
+
 
 FORMAT = "videoreloc-fpfh-map/1"
 reg = o3d.pipelines.registration
@@ -664,8 +667,8 @@ def run_fpfh_icp(tour, pmap: PointMap, clip_poses: dict, out_dir, cfg: FpfhConfi
 def main(argv=None) -> int:
     import argparse
 
-    from synth.dataset import Tour
-    from synth.errors import run_command
+    from formats.tour import Tour
+    from formats.errors import run_command
 
     from ..backend.run import load_clip_poses
 

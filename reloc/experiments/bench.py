@@ -73,7 +73,7 @@ def format_frontend(rep: dict) -> str:
 
 
 def cmd_frontend(args) -> int:
-    from synth.dataset import Tour
+    from formats.tour import Tour
 
     from ..config import load_config
 

@@ -42,12 +42,12 @@ def load_depths(tour_dir, frames: int | None = None, start: int = 0):
     Only frames whose files exist are read (a tour may still be rendering); ``frames`` caps
     the count after ``start`` (a position in poses.txt order).
     """
-    from synth import frames as fr
-    from synth.camera import read_tum
+    from formats import frames as fr
+    from formats.camera import read_tum
 
     root = Path(tour_dir)
-    from synth.dataset import Tour
-    from synth.errors import UserError
+    from formats.tour import Tour
+    from formats.errors import UserError
 
     try:
         tour = Tour(root)
@@ -81,7 +81,7 @@ def load_depths(tour_dir, frames: int | None = None, start: int = 0):
 
 
 def _has_rgb(path) -> bool:
-    from synth import frames as fr
+    from formats import frames as fr
 
     try:
         return all(c in fr.read_channels(path) for c in fr.RGB_CHANNELS)

@@ -34,7 +34,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from synth.errors import SceneFormatError, UserError
+from formats.errors import SceneFormatError, UserError
 
 from .tables import FACTOR_KEYS, METRICS
 
@@ -52,7 +52,7 @@ class Check:
 
 
 def parse_checks(path) -> list[Check]:
-    from synth.scene import read_yaml
+    from formats.yamlfile import read_yaml
 
     p = Path(path)
     if not p.is_file():

@@ -10,11 +10,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from synth.camera import read_tum
-from synth.errors import SceneFormatError, UserError
+from formats.atomic import write_json_atomic
+from formats.camera import read_tum
+from formats.errors import SceneFormatError, UserError
 
 from .evaluation import summarize
-from ..io import write_json_atomic
 
 TRAJECTORIES = ("causal", "closure")
 
@@ -58,7 +58,7 @@ def format_eval(rep: dict) -> str:
 
 
 def cmd_eval(args) -> int:
-    from synth.dataset import Tour
+    from formats.tour import Tour
 
     tour = Tour(args.gt)
     rep = evaluate_run(args.out_dir, tour)

@@ -53,10 +53,14 @@ import time
 from importlib import metadata
 from pathlib import Path
 
-from synth.errors import SceneFormatError, UserError, check_output_folder
+from formats.atomic import write_json_atomic, write_text_atomic
+from formats.camera import write_tum
+from formats.design import DESIGN_FILE, list_tours, read_design, tour_name
+from formats.errors import SceneFormatError, UserError, check_output_folder
+from formats.tour import Tour
+from formats.yamlfile import read_yaml
 
 from . import tables
-from ..io import write_json_atomic, write_text_atomic
 from .tables import ABLATIONS, ablation_name
 from .units import DEFAULT_LENGTHS
 
@@ -111,8 +115,6 @@ def _check_overrides(cls, d: dict, src, field) -> None:
 
 def load_experiment(path) -> ExperimentSpec:
     """Read and validate an experiment spec; every error names the file and the key."""
-    from synth.scene import read_yaml
-
     from ..config import Config
     from ..frontend.detection import Corruption
 
@@ -131,9 +133,10 @@ def load_experiment(path) -> ExperimentSpec:
     render = (src.parent / str(doc["render"])).resolve()
     if not render.is_file():
         _fail(src, "render", f"render job spec {render} not found")
-    from synth.jobs import load_spec
-
-    job = load_spec(render)
+    render_doc = read_yaml(render)
+    job_out = render_doc.get("out") if isinstance(render_doc, dict) else None
+    if not doc.get("tours") and not isinstance(job_out, str):
+        raise SceneFormatError(render, "out", "expected the render job's output folder (or give tours: in the experiment spec)")
     mapping = _mapping_of(doc["mapping"], src, "mapping")
     for k in ("layout", "lighting", "path"):
         if not isinstance(mapping.get(k), str):
@@ -180,7 +183,7 @@ def load_experiment(path) -> ExperimentSpec:
         from ..baselines.fpfh_icp import FpfhConfig
 
         _check_overrides(FpfhConfig, fp, src, "fpfh_icp")
-    tours_root = Path(doc["tours"]) if doc.get("tours") else Path(job.out)
+    tours_root = Path(doc["tours"]) if doc.get("tours") else Path(job_out)
     return ExperimentSpec(
         name=str(doc["name"]), source=src, render=render, tours_root=tours_root, out=Path(doc["out"]),
         mapping=mapping, query=str(doc["query"]), unchanged=str(doc["unchanged"]), map=doc.get("map", "build"),
@@ -195,40 +198,46 @@ def load_experiment(path) -> ExperimentSpec:
 
 
 def design_tours(spec: ExperimentSpec) -> tuple[dict, dict]:
-    """(query tours {name: info}, mapping tour info) from the render spec; checks they are rendered."""
-    from synth.dataset import Tour
-    from synth.jobs import expand, load_spec, tour_name
-
-    plan = expand(load_spec(spec.render), out=spec.tours_root)
+    """(query tours {name: info}, mapping tour info) of the design in ``spec.tours_root``, read from
+    its files (``formats.design``): the planned tours from design.json, each tour from its meta.json
+    (without design.json, the tours found there). Checks that they are rendered."""
+    root = spec.tours_root
+    found = list_tours(root)
+    planned = read_design(root)
+    if planned is None:
+        planned = {n: {k: m.get(k) for k in ("layout", "lighting", "path")} for n, m in found.items()}
+    where = f"the design in {root}"
+    if not planned:
+        raise UserError(f"{root}: no rendered design here (no {DESIGN_FILE}, no tour with a meta.json); "
+                        f"run: synth render {spec.render}")
     missing = []
 
     def info(name, p) -> dict | None:
-        d = spec.tours_root / name
-        if not (d / "meta.json").is_file() or not (d / "poses.txt").is_file():
+        d = root / name
+        meta = found.get(name)
+        if meta is None or not (d / "poses.txt").is_file():
             missing.append(name)
             return None
-        meta = json.loads((d / "meta.json").read_text())
         if meta.get("complete") is False:
             missing.append(name + " (incomplete)")
             return None
         t = Tour(d)
-        return {"dir": str(d.resolve()), "layout": p.layout_name, "lighting": p.lighting_name, "path": p.path_name,
-                "rearranged": p.layout_name != spec.unchanged, "frames": len(t), "fps": t.fps,
-                "rgb_every": t.rgb_every}
+        return {"dir": str(d.resolve()), "layout": p["layout"], "lighting": p["lighting"], "path": p["path"],
+                "rearranged": p["layout"] != spec.unchanged, "frames": len(t), "fps": t.fps, "rgb_every": t.rgb_every}
 
     m = spec.mapping
     mname = tour_name(m["layout"], m["lighting"], m["path"])
-    if mname not in plan.tours:
-        _fail(spec.source, "mapping", f"{spec.render.name} has no tour {mname}")
-    queries = {n: p for n, p in plan.tours.items() if p.path_name == spec.query and n != mname}
+    if mname not in planned:
+        _fail(spec.source, "mapping", f"{where} has no tour {mname}")
+    queries = {n: p for n, p in planned.items() if p["path"] == spec.query and n != mname}
     if not queries:
-        _fail(spec.source, "query", f"{spec.render.name} has no tours of path {spec.query!r}")
-    if spec.unchanged not in {p.layout_name for p in queries.values()}:
-        _fail(spec.source, "unchanged", f"layout {spec.unchanged!r} has no query tour in {spec.render.name}")
+        _fail(spec.source, "query", f"{where} has no tours of path {spec.query!r}")
+    if spec.unchanged not in {p["layout"] for p in queries.values()}:
+        _fail(spec.source, "unchanged", f"layout {spec.unchanged!r} has no query tour in {where}")
     out = {n: info(n, p) for n, p in queries.items()}
-    mapping = info(mname, plan.tours[mname])
+    mapping = info(mname, planned[mname])
     if missing:
-        raise UserError(f"{spec.tours_root}: {len(missing)} tour(s) not rendered: {', '.join(missing[:4])}"
+        raise UserError(f"{root}: {len(missing)} tour(s) not rendered: {', '.join(missing[:4])}"
                         f"{' ...' if len(missing) > 4 else ''}; run: synth render {spec.render} --resume")
     return out, mapping
 
@@ -238,10 +247,10 @@ def design_tours(spec: ExperimentSpec) -> tuple[dict, dict]:
 
 # The project's top-level packages (pyproject.toml's tool.setuptools.packages.find). A new one must
 # be added here for the fingerprint to follow imports into it (tests check this list).
-PROJECT_PACKAGES = ("reloc", "synth")
+PROJECT_PACKAGES = ("formats", "reloc", "synth")
 # Distributions whose version changes numbers: the numeric and image libraries reloc computes with.
 LIBRARIES = ("numpy", "scipy", "open3d", "opencv-python-headless", "opencv-python", "OpenEXR", "onnxruntime")
-SOURCE_ROOT = Path(__file__).resolve().parent.parent  # the folder holding the reloc and synth packages
+SOURCE_ROOT = Path(__file__).resolve().parents[2]  # the folder holding the project's packages
 
 
 def _module_file(root: Path, name: str) -> Path | None:
@@ -274,7 +283,7 @@ def _imported_names(path: Path, module: str) -> set[str]:
 
 def code_files(root: Path | None = None) -> list[Path]:
     """The sources whose code can compute a result: every module of the ``reloc`` package, and every
-    module of the project's other packages (``PROJECT_PACKAGES``: synth) that reloc imports, directly
+    module of the project's other packages (``PROJECT_PACKAGES``: formats, synth) that reloc imports, directly
     or through other such modules, with the ``__init__.py`` of each package on the way; found by
     reading the import statements. Sorted by path relative to ``root`` (default ``SOURCE_ROOT``)."""
     root = Path(root or SOURCE_ROOT)
@@ -343,10 +352,8 @@ def _file_key(path) -> str:
 
 
 def _ground_truth_key(tour_dir) -> str:
-    """What a ground-truth map depends on: the content of the layout file the tour was rendered from."""
-    meta = json.loads((Path(tour_dir) / "meta.json").read_text())
-    f = meta.get("layout_file")
-    return "ground-truth:" + (_file_key(f) if f and Path(f).is_file() else str(meta.get("layout")))
+    """What a ground-truth map depends on: the content of the tour's objects.json."""
+    return "ground-truth:" + _file_key(Path(tour_dir) / "objects.json")
 
 
 def is_done(d: Path, key: str) -> bool:
@@ -405,17 +412,16 @@ def _load(kind: str, path: str):
 
 def run_map_task(task: dict) -> dict:
     """Build one map (box map, FPFH point map or appearance keyframe map) from the mapping tour."""
-    from synth.dataset import Tour
-
     t0 = time.perf_counter()
     out = Path(task["file"])
     out.with_name(out.name + ".done.json").unlink(missing_ok=True)
     tour = Tour(task["tour"])
     if task["kind"] == "boxes":
-        from ..map.build import build_map, dumps_map, map_from_scene
+        from ..map.build import build_map
+        from ..map.document import dumps_map, map_from_tour
 
         if task["source"] == "ground-truth":
-            doc = map_from_scene(tour.meta.get("layout_file") or tour.meta["layout"])
+            doc = map_from_tour(tour.root)
         else:
             doc, report = build_map(tour.root, progress=False)
             if not doc["boxes"]:
@@ -437,8 +443,6 @@ def run_map_task(task: dict) -> dict:
 
 def run_tour_task(task: dict) -> dict:
     """One method on one query tour; writes its trajectories into ``task['dir']`` and marks it done."""
-    from synth.dataset import Tour
-
     from ..backend.run import load_clip_poses, relocalize
 
     t0 = time.perf_counter()
@@ -467,8 +471,6 @@ def run_tour_task(task: dict) -> dict:
                            clip_poses=load_clip_poses(task["clips"]), cfg=AppearanceConfig(**task["options"]),
                            clip_rigid=_config(task["config"]).clip_rigid, progress=False)
     elif method == "one_frame":
-        from synth.camera import write_tum
-
         from .units import run_units
 
         bmap = _load("boxes", task["map"])

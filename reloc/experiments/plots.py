@@ -35,9 +35,9 @@ from matplotlib.colors import LinearSegmentedColormap, Normalize
 from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
-from synth.camera import read_tum
-from synth.errors import SceneFormatError, UserError
-from synth.preview import save_figure
+from formats.atomic import save_figure
+from formats.camera import read_tum
+from formats.errors import SceneFormatError, UserError
 
 from .evaluation import THRESHOLDS, pose_errors
 
@@ -392,7 +392,7 @@ def plot_experiment(results_dir) -> list[Path]:
 
     A missing trajectory file is a column without poses; a tour whose ground truth cannot be read
     is skipped with a message on stderr; a missing map leaves the boxes out."""
-    from synth.dataset import Tour
+    from formats.tour import Tour
 
     from ..map.boxmap import BoxMap
 

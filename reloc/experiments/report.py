@@ -22,9 +22,9 @@ import math
 import re
 from pathlib import Path
 
-from synth.errors import SceneFormatError, UserError
+from formats.atomic import write_text_atomic
+from formats.errors import SceneFormatError, UserError
 
-from ..io import write_text_atomic
 from .tables import PAPER_TABLES, table_title
 
 __all__ = ["write_report", "build_markdown", "markdown_to_html", "table_to_html", "split_row", "TABLE_ORDER"]

@@ -27,10 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
-from synth.camera import read_tum
+from formats.atomic import write_json_atomic, write_text_atomic
+from formats.camera import read_tum
 
 from .evaluation import summarize
-from ..io import write_json_atomic, write_text_atomic
 
 FORMAT = "videoreloc-experiment/1"
 LIGHTINGS = ("day", "evening", "night")
@@ -77,7 +77,7 @@ def table_title(key: str) -> str:
 
 
 def _gt(tour_dir: str):
-    from synth.dataset import Tour
+    from formats.tour import Tour
 
     t = Tour(tour_dir)
     return t, {int(i): T for i, T in zip(t.frame_indices, t.poses)}

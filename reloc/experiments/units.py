@@ -126,7 +126,7 @@ def format_units(rep: dict) -> str:
 
 
 def _lengths(text: str) -> tuple[int, ...]:
-    from synth.errors import UserError
+    from formats.errors import UserError
 
     try:
         vals = tuple(int(x) for x in text.split(","))
@@ -140,11 +140,11 @@ def _lengths(text: str) -> tuple[int, ...]:
 def cmd_units(args) -> int:
     import json
 
-    from synth.dataset import Tour
+    from formats.tour import Tour
 
     from ..config import Config, load_config
     from ..frontend.detection import build_detector, detector_spec_from_args
-    from ..io import write_json_atomic
+    from formats.atomic import write_json_atomic
 
     tour = Tour(args.tour)
     bmap = BoxMap.load(args.map)

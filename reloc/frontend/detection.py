@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 from scipy.ndimage import find_objects
 
-from synth.errors import UserError
+from formats.errors import UserError
 
 from ..config import DetectionConfig
 from .detection_onnx import OnnxDetector

@@ -23,8 +23,11 @@ import numpy as np
 import yaml
 
 from reloc.frontend.detector_base import Detection, FrameData
-from synth.errors import UserError
-from synth.frames import srgb8
+
+from formats.errors import UserError
+from formats.frames import srgb8
+
+
 
 PAD_VALUE = 114  # letterbox padding, out of 255 (as Ultralytics)
 MAX_NMS = 30000  # candidates kept for NMS, by score

@@ -25,12 +25,11 @@ from pathlib import Path
 
 import numpy as np
 
-from synth.errors import SceneFormatError, UserError
+from formats.boxes import BOXES_FORMAT, STRUCTURE_KINDS
+from formats.errors import SceneFormatError, UserError
 
 from ..config import MapConfig
 
-MAP_FORMAT = "videoreloc-boxes/1"
-STRUCTURE_KINDS = ("wall", "floor", "ceiling")
 KINDS = ("object",) + STRUCTURE_KINDS
 
 
@@ -241,8 +240,8 @@ def _validate(doc, source: str) -> list[dict]:
     if not isinstance(doc, dict):
         raise SceneFormatError(source, None, "expected a JSON object")
     fmt = doc.get("format")
-    if fmt != MAP_FORMAT:
-        raise SceneFormatError(source, "format", f"expected {MAP_FORMAT!r}, got {fmt!r}")
+    if fmt != BOXES_FORMAT:
+        raise SceneFormatError(source, "format", f"expected {BOXES_FORMAT!r}, got {fmt!r}")
     boxes = doc.get("boxes")
     if not isinstance(boxes, list):
         raise SceneFormatError(source, "boxes", "expected a list of boxes")

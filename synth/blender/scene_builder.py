@@ -1,19 +1,19 @@
 """Translate a layout's render parts, a resolved lighting and a camera into a Blender scene.
 
 Everything here is translation of plain data (``synth.meshes``, ``synth.lighting``,
-``synth.camera``); the conventions are decided there. The one conversion made here is the
+``formats.camera``); the conventions are decided there. The one conversion made here is the
 camera's: an OpenCV camera-to-world pose becomes Blender's camera matrix (looking down -Z, +Y up)
-through ``synth.camera.blender_from_opencv``, and the intrinsics become lens and shift.
+through ``formats.camera.blender_from_opencv``, and the intrinsics become lens and shift.
 """
 
 from __future__ import annotations
-
 
 import bpy
 import numpy as np
 from mathutils import Matrix, Vector
 
-from ..camera import Intrinsics, blender_from_opencv
+from formats.camera import Intrinsics, blender_from_opencv
+
 from ..lighting import ResolvedLighting
 
 

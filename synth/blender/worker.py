@@ -24,7 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import frames as fr
+from formats import frames as fr
+
 from ..chunks import emit, worker_main
 
 
@@ -49,7 +50,7 @@ def read_blender_exr(path: str) -> dict[str, np.ndarray]:
 def run(job: dict) -> int:
     import bpy
 
-    from ..camera import Intrinsics, read_tum
+    from formats.camera import Intrinsics, read_tum
     from ..lighting import load_lighting, resolve_lighting
     from ..meshes import instance_classes, layout_parts
     from ..render_settings import quality

@@ -6,6 +6,7 @@
   is the image centre, ``cx = (width - 1) / 2``, ``cy = (height - 1) / 2``; square pixels, fx = fy.
 - Depth is planar: the camera-frame z of the surface point, in metres (0 = no surface).
 - Text trajectories are TUM: ``t tx ty tz qx qy qz qw`` per line, ``t = frame / fps``.
+- Quaternions in code are ``(w, x, y, z)`` (``quat_to_matrix``, ``matrix_to_quat``: w >= 0).
 
 Blender's camera looks down its -Z with +Y up; ``blender_from_opencv`` converts a pose once, for
 the bpy camera code.
@@ -19,7 +20,6 @@ from pathlib import Path
 
 import numpy as np
 
-from . import geometry as geo
 from .atomic import write_text_atomic
 from .errors import SceneFormatError
 
@@ -88,6 +88,44 @@ class Intrinsics:
         return np.stack([(uu - self.cx) / self.fx, (vv - self.cy) / self.fy, np.ones_like(uu)], axis=-1)
 
 
+# quaternions are (w, x, y, z) everywhere in the toolkit's code; TUM files store x y z w
+
+
+def quat_to_matrix(q) -> np.ndarray:
+    """3x3 rotation matrix of a (w, x, y, z) quaternion (normalised first)."""
+    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def matrix_to_quat(R) -> tuple[float, float, float, float]:
+    """(w, x, y, z) quaternion of a 3x3 rotation matrix, with w >= 0."""
+    R = np.asarray(R, dtype=float)
+    tr = R[0, 0] + R[1, 1] + R[2, 2]
+    if tr > 0:
+        s = math.sqrt(tr + 1.0) * 2
+        w, x, y, z = 0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s
+    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
+        s = math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2]) * 2
+        w, x, y, z = (R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s
+    elif R[1, 1] > R[2, 2]:
+        s = math.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2]) * 2
+        w, x, y, z = (R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s
+    else:
+        s = math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1]) * 2
+        w, x, y, z = (R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s
+    q = np.array([w, x, y, z])
+    q /= np.linalg.norm(q)
+    if q[0] < 0:
+        q = -q
+    return tuple(float(v) for v in q)
+
+
 CAMERA_DOC = {
     "camera_axes": "OpenCV: x right, y down, z forward",
     "pose": "camera-to-world (T_world_cam) in poses.txt (TUM: t tx ty tz qx qy qz qw, t = frame / fps)",
@@ -151,7 +189,7 @@ def write_tum(path, poses, fps: float = DEFAULT_FPS, frames=None, header: str | 
     frames = range(len(poses)) if frames is None else frames
     lines = [] if header is None else [f"# {h}" for h in header.splitlines()]
     for i, T in zip(frames, poses):
-        q = geo.matrix_to_quat(np.asarray(T)[:3, :3])  # (w, x, y, z)
+        q = matrix_to_quat(np.asarray(T)[:3, :3])  # (w, x, y, z)
         t = np.asarray(T)[:3, 3]
         lines.append(f"{i / fps:.6f} {t[0]:.6f} {t[1]:.6f} {t[2]:.6f} {q[1]:.9f} {q[2]:.9f} {q[3]:.9f} {q[0]:.9f}")
     return write_text_atomic(path, "\n".join(lines) + "\n")
@@ -190,7 +228,7 @@ def read_tum(path, fps: float = DEFAULT_FPS, strict: bool = False, lines: bool =
         if abs(n - 1.0) > 1e-3:
             raise SceneFormatError(path, f"line {ln}", f"quaternion is not unit length (norm {n:.4f})")
         T = np.eye(4)
-        T[:3, :3] = geo.quat_to_matrix(q)
+        T[:3, :3] = quat_to_matrix(q)
         T[:3, 3] = v[1:4]
         k = int(round(v[0] * fps))
         if strict:

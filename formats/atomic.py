@@ -12,6 +12,8 @@ import os
 from contextlib import contextmanager
 from pathlib import Path
 
+from .errors import UserError
+
 
 def temp_name(path) -> Path:
     """The hidden temporary name ``path`` is written under before it is renamed into place."""
@@ -50,3 +52,20 @@ def save_npz_atomic(path, compressed: bool = True, **arrays) -> Path:
     with replacing(path) as tmp, open(tmp, "wb") as f:
         (np.savez_compressed if compressed else np.savez)(f, **arrays)
     return Path(path)
+
+
+def save_figure(fig, out_path, dpi: float) -> Path:
+    """Write a matplotlib figure atomically (temporary name next to the target, then rename).
+
+    The format follows the extension (no extension: png); an unsupported one is a UserError.
+    Metadata that changes on every run (dates, software) is left out, so reruns give equal files.
+    """
+    out = Path(out_path)
+    fmt = out.suffix.lower().lstrip(".") or "png"
+    supported = fig.canvas.get_supported_filetypes()
+    if fmt not in supported:
+        raise UserError(f"{out}: cannot write '.{fmt}' plots; use one of: {', '.join(sorted(supported))}")
+    meta = {"png": {"Software": None}, "pdf": {"CreationDate": None, "Producer": None}, "svg": {"Date": None}}.get(fmt)
+    with replacing(out) as tmp:
+        fig.savefig(tmp, format=fmt, dpi=dpi, facecolor="white", metadata=meta)
+    return out

@@ -1,0 +1,28 @@
+"""Reading the YAML (and JSON) files users write: specs, layouts, lighting presets, configs."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import yaml
+
+from .errors import SceneFormatError
+
+
+def read_yaml(path) -> object:
+    """The document in a YAML (or JSON) file; a missing, unreadable or malformed file is a
+    SceneFormatError naming the file (and the parser's line and column)."""
+    path = Path(path)
+    if not path.exists():
+        raise SceneFormatError(path, None, "file not found")
+    try:
+        text = path.read_text()
+    except OSError as e:
+        raise SceneFormatError(path, None, f"cannot read: {e.strerror}") from None
+    try:
+        if path.suffix == ".json":
+            return json.loads(text)
+        return yaml.safe_load(text)
+    except (yaml.YAMLError, ValueError) as e:
+        raise SceneFormatError(path, None, "malformed " + ("JSON" if path.suffix == ".json" else "YAML") + ": " + str(e).replace("\n", " ")) from None

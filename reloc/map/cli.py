@@ -1,0 +1,101 @@
+"""The ``reloc map`` commands: ``ground-truth`` (a tour's ground-truth boxes as a map), ``build``
+(a map from a rendered mapping tour, with its errors against the tour's ground truth) and ``show``.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections import Counter
+
+from formats.atomic import write_text_atomic
+from formats.errors import UserError, check_output_file
+
+from .build import build_map
+from .document import dumps_map, map_from_tour
+from .scoring import box_errors
+from .settings import DEFAULT_STRIDE
+
+
+def summary_line(doc: dict, size_bytes: int, errors: dict | None, report: dict | None = None) -> str:
+    kinds = Counter(b.get("kind", "object") for b in doc["boxes"])
+    parts = [f"{len(doc['boxes'])} boxes ("
+             + ", ".join(f"{kinds.get(k, 0)} {k}s" for k in ("object", "wall", "floor", "ceiling")) + ")",
+             f"{size_bytes / 1024:.1f} kB"]
+    if report is not None:
+        parts.append(f"{report['frames_used']}/{report['frames_in_tour']} frames in {report['wall_time_s']:.1f} s")
+    if errors is not None:
+        errs = []
+        for k, e in errors["by_kind"].items():
+            if e["matched"]:
+                errs.append(f"{k} {e['median_center_err_m']:.3f}/{e['median_size_err_max_m']:.3f}")
+        parts.append("median center/size err m: " + (", ".join(errs) or "-"))
+        parts.append(f"{errors['gt_unobserved']} GT unobserved, {errors['built_unmatched']} unmatched")
+    return "; ".join(parts)
+
+
+def cmd_ground_truth(args) -> int:
+    check_output_file(args.out)
+    doc = map_from_tour(args.tour)
+    out = write_text_atomic(args.out, dumps_map(doc))
+    print(f"wrote {len(doc['boxes'])} boxes of {doc['layout']} to {out} ({out.stat().st_size / 1024:.1f} kB)")
+    return 0
+
+
+def cmd_build(args) -> int:
+    check_output_file(args.out)
+    if args.report:
+        check_output_file(args.report)
+    doc, report = build_map(args.tour, stride=args.stride, voxel=args.voxel, progress=not args.quiet)
+    for w in report["warnings"]:
+        print(f"warning: {w}", file=sys.stderr)
+    if not doc["boxes"]:
+        raise UserError(report["warnings"][0] if report["warnings"] else f"{args.tour}: no boxes built")
+    from .boxmap import BoxMap
+
+    BoxMap(doc, source=str(args.out))  # validates what is about to be written
+    out = write_text_atomic(args.out, dumps_map(doc))
+    errors = None
+    try:
+        from formats.tour import Tour
+
+        gt = Tour(args.tour).objects()
+        errors = box_errors(doc, gt)
+    except UserError:
+        pass  # no ground truth: no errors to report
+    if args.report:
+        write_text_atomic(args.report, json.dumps({"build": report, "errors": errors}, indent=1) + "\n")
+    print(f"{out}: " + summary_line(doc, out.stat().st_size, errors, report))
+    return 0
+
+
+def cmd_show(args) -> int:
+    from .boxmap import BoxMap
+
+    s = BoxMap.load(args.file).summary()
+    for k, v in s.items():
+        if isinstance(v, dict):
+            v = ", ".join(f"{a} {b}" for a, b in v.items())
+        print(f"{k:<18} {v}")
+    return 0
+
+
+def register_cli(subparsers) -> None:
+    """Add the ``map`` command group: ground-truth, build, show."""
+    g = subparsers.add_parser("map", help="box maps: a tour's ground truth, built from a mapping tour, summary")
+    ms = g.add_subparsers(dest="cmd", required=True)
+    a = ms.add_parser("ground-truth", help="the ground-truth boxes of a tour's layout (its objects.json) as a map")
+    a.add_argument("tour", metavar="TOUR_DIR", help="tour directory")
+    a.add_argument("--out", required=True, help="map file (.json)")
+    a.set_defaults(fn=cmd_ground_truth)
+    a = ms.add_parser("build", help="build a map from a rendered mapping tour (oracle detector)")
+    a.add_argument("tour", metavar="TOUR_DIR", help="tour directory")
+    a.add_argument("--out", required=True, help="map file (.json)")
+    a.add_argument("--stride", type=int, default=DEFAULT_STRIDE, help=f"use every N-th frame (default {DEFAULT_STRIDE})")
+    a.add_argument("--voxel", type=float, default=0.05, help="voxel size in metres (default 0.05)")
+    a.add_argument("--report", metavar="FILE.json", help="write the build report and per-box errors against the tour's ground truth")
+    a.add_argument("--quiet", action="store_true", help="no progress bar")
+    a.set_defaults(fn=cmd_build)
+    a = ms.add_parser("show", help="summary of a map file")
+    a.add_argument("file")
+    a.set_defaults(fn=cmd_show)
