@@ -364,11 +364,12 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--quiet", action="store_true")
     a.set_defaults(fn=cmd_tour_render)
     # stages with their own subcommands register them here
-    from . import bench, dataset, jobs
+    from . import bench, dataset, jobs, trainset
     from .paths import cli as paths_cli
 
     paths_cli.register_cli(sub)  # synth path plan|show|check|preview|generate
     jobs.register_cli(sub)  # synth render SPEC.yaml
+    trainset.register_cli(sub)  # synth trainset render SPEC.yaml (detector training data)
     dataset.register_cli(sub)  # synth dataset check|show
     bench.register_cli(sub)  # synth bench
     return p

@@ -139,6 +139,64 @@ def load_lighting(name_or_file) -> LightingPreset:
     return parse_preset(read_yaml(p), str(p))
 
 
+def preset_document(preset: LightingPreset) -> dict:
+    """The YAML document of a preset (what ``parse_preset`` reads back to an equal preset)."""
+    def fixture(f: FixtureSetting) -> dict:
+        d = {"enabled": f.on, "color_temperature": f.color_temperature, "power": f.power}
+        if f.count is not None:
+            d["count"] = f.count
+        return d
+
+    return {"name": preset.name, "description": preset.description,
+            "sky": {"color": [float(c) for c in preset.sky_color], "strength": preset.sky_strength},
+            "sun": dict(preset.sun) if preset.sun is not None else None, "window_portals": preset.window_portals,
+            "fixtures": {"ceiling": fixture(preset.ceiling), "lamp": fixture(preset.lamp)}}
+
+
+@dataclass(frozen=True)
+class LightingJitter:
+    """How far ``jitter_preset`` moves a preset (training data: the detector must not learn one light)."""
+
+    sun_azimuth_deg: float = 60.0  # +- uniform
+    sun_elevation_deg: float = 15.0  # +- uniform, kept within [5, 80]
+    strength_log2: float = 0.7  # sun, sky and fixture power times 2**U(-x, x)
+    sky_tint: float = 0.15  # each sky colour channel times 1 + U(-x, x)
+    temperature_k: float = 500.0  # colour temperatures +- uniform, kept within [1800, 9000] K
+    lamps_extra: int = 2  # a preset keeping N lamps keeps N + U{0..x}
+
+
+def jitter_preset(preset: LightingPreset, seed: int, jitter: LightingJitter = LightingJitter()) -> LightingPreset:
+    """A seeded variation of ``preset``: the same lights on and off, moved in direction, strength
+    and colour (``jitter``). Exposure is not a property of the light: it belongs to the camera,
+    which applies it to the linear frames later. Same preset and seed, same result."""
+    rng = np.random.default_rng([int(seed), 11])
+
+    def gain() -> float:
+        return float(2.0 ** rng.uniform(-jitter.strength_log2, jitter.strength_log2))
+
+    def temp(t: float) -> float:
+        return round(float(np.clip(t + rng.uniform(-jitter.temperature_k, jitter.temperature_k), 1800.0, 9000.0)), 1)
+
+    sun = None
+    if preset.sun is not None:
+        sun = dict(preset.sun)
+        sun["azimuth_deg"] = round((sun["azimuth_deg"] + rng.uniform(-jitter.sun_azimuth_deg, jitter.sun_azimuth_deg)) % 360.0, 3)
+        sun["elevation_deg"] = round(float(np.clip(sun["elevation_deg"] + rng.uniform(-jitter.sun_elevation_deg,
+                                                                                       jitter.sun_elevation_deg), 5.0, 80.0)), 3)
+        sun["strength"] = round(sun["strength"] * gain(), 4)
+        sun["color_temperature"] = temp(sun["color_temperature"])
+    sky_color = tuple(round(float(c * (1.0 + rng.uniform(-jitter.sky_tint, jitter.sky_tint))), 4) for c in preset.sky_color)
+
+    def fixture(f: FixtureSetting) -> FixtureSetting:
+        count = f.count if f.count is None else f.count + int(rng.integers(0, jitter.lamps_extra + 1))
+        return FixtureSetting(f.on, temp(f.color_temperature), round(f.power * gain(), 3), count)
+
+    return LightingPreset(
+        name=f"{preset.name}_j{int(seed)}", description=f"{preset.name}, jittered with seed {int(seed)}",
+        sky_color=sky_color, sky_strength=round(preset.sky_strength * gain(), 4), sun=sun,
+        window_portals=preset.window_portals, ceiling=fixture(preset.ceiling), lamp=fixture(preset.lamp))
+
+
 @dataclass
 class Light:
     kind: str  # point | area | sun | portal
