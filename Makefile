@@ -16,6 +16,11 @@ $(VENV)/.installed: pyproject.toml
 	$(VENV)/bin/python -m pip install -q -e ".[test]"
 	@touch $@
 
+# PyTorch (about 5.5 GB, a minute or two) only for the tests that train a tiny detector; make demo never needs it
+$(VENV)/.installed-train: $(VENV)/.installed
+	$(VENV)/bin/python -m pip install -q -e ".[test,train]"
+	@touch $@
+
 setup: $(VENV)/.installed
 	@bash tools/system_deps.sh $(VENV)
 
@@ -25,7 +30,7 @@ demo: setup
 	$(VENV)/bin/reloc experiment render_jobs/demo_experiment.yaml --tours $(OUT)/demo --out $(OUT)/demo/experiment
 	$(VENV)/bin/reloc check render_jobs/demo_checks.yaml $(OUT)/demo/experiment
 
-test: setup
+test: setup $(VENV)/.installed-train
 	$(VENV)/bin/python -m pytest $(PYTEST_ARGS)
 
 clean:

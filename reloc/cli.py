@@ -17,6 +17,7 @@ from . import __version__
 def build_parser() -> argparse.ArgumentParser:
     # one module per command group, imported when the parser is built (``reloc --version`` stays fast)
     from .backend import run
+    from .detector import cli as detector_cli
     from .experiments import bench, checks, experiment, units
     from .experiments import eval as eval_
     from .map import cli as map_cli
@@ -31,6 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
     bench.register_cli(sub)
     experiment.register_cli(sub)
     checks.register_cli(sub)
+    detector_cli.register_cli(sub)
     return p
 
 

@@ -114,6 +114,7 @@ MAY_IMPORT = {
     "reloc.map": {"reloc.map", "reloc.frontend.detection", "reloc.frontend.detector_base"},  # all but boxmap
     "reloc.backend": {"reloc.map.boxmap", "reloc.frontend", "reloc.backend"},
     "reloc.baselines": {"reloc.map.boxmap", "reloc.frontend", "reloc.backend", "reloc.baselines"},
+    "reloc.detector": {"reloc.frontend", "reloc.detector"},  # training tools of the front-end's detector
 }
 
 

@@ -26,6 +26,7 @@ from scipy.ndimage import find_objects
 from formats.errors import UserError
 
 from ..config import DetectionConfig
+from .detection_learned import LearnedDetector
 from .detection_onnx import OnnxDetector
 from .detector_base import STRUCTURE_CLASSES, Detection, Detector, FrameData
 
@@ -156,7 +157,12 @@ def build_detector(spec: DetectorSpec, classes: dict[int, str], vocabulary=None,
         if not spec.model:
             raise UserError("--detector onnx needs --model FILE.onnx")
         return OnnxDetector(spec.model, class_map=spec.class_map, vocabulary=vocabulary)
-    raise UserError(f"unknown detector {spec.kind!r} (expected oracle or onnx)")
+    if spec.kind == "learned":
+        if not spec.model:
+            raise UserError("--detector learned needs --model FILE.onnx (reloc detector train)")
+        cfg = config or DetectionConfig()
+        return LearnedDetector(spec.model, vocabulary=vocabulary, min_pixels=cfg.min_mask_pixels)
+    raise UserError(f"unknown detector {spec.kind!r} (expected oracle, onnx or learned)")
 
 
 def detector_record(detector: Detector) -> dict:
@@ -166,7 +172,8 @@ def detector_record(detector: Detector) -> dict:
     if isinstance(detector, OracleDetector):
         rec["corruption"] = {**asdict(detector.corruption), "active": detector.corruption.active}
         rec["min_pixels"] = detector.min_pixels
-    for k in ("model_path", "score_threshold", "iou_threshold", "max_detections", "mask_threshold"):
+    for k in ("model_path", "score_threshold", "iou_threshold", "max_detections", "mask_threshold",
+              "boundary_threshold", "min_pixels"):
         v = getattr(detector, k, None)
         if v is not None:
             rec["model" if k == "model_path" else k] = str(v) if k == "model_path" else v
@@ -176,9 +183,10 @@ def detector_record(detector: Detector) -> dict:
 def add_detector_arguments(p) -> None:
     """The detector options shared by reloc's commands."""
     g = p.add_argument_group("detector")
-    g.add_argument("--detector", choices=("oracle", "onnx"), default="oracle",
-                   help="oracle: the tour's rendered labels (default); onnx: a YOLO-style segmentation model")
-    g.add_argument("--model", help="ONNX model file (with --detector onnx)")
+    g.add_argument("--detector", choices=("oracle", "onnx", "learned"), default="oracle",
+                   help="oracle: the tour's rendered labels (default); onnx: a YOLO-style segmentation model; "
+                        "learned: the toolkit's own model (reloc detector train)")
+    g.add_argument("--model", help="ONNX model file (with --detector onnx or learned)")
     g.add_argument("--class-map", help="YAML/JSON mapping model class -> toolkit class (with --detector onnx)")
     g.add_argument("--miss-rate", type=float, default=0.0, help="oracle corruption: probability of missing an instance")
     g.add_argument("--confusion-rate", type=float, default=0.0, help="oracle corruption: probability of a wrong map class")

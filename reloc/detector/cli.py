@@ -1,0 +1,119 @@
+"""``reloc detector pack|train|export|eval``: the learned detector's commands.
+
+``pack`` and ``eval`` need no PyTorch; ``train`` and ``export`` need the ``[train]`` extra
+(``pip install '.[train]'``) and say so in one line when it is missing.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from formats.design import list_tours
+from formats.errors import UserError, check_output_file, check_output_folder
+
+
+def _tours(args_tours) -> list[Path]:
+    """Tour folders from the arguments: a tour (has meta.json) or a design folder (its tours)."""
+    out = []
+    for t in args_tours:
+        p = Path(t)
+        if (p / "meta.json").is_file():
+            out.append(p)
+        elif p.is_dir():
+            found = list_tours(p)
+            if not found:
+                raise UserError(f"{p}: neither a tour nor a folder of tours")
+            out += [p / n for n in found]
+        else:
+            raise UserError(f"{p}: tour not found")
+    return out
+
+
+def _torch():
+    try:
+        import torch  # noqa: F401
+    except ImportError:
+        raise UserError("training needs PyTorch: pip install '.[train]'") from None
+
+
+def cmd_pack(args) -> int:
+    from .data import pack, tour_classes
+
+    check_output_file(args.out)
+    tours = _tours(args.tours)
+    s = pack(tours, args.out, tour_classes(tours), every=args.every, progress=not args.quiet)
+    print(f"packed {s['frames']} frames of {len(tours)} tours, {s['classes']} classes, "
+          f"{s['bytes'] / 1e6:.1f} MB -> {args.out}")
+    return 0
+
+
+def cmd_train(args) -> int:
+    _torch()
+    from .train import TrainConfig, export_onnx, train
+
+    check_output_folder(args.out)
+    if not Path(args.data).is_file():
+        raise UserError(f"{args.data}: training set not found (make one with reloc detector pack)")
+    cfg = TrainConfig(epochs=args.epochs, batch=args.batch, lr=args.lr, width=args.width, seed=args.seed,
+                      val_layouts=args.val_layouts)
+    log = train(args.data, args.out, cfg, device=args.device, resume=args.resume, progress=not args.quiet)
+    onnx_path = export_onnx(Path(args.out) / "checkpoint.pt", Path(args.out) / "model.onnx")
+    last = log["epochs"][-1]
+    print(f"trained {len(log['epochs'])} epochs in {log['wall_time_s']} s; validation mIoU {last['val_miou']}, "
+          f"pixel accuracy {last['val_pixel_acc']}; wrote {onnx_path}")
+    return 0
+
+
+def cmd_export(args) -> int:
+    _torch()
+    from .train import export_onnx
+
+    check_output_file(args.out)
+    print(export_onnx(args.checkpoint, args.out, height=args.height, width=args.width))
+    return 0
+
+
+def cmd_eval(args) -> int:
+    from .evaluate import evaluate, format_report
+
+    rep = evaluate(args.model, _tours(args.tours), every=args.every, progress=not args.quiet)
+    print(json.dumps(rep, indent=1) if args.json else format_report(rep))
+    return 0
+
+
+def register_cli(subparsers) -> None:
+    g = subparsers.add_parser("detector", help="the learned detector: pack renders, train, export, evaluate")
+    ds = g.add_subparsers(dest="cmd", required=True)
+    a = ds.add_parser("pack", help="pack rendered tours into a training set (.npz)")
+    a.add_argument("tours", nargs="+", help="tour folders, or design folders holding tours")
+    a.add_argument("--out", required=True, help="training set file (.npz)")
+    a.add_argument("--every", type=int, default=1, help="every N-th frame (default 1)")
+    a.add_argument("--quiet", action="store_true")
+    a.set_defaults(fn=cmd_pack)
+    a = ds.add_parser("train", help="train the segmentation model, then export it (needs PyTorch)")
+    a.add_argument("data", help="training set (.npz) from reloc detector pack")
+    a.add_argument("--out", required=True, help="folder: checkpoint.pt, train_log.json, model.onnx")
+    a.add_argument("--epochs", type=int, default=40)
+    a.add_argument("--batch", type=int, default=32)
+    a.add_argument("--lr", type=float, default=2e-3)
+    a.add_argument("--width", type=int, default=16, help="channels of the first stage (default 16)")
+    a.add_argument("--seed", type=int, default=0)
+    a.add_argument("--val-layouts", nargs="*", default=[], help="layouts held out for validation (default: the last)")
+    a.add_argument("--device", default="cpu", help="cpu or cuda")
+    a.add_argument("--resume", action="store_true", help="continue from the folder's checkpoint")
+    a.add_argument("--quiet", action="store_true")
+    a.set_defaults(fn=cmd_train)
+    a = ds.add_parser("export", help="a checkpoint as ONNX (needs PyTorch)")
+    a.add_argument("checkpoint")
+    a.add_argument("--out", required=True, help="model file (.onnx)")
+    a.add_argument("--height", type=int, default=120)
+    a.add_argument("--width", type=int, default=160)
+    a.set_defaults(fn=cmd_export)
+    a = ds.add_parser("eval", help="per-lighting class IoU, instance recall/precision, confusions, ms/frame")
+    a.add_argument("tours", nargs="+", help="tour folders, or design folders holding tours")
+    a.add_argument("--model", required=True, help="ONNX model (reloc detector export)")
+    a.add_argument("--every", type=int, default=1)
+    a.add_argument("--json", action="store_true")
+    a.add_argument("--quiet", action="store_true")
+    a.set_defaults(fn=cmd_eval)

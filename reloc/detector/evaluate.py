@@ -1,0 +1,133 @@
+"""Evaluate the learned detector on rendered tours (``reloc detector eval``), per lighting.
+
+For every RGB frame (every ``every``-th) of the tours, against the frame's rendered ground truth:
+
+* per-class IoU of the per-pixel classes (background included in the argmax, not in the mean);
+* instances: a ground-truth instance of at least ``min_pixels`` pixels is found when a detection
+  of its class overlaps it with mask IoU >= 0.5 (one-to-one, best IoU first); recall = found /
+  ground truth, precision = matched detections / detections;
+* the most frequent confusions (ground-truth class -> predicted class, in pixels);
+* milliseconds per frame of ``detect`` (network and instance cutting) on this machine, median.
+
+Needs onnxruntime only (no PyTorch): it runs the exported model through
+``reloc.frontend.detection_learned.LearnedDetector``.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections import Counter, defaultdict
+
+import numpy as np
+
+from formats.tour import Tour
+
+from ..frontend.detection_learned import LearnedDetector
+from ..frontend.detector_base import FrameData
+
+IOU_MATCH = 0.5
+
+
+def preset_of(lighting: str | None) -> str:
+    """day, evening or night from a tour's lighting name (jittered presets: ``<layout>/<preset>_j<k>``)."""
+    if not lighting:
+        return "geometry"
+    base = str(lighting).rsplit("/", 1)[-1]
+    return base.split("_j")[0]
+
+
+def _match(dets, gt_masks: dict[int, tuple[str, np.ndarray]]) -> tuple[int, int]:
+    """(ground-truth instances found, detections matched), one-to-one by IoU >= 0.5, best first."""
+    pairs = []
+    for i, d in enumerate(dets):
+        for g, (cls, m) in gt_masks.items():
+            if cls != d.cls:
+                continue
+            inter = np.count_nonzero(d.mask & m)
+            if inter:
+                iou = inter / np.count_nonzero(d.mask | m)
+                if iou >= IOU_MATCH:
+                    pairs.append((iou, i, g))
+    used_d, used_g = set(), set()
+    for iou, i, g in sorted(pairs, reverse=True):
+        if i not in used_d and g not in used_g:
+            used_d.add(i)
+            used_g.add(g)
+    return len(used_g), len(used_d)
+
+
+def evaluate(model, tour_dirs, every: int = 1, min_pixels: int = 20, progress: bool = True) -> dict:
+    det = LearnedDetector(model)
+    index = {c: k for k, c in enumerate(det.classes)}
+    n = len(det.classes)
+    acc = defaultdict(lambda: {"conf": np.zeros((n, n), np.int64), "gt": 0, "found": 0, "dets": 0, "matched": 0,
+                               "frames": 0})
+    times = []
+    for d in tour_dirs:
+        tour = Tour(d)
+        lighting = preset_of(tour.meta.get("lighting"))
+        names = tour.class_names()  # semantic id -> name
+        sem_map = np.zeros(65536, np.int64)
+        for sid, name in names.items():
+            sem_map[int(sid)] = index.get(name, 0)
+        a = acc[lighting]
+        for i in tour.frame_indices[::every]:
+            f = tour.frame(int(i), rgb=True, depth=True, instance=True, semantic=True)
+            if f.rgb is None:
+                continue
+            t0 = time.perf_counter()
+            dets = det.detect(FrameData(int(i), f.depth, tour.K, rgb=f.rgb))
+            times.append(time.perf_counter() - t0)
+            cls, _, _ = det.predict(f.rgb)
+            gt_cls = sem_map[np.minimum(f.semantic, 65535).astype(np.int64)]
+            a["conf"] += np.bincount(gt_cls.ravel() * n + cls.ravel(), minlength=n * n).reshape(n, n)
+            gt_masks = {}
+            for iid in np.unique(f.instance):
+                if iid == 0:
+                    continue
+                m = f.instance == iid
+                c = det.classes[int(np.bincount(gt_cls[m]).argmax())]
+                if c != "background" and np.count_nonzero(m) >= min_pixels:
+                    gt_masks[int(iid)] = (c, m)
+            found, matched = _match(dets, gt_masks)
+            a["gt"] += len(gt_masks)
+            a["found"] += found
+            a["dets"] += len(dets)
+            a["matched"] += matched
+            a["frames"] += 1
+        if progress:
+            print(f"evaluated {tour.name}", file=sys.stderr)
+    rep = {"model": str(model), "ms_per_frame": round(1000 * float(np.median(times)), 1) if times else None,
+           "lightings": {}}
+    for lighting, a in sorted(acc.items()):
+        conf = a["conf"]
+        tp = np.diag(conf).astype(float)
+        union = conf.sum(0) + conf.sum(1) - np.diag(conf)
+        present = conf.sum(1) > 0
+        iou = {det.classes[k]: round(float(tp[k] / union[k]), 3) for k in range(1, n) if present[k]}
+        off = conf.copy()
+        np.fill_diagonal(off, 0)
+        top = Counter({(det.classes[g], det.classes[p]): int(off[g, p]) for g, p in zip(*np.nonzero(off))})
+        rep["lightings"][lighting] = {
+            "frames": a["frames"],
+            "miou": round(float(np.mean(list(iou.values()))), 3) if iou else 0.0,
+            "pixel_acc": round(float(tp.sum() / max(conf.sum(), 1)), 3),
+            "instance_recall": round(a["found"] / a["gt"], 3) if a["gt"] else None,
+            "instance_precision": round(a["matched"] / a["dets"], 3) if a["dets"] else None,
+            "gt_instances": a["gt"], "detections": a["dets"],
+            "class_iou": iou,
+            "confusions": [{"true": g, "predicted": p, "pixels": c} for (g, p), c in top.most_common(8)],
+        }
+    return rep
+
+
+def format_report(rep: dict) -> str:
+    lines = [f"{'lighting':<10} {'frames':>6} {'mIoU':>6} {'pix acc':>8} {'inst R':>7} {'inst P':>7}"]
+    for name, r in rep["lightings"].items():
+        lines.append(f"{name:<10} {r['frames']:>6} {r['miou']:>6.3f} {r['pixel_acc']:>8.3f} "
+                     f"{(r['instance_recall'] or 0):>7.3f} {(r['instance_precision'] or 0):>7.3f}")
+        conf = ", ".join(f"{c['true']}->{c['predicted']} {c['pixels']}" for c in r["confusions"][:4])
+        lines.append(f"  top confusions: {conf or 'none'}")
+    lines.append(f"detect: {rep['ms_per_frame']} ms/frame (median, this machine)")
+    return "\n".join(lines)

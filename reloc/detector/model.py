@@ -1,0 +1,56 @@
+"""A compact encoder-decoder for per-pixel classes and instance boundaries (PyTorch).
+
+Input: an 8-bit sRGB image as float in [0, 1], NCHW, height and width divisible by 8. Outputs, at
+full resolution: ``semantic`` logits (background + the class table's classes) and ``boundary``
+logits (one channel: the pixel lies on the border between two instances, or between an instance
+and the background). Instances are cut from these by ``reloc.frontend.detection_learned``, which
+also splits them at depth discontinuities.
+
+Three stride-2 stages (24, 48, 96 channels, a 128-channel bottleneck at 1/8) with skip
+connections; about 0.6 M parameters. Only ONNX-friendly operations (convolutions, batch norm,
+ReLU, nearest upsampling, concatenation).
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+
+def _block(cin: int, cout: int, stride: int = 1) -> nn.Sequential:
+    return nn.Sequential(
+        nn.Conv2d(cin, cout, 3, stride=stride, padding=1, bias=False), nn.BatchNorm2d(cout), nn.ReLU(inplace=True),
+        nn.Conv2d(cout, cout, 3, padding=1, bias=False), nn.BatchNorm2d(cout), nn.ReLU(inplace=True),
+    )
+
+
+class SegNet(nn.Module):
+    def __init__(self, n_classes: int, width: int = 24):
+        super().__init__()
+        w1, w2, w3, w4 = width, 2 * width, 4 * width, 128 * width // 24
+        self.n_classes = int(n_classes)
+        self.width = int(width)
+        self.e1 = _block(3, w1)
+        self.e2 = _block(w1, w2, 2)
+        self.e3 = _block(w2, w3, 2)
+        self.e4 = _block(w3, w4, 2)
+        self.up = nn.Upsample(scale_factor=2, mode="nearest")
+        self.d3 = _block(w4 + w3, w3)
+        self.d2 = _block(w3 + w2, w2)
+        self.d1 = _block(w2 + w1, w1)
+        self.semantic = nn.Conv2d(w1, n_classes, 1)
+        self.boundary = nn.Conv2d(w1, 1, 1)
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        x1 = self.e1(x)
+        x2 = self.e2(x1)
+        x3 = self.e3(x2)
+        x4 = self.e4(x3)
+        y = self.d3(torch.cat([self.up(x4), x3], 1))
+        y = self.d2(torch.cat([self.up(y), x2], 1))
+        y = self.d1(torch.cat([self.up(y), x1], 1))
+        return self.semantic(y), self.boundary(y)
+
+
+def parameter_count(model: nn.Module) -> int:
+    return sum(p.numel() for p in model.parameters())

@@ -1,0 +1,209 @@
+"""Train the learned detector (``reloc detector train``), and export it to ONNX.
+
+Loss: class-weighted cross-entropy on the per-pixel classes (weights ``freq ** -0.5``, normalised,
+so that small objects count) plus binary cross-entropy on instance boundaries (positive weight
+``boundary_pos_weight``). Augmentation: horizontal flips and an exposure change (the stored sRGB
+frame decoded to linear, scaled by ``2 ** U(-e, e)``, encoded again), since exposure belongs to the
+camera, not to the rendered light. Adam with a cosine schedule; seeded.
+
+Validation frames are whole tours held out by layout (``val_layouts``); the checkpoint after each
+epoch is written atomically, and ``--resume`` continues from it. Runs on the CPU or, with
+``--device cuda``, on a GPU; it imports nothing of the toolkit but this package and
+``formats.atomic``, so it runs wherever PyTorch and Pillow are.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+import warnings
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from formats.atomic import replacing, write_json_atomic
+
+from .data import boundaries, load
+from .model import SegNet, parameter_count
+
+MODEL_FORMAT = "videoreloc-segnet/1"
+
+
+@dataclass
+class TrainConfig:
+    epochs: int = 40
+    batch: int = 32
+    lr: float = 2e-3
+    weight_decay: float = 1e-4
+    width: int = 16
+    boundary_pos_weight: float = 3.0
+    boundary_loss_weight: float = 1.0
+    exposure_log2: float = 0.7
+    seed: int = 0
+    val_layouts: list[str] = field(default_factory=list)  # default: the last layout of the set
+
+
+def _weights(sem: np.ndarray, n: int) -> torch.Tensor:
+    counts = np.bincount(sem.ravel(), minlength=n).astype(np.float64)
+    freq = counts / counts.sum()
+    w = np.where(counts > 0, (freq + 1e-6) ** -0.5, 0.0)
+    w = w / w[counts > 0].mean()
+    return torch.tensor(np.minimum(w, 10.0), dtype=torch.float32)
+
+
+def _augment(x: torch.Tensor, g: torch.Generator, exposure_log2: float) -> torch.Tensor:
+    """x: (B, 3, H, W) sRGB in [0, 1]: an exposure change in linear light, per image."""
+    gain = 2.0 ** ((torch.rand(x.shape[0], 1, 1, 1, generator=g, device=x.device) * 2 - 1) * exposure_log2)
+    lin = torch.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4) * gain
+    lin = lin.clamp(0, 1)
+    return torch.where(lin <= 0.0031308, lin * 12.92, 1.055 * lin.clamp_min(1e-8) ** (1 / 2.4) - 0.055)
+
+
+def train(data_path, out, cfg: TrainConfig, device: str = "cpu", resume: bool = False, progress: bool = True) -> dict:
+    """Train on a packed set; writes ``out/checkpoint.pt``, ``out/train_log.json`` and returns the log."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    torch.manual_seed(cfg.seed)
+    ds = load(data_path)
+    n_cls = len(ds.classes)
+    layouts = sorted(set(ds.layouts))
+    if cfg.val_layouts or len(layouts) > 1:
+        val_layouts = set(cfg.val_layouts or layouts[-1:])
+        val = np.array([lay in val_layouts for lay in ds.layouts])
+    else:  # one layout: hold out its last tour
+        val_layouts = {f"{layouts[0]} (tour {ds.tours[-1]})"}
+        val = np.array([t == ds.tours[-1] for t in ds.tours])
+    if val.all() or not val.any():
+        raise ValueError(f"validation layouts {sorted(val_layouts)} leave no training or no validation frames")
+    bnd = boundaries(ds.instance)
+    X = torch.from_numpy(ds.rgb).permute(0, 3, 1, 2).contiguous()  # uint8, moved per batch
+    S = torch.from_numpy(ds.semantic.astype(np.int64))
+    B = torch.from_numpy(bnd.astype(np.float32))
+    tr_idx, va_idx = np.flatnonzero(~val), np.flatnonzero(val)
+    model = SegNet(n_cls, cfg.width).to(device)
+    w = _weights(ds.semantic[~val], n_cls).to(device)
+    opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    steps_per_epoch = math.ceil(len(tr_idx) / cfg.batch)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=cfg.lr, total_steps=cfg.epochs * steps_per_epoch,
+                                                pct_start=0.1)
+    log = {"format": MODEL_FORMAT, "config": asdict(cfg), "classes": ds.classes, "data": str(data_path),
+           "train_frames": int(len(tr_idx)), "val_frames": int(len(va_idx)), "val_layouts": sorted(val_layouts),
+           "parameters": parameter_count(model), "device": device, "epochs": []}
+    start = 0
+    ck = out / "checkpoint.pt"
+    if resume and ck.is_file():
+        state = torch.load(ck, map_location=device)
+        model.load_state_dict(state["model"])
+        opt.load_state_dict(state["opt"])
+        sched.load_state_dict(state["sched"])
+        log = state["log"]
+        start = len(log["epochs"])
+    g = torch.Generator(device="cpu").manual_seed(cfg.seed)
+    gd = torch.Generator(device=device).manual_seed(cfg.seed)
+    t_all = time.perf_counter()
+    for epoch in range(start, cfg.epochs):
+        model.train()
+        t0 = time.perf_counter()
+        perm = tr_idx[torch.randperm(len(tr_idx), generator=g).numpy()]
+        tot = 0.0
+        for k in range(steps_per_epoch):
+            idx = torch.from_numpy(perm[k * cfg.batch:(k + 1) * cfg.batch])
+            x = X[idx].to(device).float() / 255.0
+            s, b = S[idx].to(device), B[idx].to(device)
+            flip = torch.rand(len(idx), generator=g) < 0.5
+            x[flip], s[flip], b[flip] = x[flip].flip(-1), s[flip].flip(-1), b[flip].flip(-1)
+            x = _augment(x, gd, cfg.exposure_log2)
+            ls, lb = model(x)
+            loss = F.cross_entropy(ls, s, weight=w) + cfg.boundary_loss_weight * F.binary_cross_entropy_with_logits(
+                lb[:, 0], b, pos_weight=torch.tensor(cfg.boundary_pos_weight, device=device))
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            sched.step()
+            tot += loss.item() * len(idx)
+        ev = evaluate_pixels(model, X[va_idx], S[va_idx], n_cls, device)
+        rec = {"epoch": epoch + 1, "loss": round(tot / len(tr_idx), 5), "val_pixel_acc": ev["pixel_acc"],
+               "val_miou": ev["miou"], "seconds": round(time.perf_counter() - t0, 2)}
+        log["epochs"].append(rec)
+        with replacing(ck) as tmp:
+            torch.save({"model": model.state_dict(), "opt": opt.state_dict(), "sched": sched.state_dict(), "log": log}, tmp)
+        if progress:
+            print(json.dumps(rec), file=sys.stderr, flush=True)
+    log["wall_time_s"] = round(time.perf_counter() - t_all, 1)
+    write_json_atomic(out / "train_log.json", log, indent=1)
+    return log
+
+
+@torch.no_grad()
+def evaluate_pixels(model, X: torch.Tensor, S: torch.Tensor, n_cls: int, device: str, batch: int = 64) -> dict:
+    model.eval()
+    conf = torch.zeros(n_cls, n_cls, dtype=torch.int64)
+    for k in range(0, len(X), batch):
+        x = X[k:k + batch].to(device).float() / 255.0
+        pred = model(x)[0].argmax(1).cpu()
+        conf += torch.bincount(S[k:k + batch].reshape(-1) * n_cls + pred.reshape(-1), minlength=n_cls * n_cls).reshape(n_cls, n_cls)
+    tp = conf.diag().double()
+    present = conf.sum(1) > 0
+    iou = tp / (conf.sum(0) + conf.sum(1) - conf.diag()).double().clamp_min(1)
+    return {"pixel_acc": round(float(tp.sum() / conf.sum().clamp_min(1)), 4),
+            "miou": round(float(iou[present].mean()), 4) if present.any() else 0.0}
+
+
+def export_onnx(checkpoint, out_onnx, height: int = 120, width: int = 160) -> Path:
+    """The checkpoint's model as ONNX (input ``image``: N x 3 x H x W sRGB in [0, 1]; outputs
+    ``semantic`` and ``boundary`` logits), with its classes and format in the metadata."""
+    import onnx
+
+    state = torch.load(checkpoint, map_location="cpu")
+    log = state["log"]
+    model = SegNet(len(log["classes"]), log["config"]["width"])
+    model.load_state_dict(state["model"])
+    model.eval()
+    out_onnx = Path(out_onnx)
+    with replacing(out_onnx) as tmp, warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)  # the TorchScript exporter: no onnxscript needed
+        torch.onnx.export(model, torch.zeros(1, 3, height, width), str(tmp), input_names=["image"],
+                          output_names=["semantic", "boundary"], opset_version=17, dynamo=False,
+                          dynamic_axes={"image": {0: "n", 2: "h", 3: "w"}, "semantic": {0: "n", 2: "h", 3: "w"},
+                                        "boundary": {0: "n", 2: "h", 3: "w"}})
+        m = onnx.load(str(tmp))
+        for k, v in (("format", MODEL_FORMAT), ("classes", json.dumps(log["classes"])),
+                     ("input", "sRGB 8-bit / 255, NCHW, H and W divisible by 8"),
+                     ("train", json.dumps({k: log[k] for k in ("config", "train_frames", "val_frames", "val_layouts",
+                                                              "parameters") if k in log}))):
+            p = m.metadata_props.add()
+            p.key, p.value = k, v
+        onnx.save(m, str(tmp))
+    return out_onnx
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m reloc.detector.train", description=__doc__.split("\n")[0])
+    ap.add_argument("data", help="packed training set (.npz, reloc detector pack)")
+    ap.add_argument("--out", required=True, help="output folder: checkpoint.pt, train_log.json, model.onnx")
+    ap.add_argument("--epochs", type=int, default=TrainConfig.epochs)
+    ap.add_argument("--batch", type=int, default=TrainConfig.batch)
+    ap.add_argument("--lr", type=float, default=TrainConfig.lr)
+    ap.add_argument("--width", type=int, default=TrainConfig.width)
+    ap.add_argument("--seed", type=int, default=TrainConfig.seed)
+    ap.add_argument("--val-layouts", nargs="*", default=[])
+    ap.add_argument("--device", default="cpu")
+    ap.add_argument("--resume", action="store_true")
+    ap.add_argument("--quiet", action="store_true")
+    a = ap.parse_args(argv)
+    cfg = TrainConfig(epochs=a.epochs, batch=a.batch, lr=a.lr, width=a.width, seed=a.seed, val_layouts=a.val_layouts)
+    log = train(a.data, a.out, cfg, device=a.device, resume=a.resume, progress=not a.quiet)
+    onnx_path = export_onnx(Path(a.out) / "checkpoint.pt", Path(a.out) / "model.onnx")
+    print(f"trained {len(log['epochs'])} epochs in {log.get('wall_time_s')} s; val mIoU {log['epochs'][-1]['val_miou']}; "
+          f"wrote {onnx_path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,160 @@
+"""The learned detector (``detector: learned``): instances from pixels, by the toolkit's own model.
+
+The model (``reloc.detector``: trained on renders of apartments the experiments never use,
+exported to ONNX) sees only the RGB frame, exposed as a camera would (``formats.tour.tonemap``:
+per-frame auto exposure, 8-bit sRGB), and gives per-pixel class scores and instance-boundary
+scores. Instances are then cut here, without any ground truth:
+
+1. each pixel takes its best class (background included) and that class's probability;
+2. pixels on a predicted boundary (``boundary_threshold``) or on a depth discontinuity (a
+   4-neighbour whose depth differs by more than ``depth_edge_rel`` of the nearer depth plus
+   ``depth_edge_abs_m``, or has none) are cut;
+3. the remaining pixels of each class fall into 4-connected components; a component of at least
+   ``min_pixels`` pixels is an instance, and the cut pixels of its class within ``REGROW_PX`` go
+   to the nearest such component (so masks reach their borders again);
+4. an instance's score is its mean class probability; ``score_threshold`` drops weak ones.
+
+Frames without RGB give no detections: detections are computed where the camera image exists.
+Errors (a missing or corrupt model, a model of another format, a model whose classes do not cover
+the map's) are one-line ``UserError`` naming the file.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from formats.errors import UserError
+from formats.tour import tonemap
+
+from .detector_base import Detection, FrameData
+
+MODEL_FORMAT = "videoreloc-segnet/1"
+REGROW_PX = 3.0  # cut pixels this close to an instance rejoin it (predicted boundaries are 2-4 px wide)
+
+
+def _one_line(e: Exception) -> str:
+    return " ".join(str(e).split())[:200] or type(e).__name__
+
+
+def depth_edges(depth: np.ndarray, rel: float, abs_m: float) -> np.ndarray:
+    """(H, W) bool: pixels without depth, or next to a 4-neighbour across a depth jump."""
+    d = np.asarray(depth, np.float32)
+    bad = ~(d > 0) | ~np.isfinite(d)
+    e = bad.copy()
+    for a, b, sl_a, sl_b in ((d[1:, :], d[:-1, :], (slice(1, None), slice(None)), (slice(None, -1), slice(None))),
+                             (d[:, 1:], d[:, :-1], (slice(None), slice(1, None)), (slice(None), slice(None, -1)))):
+        with np.errstate(invalid="ignore"):
+            jump = np.abs(a - b) > rel * np.minimum(a, b) + abs_m
+        e[sl_a] |= jump
+        e[sl_b] |= jump
+    return e
+
+
+class LearnedDetector:
+    """A :class:`reloc.frontend.detection.Detector` running the toolkit's segmentation model."""
+
+    name = "learned"
+
+    def __init__(self, model, vocabulary=None, *, min_pixels: int = 20, boundary_threshold: float = 0.5,
+                 score_threshold: float = 0.3, depth_edge_rel: float = 0.04, depth_edge_abs_m: float = 0.03,
+                 intra_op_num_threads: int = 1):
+        import onnxruntime as ort
+
+        self.model_path = Path(model)
+        where = self.model_path
+        if not where.is_file():
+            raise UserError(f"{where}: detector model not found")
+        opts = ort.SessionOptions()
+        opts.intra_op_num_threads = int(intra_op_num_threads)
+        opts.inter_op_num_threads = 1
+        opts.log_severity_level = 3
+        try:
+            self.session = ort.InferenceSession(str(where), sess_options=opts, providers=["CPUExecutionProvider"])
+        except Exception as e:
+            raise UserError(f"{where}: not a readable ONNX model: {_one_line(e)}") from None
+        meta = self.session.get_modelmeta().custom_metadata_map or {}
+        if meta.get("format") != MODEL_FORMAT:
+            raise UserError(f"{where}: format: expected a {MODEL_FORMAT} model (reloc detector export), "
+                            f"got {meta.get('format')!r}")
+        try:
+            self.classes = list(json.loads(meta["classes"]))
+        except (KeyError, ValueError, TypeError) as e:
+            raise UserError(f"{where}: classes: missing or malformed in the model's metadata ({_one_line(e)})") from None
+        if vocabulary is not None:
+            missing = sorted(set(vocabulary) - set(self.classes))
+            if missing:
+                raise UserError(f"{where}: classes: the model does not know the map's classes {', '.join(missing)}")
+        self.vocabulary = set(vocabulary) if vocabulary is not None else set(self.classes[1:])
+        self.min_pixels = int(min_pixels)
+        self.boundary_threshold = float(boundary_threshold)
+        self.score_threshold = float(score_threshold)
+        self.depth_edge_rel = float(depth_edge_rel)
+        self.depth_edge_abs_m = float(depth_edge_abs_m)
+        self._input = self.session.get_inputs()[0].name
+
+    def record(self) -> dict:
+        """What run.json says about this detector."""
+        return {"name": self.name, "model": str(self.model_path), "classes": len(self.classes),
+                "min_pixels": self.min_pixels, "boundary_threshold": self.boundary_threshold,
+                "score_threshold": self.score_threshold}
+
+    # -- the network -------------------------------------------------------------------------------
+
+    def predict(self, rgb_linear: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(class index, its probability, boundary probability), each (H, W), for a linear RGB frame."""
+        srgb, _ = tonemap(rgb_linear)
+        x = np.round(srgb * 255.0) / 255.0  # the 8-bit frame the model was trained on
+        h, w = x.shape[:2]
+        ph, pw = (-h) % 8, (-w) % 8
+        x = np.pad(x, ((0, ph), (0, pw), (0, 0)), mode="edge").transpose(2, 0, 1)[None].astype(np.float32)
+        sem, bnd = self.session.run(None, {self._input: x})
+        logits = sem[0, :, :h, :w]
+        logits = logits - logits.max(axis=0, keepdims=True)
+        p = np.exp(logits)
+        p /= p.sum(axis=0, keepdims=True)
+        cls = p.argmax(axis=0)
+        conf = np.take_along_axis(p, cls[None], axis=0)[0]
+        return cls, conf, 1.0 / (1.0 + np.exp(-bnd[0, 0, :h, :w]))
+
+    # -- instances ---------------------------------------------------------------------------------
+
+    def detect(self, frame: FrameData) -> list[Detection]:
+        if frame.rgb is None:
+            return []
+        from scipy import ndimage
+
+        cls, conf, bnd = self.predict(frame.rgb)
+        cut = bnd > self.boundary_threshold
+        if frame.depth is not None:
+            cut |= depth_edges(frame.depth, self.depth_edge_rel, self.depth_edge_abs_m)
+        out = []
+        four = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], bool)
+        for k in np.unique(cls):
+            name = self.classes[int(k)]
+            if k == 0 or name not in self.vocabulary:
+                continue
+            of_class = cls == k
+            lab, n = ndimage.label(of_class & ~cut, structure=four)
+            if n == 0:
+                continue
+            sizes = np.bincount(lab.ravel(), minlength=n + 1)
+            keep = np.flatnonzero(sizes >= self.min_pixels)
+            keep = keep[keep > 0]
+            if not len(keep):
+                continue
+            kept = np.isin(lab, keep)
+            lab = np.where(kept, lab, 0)
+            # the class's cut pixels near an instance (a boundary's width) go back to the nearest one;
+            # pieces too small to keep stay out
+            dist, (iy, ix) = ndimage.distance_transform_edt(lab == 0, return_indices=True)
+            full = np.where(of_class & ((lab > 0) | (cut & (dist <= REGROW_PX))), lab[iy, ix], 0)
+            for j in keep:
+                m = full == j
+                score = float(conf[m].mean())
+                if score >= self.score_threshold and m.sum() >= self.min_pixels:
+                    out.append(Detection(cls=name, mask=m, score=score))
+        out.sort(key=lambda d: -d.score)
+        return out

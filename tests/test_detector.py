@@ -1,0 +1,161 @@
+"""The learned detector: packing renders, a tiny training run, ONNX export, and instance cutting.
+
+The training path runs for real on a set rendered here (tiny images, a few steps); the ONNX model
+is checked against PyTorch on the same input; instance cutting is checked on constructed class,
+boundary and depth maps whose instances are known by construction.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import yaml
+
+from formats.errors import UserError
+from formats.tour import Tour, tonemap
+from reloc.cli import main as reloc_main
+from reloc.frontend.detection_learned import LearnedDetector, depth_edges
+from reloc.frontend.detector_base import FrameData
+from synth.cli import main as synth_main
+
+torch = pytest.importorskip("torch")  # the [train] extra; make test installs it
+
+from reloc.detector.data import boundaries, load  # noqa: E402
+from reloc.detector.model import SegNet  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    """Two tours (day, night) of 3 random views at 64x48 of a training apartment, packed."""
+    root = tmp_path_factory.mktemp("detector")
+    spec = root / "t.yaml"
+    spec.write_text(yaml.safe_dump({"name": "t", "out": str(root / "renders"), "seeds": [103], "variants": 0,
+                                    "lightings": ["day", "night"], "jitter": 1, "views": 3, "size": [64, 48]}))
+    assert synth_main(["trainset", "render", str(spec), "--quiet"]) == 0
+    assert reloc_main(["detector", "pack", str(root / "renders"), "--out", str(root / "set.npz"), "--quiet"]) == 0
+    assert reloc_main(["detector", "train", str(root / "set.npz"), "--out", str(root / "run"), "--epochs", "15",
+                       "--batch", "2", "--width", "8", "--lr", "0.01", "--quiet"]) == 0
+    return root
+
+
+@pytest.mark.blender
+def test_pack_round_trip_against_the_renders(tiny):
+    ds = load(tiny / "set.npz")
+    assert len(ds) == 6 and ds.rgb.shape == (6, 48, 64, 3) and ds.classes[0] == "background"
+    assert sorted({lt.rsplit("/", 1)[-1] for lt in ds.lightings}) == ["day_j0", "night_j0"]
+    for k, name in enumerate(ds.tours):
+        tour = Tour(tiny / "renders" / name)
+        i = [j for j, t in enumerate(ds.tours) if t == name].index(k)
+        f = tour.frame(int(tour.frame_indices[i]))
+        srgb, _ = tonemap(f.rgb)
+        assert np.abs(ds.rgb[k].astype(float) - srgb * 255).mean() < 3.0  # JPEG, quality 92
+        assert np.array_equal(ds.instance[k], f.instance.astype(np.int32))  # lossless
+        by_id = {int(v): c for c, v in tour.objects()["classes"].items()}
+        expect = np.vectorize(lambda s: ds.classes.index(by_id[s]) if s else 0)(f.semantic)
+        assert np.array_equal(ds.semantic[k], expect)
+
+
+def test_boundaries_cut_touching_instances():
+    inst = np.zeros((6, 8), int)
+    inst[1:5, 1:4], inst[1:5, 4:7] = 3, 4  # two instances side by side
+    b = boundaries(inst)
+    assert b[2, 3] and b[2, 4] and not b[2, 2] and not b[2, 5]  # the seam, both sides
+    assert b[0, 2] and b[1, 2] and not b[3, 2]  # the border with the background
+
+
+@pytest.mark.blender
+def test_training_learns_and_onnx_matches_pytorch(tiny):
+    log = json.loads((tiny / "run" / "train_log.json").read_text())
+    losses = [e["loss"] for e in log["epochs"]]
+    assert len(losses) == 15 and losses[-1] < 0.8 * losses[0]  # it learns (on its own frames)
+    state = torch.load(tiny / "run" / "checkpoint.pt", map_location="cpu")
+    model = SegNet(len(log["classes"]), 8)
+    model.load_state_dict(state["model"])
+    model.eval()
+    det = LearnedDetector(tiny / "run" / "model.onnx")
+    assert det.classes == log["classes"]
+    for h, w in ((48, 64), (120, 160)):  # dynamic size
+        x = np.random.default_rng(h).random((1, 3, h, w)).astype(np.float32)
+        with torch.no_grad():
+            ts, tb = (t.numpy() for t in model(torch.from_numpy(x)))
+        os_, ob = det.session.run(None, {"image": x})
+        assert np.abs(ts - os_).max() < 1e-4 and np.abs(tb - ob).max() < 1e-4
+
+
+@pytest.mark.blender
+def test_learned_detector_bad_models_are_one_line(tiny, tmp_path):
+    with pytest.raises(UserError, match="detector model not found"):
+        LearnedDetector(tmp_path / "none.onnx")
+    (tmp_path / "bad.onnx").write_bytes(b"not a model")
+    with pytest.raises(UserError, match="not a readable ONNX model"):
+        LearnedDetector(tmp_path / "bad.onnx")
+    with pytest.raises(UserError, match="does not know the map's classes unicorn"):
+        LearnedDetector(tiny / "run" / "model.onnx", vocabulary={"chair", "unicorn"})
+    import onnx
+
+    m = onnx.load(str(tiny / "run" / "model.onnx"))
+    del m.metadata_props[:]
+    onnx.save(m, str(tmp_path / "plain.onnx"))
+    with pytest.raises(UserError, match="format: expected a videoreloc-segnet/1 model"):
+        LearnedDetector(tmp_path / "plain.onnx")
+
+
+# ---------------------------------------------------------------------------------------------
+# instance cutting, on maps built here
+
+
+class _Fixed(LearnedDetector):
+    """The cutting of LearnedDetector with a prediction given by the test."""
+
+    def __init__(self, cls, conf, bnd, classes):
+        self.classes, self.vocabulary = classes, set(classes[1:])
+        self.min_pixels, self.boundary_threshold, self.score_threshold = 20, 0.5, 0.3
+        self.depth_edge_rel, self.depth_edge_abs_m = 0.04, 0.03
+        self._pred = (cls, conf, bnd)
+
+    def predict(self, rgb_linear):
+        return self._pred
+
+
+def _frame(depth):
+    return FrameData(0, depth.astype(np.float32), np.eye(3), rgb=np.zeros(depth.shape + (3,), np.float32))
+
+
+def test_cutting_splits_same_class_neighbours_at_boundaries_and_depth_jumps():
+    H, W = 40, 60
+    classes = ["background", "wall", "chair", "book"]
+    cls = np.zeros((H, W), int)
+    cls[5:25, 5:25], cls[5:25, 25:45] = 2, 2  # two chairs touching, one class region
+    cls[30:36, 5:55] = 3  # a row of books
+    cls[2, 50:54] = 2  # a chair speck: too small
+    conf = np.full((H, W), 0.9)
+    bnd = np.zeros((H, W))
+    bnd[5:25, 24:26] = 0.9  # the predicted seam between the chairs
+    depth = np.full((H, W), 3.0)
+    depth[30:36, 30:55] = 2.0  # the books split by a depth jump only
+    dets = _Fixed(cls, conf, bnd, classes).detect(_frame(depth))
+    chairs = sorted((d for d in dets if d.cls == "chair"), key=lambda d: d.box2d[0])
+    books = sorted((d for d in dets if d.cls == "book"), key=lambda d: d.box2d[0])
+    assert len(chairs) == 2 and len(books) == 2 and len(dets) == 4
+    # the masks reach back over the cut pixels: together they are the class region (minus the speck)
+    assert chairs[0].mask[5:25, 5:24].all() and chairs[1].mask[5:25, 26:45].all()
+    assert np.array_equal(chairs[0].mask | chairs[1].mask, (cls == 2) & ~np.pad(np.ones((1, 4), bool), ((2, H - 3), (50, W - 54))))
+    assert not (chairs[0].mask & chairs[1].mask).any()
+    assert books[0].mask[30:36, 5:29].all() and books[1].mask[30:36, 31:55].all()
+    # a weak region is dropped by the score threshold, a confident one kept
+    conf[5:25, 25:45] = 0.2
+    dets = _Fixed(cls, conf, bnd, classes).detect(_frame(depth))
+    assert len([d for d in dets if d.cls == "chair"]) == 1
+
+
+def test_depth_edges_mark_jumps_and_holes():
+    d = np.full((10, 10), 2.0, np.float32)
+    d[:, 5:] = 2.5
+    d[0, 0] = 0.0
+    e = depth_edges(d, 0.04, 0.03)
+    assert e[:, 4].all() and e[:, 5].all() and not e[3, 2] and not e[3, 7] and e[0, 0]
+    d2 = d.copy()
+    d2[:, 5:] = 2.05  # within 4 % + 3 cm: a sloped surface, not an edge
+    assert not depth_edges(d2, 0.04, 0.03)[3, 4]
