@@ -85,6 +85,8 @@ def train(data_path, out, cfg: TrainConfig, device: str = "cpu", resume: bool = 
     X = torch.from_numpy(ds.rgb).permute(0, 3, 1, 2).contiguous()  # uint8, moved per batch
     S = torch.from_numpy(ds.semantic.astype(np.int64))
     B = torch.from_numpy(bnd.astype(np.float32))
+    if device != "cpu":  # the whole set fits on any GPU (3,840 frames at 160x120: 0.3 GB)
+        X, S, B = X.to(device), S.to(device), B.to(device)
     tr_idx, va_idx = np.flatnonzero(~val), np.flatnonzero(val)
     model = SegNet(n_cls, cfg.width).to(device)
     w = _weights(ds.semantic[~val], n_cls).to(device)
@@ -113,10 +115,10 @@ def train(data_path, out, cfg: TrainConfig, device: str = "cpu", resume: bool = 
         perm = tr_idx[torch.randperm(len(tr_idx), generator=g).numpy()]
         tot = 0.0
         for k in range(steps_per_epoch):
-            idx = torch.from_numpy(perm[k * cfg.batch:(k + 1) * cfg.batch])
+            idx = torch.from_numpy(perm[k * cfg.batch:(k + 1) * cfg.batch]).to(X.device)
             x = X[idx].to(device).float() / 255.0
             s, b = S[idx].to(device), B[idx].to(device)
-            flip = torch.rand(len(idx), generator=g) < 0.5
+            flip = (torch.rand(len(idx), generator=g) < 0.5).to(device)
             x[flip], s[flip], b[flip] = x[flip].flip(-1), s[flip].flip(-1), b[flip].flip(-1)
             x = _augment(x, gd, cfg.exposure_log2)
             ls, lb = model(x)
@@ -127,7 +129,8 @@ def train(data_path, out, cfg: TrainConfig, device: str = "cpu", resume: bool = 
             opt.step()
             sched.step()
             tot += loss.item() * len(idx)
-        ev = evaluate_pixels(model, X[va_idx], S[va_idx], n_cls, device)
+        va = torch.from_numpy(va_idx).to(X.device)
+        ev = evaluate_pixels(model, X[va], S[va], n_cls, device)
         rec = {"epoch": epoch + 1, "loss": round(tot / len(tr_idx), 5), "val_pixel_acc": ev["pixel_acc"],
                "val_miou": ev["miou"], "seconds": round(time.perf_counter() - t0, 2)}
         log["epochs"].append(rec)
@@ -147,7 +150,8 @@ def evaluate_pixels(model, X: torch.Tensor, S: torch.Tensor, n_cls: int, device:
     for k in range(0, len(X), batch):
         x = X[k:k + batch].to(device).float() / 255.0
         pred = model(x)[0].argmax(1).cpu()
-        conf += torch.bincount(S[k:k + batch].reshape(-1) * n_cls + pred.reshape(-1), minlength=n_cls * n_cls).reshape(n_cls, n_cls)
+        s = S[k:k + batch].cpu()
+        conf += torch.bincount(s.reshape(-1) * n_cls + pred.reshape(-1), minlength=n_cls * n_cls).reshape(n_cls, n_cls)
     tp = conf.diag().double()
     present = conf.sum(1) > 0
     iou = tp / (conf.sum(0) + conf.sum(1) - conf.diag()).double().clamp_min(1)
