@@ -29,14 +29,11 @@ import numpy as np
 from formats.errors import UserError
 from formats.tour import tonemap
 
+from .detection_onnx import _one_line, open_session
 from .detector_base import Detection, FrameData
 
 MODEL_FORMAT = "videoreloc-segnet/1"
 REGROW_PX = 3.0  # cut pixels this close to an instance rejoin it (predicted boundaries are 2-4 px wide)
-
-
-def _one_line(e: Exception) -> str:
-    return " ".join(str(e).split())[:200] or type(e).__name__
 
 
 def depth_edges(depth: np.ndarray, rel: float, abs_m: float) -> np.ndarray:
@@ -61,20 +58,8 @@ class LearnedDetector:
     def __init__(self, model, vocabulary=None, *, min_pixels: int = 20, boundary_threshold: float = 0.5,
                  score_threshold: float = 0.3, depth_edge_rel: float = 0.04, depth_edge_abs_m: float = 0.03,
                  intra_op_num_threads: int = 1):
-        import onnxruntime as ort
-
-        self.model_path = Path(model)
-        where = self.model_path
-        if not where.is_file():
-            raise UserError(f"{where}: detector model not found")
-        opts = ort.SessionOptions()
-        opts.intra_op_num_threads = int(intra_op_num_threads)
-        opts.inter_op_num_threads = 1
-        opts.log_severity_level = 3
-        try:
-            self.session = ort.InferenceSession(str(where), sess_options=opts, providers=["CPUExecutionProvider"])
-        except Exception as e:
-            raise UserError(f"{where}: not a readable ONNX model: {_one_line(e)}") from None
+        self.model_path = where = Path(model)
+        self.session = open_session(where, "detector model", intra_op_num_threads)
         meta = self.session.get_modelmeta().custom_metadata_map or {}
         if meta.get("format") != MODEL_FORMAT:
             raise UserError(f"{where}: format: expected a {MODEL_FORMAT} model (reloc detector export), "

@@ -178,6 +178,24 @@ def _bilinear(m: np.ndarray, ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
 # ---------------------------------------------------------------- the detector
 
 
+def open_session(path, what: str, intra_op_num_threads: int = 1, providers: list | None = None):
+    """A quiet onnxruntime session (CPU unless ``providers`` say otherwise); a missing file or one
+    onnxruntime cannot read is a one-line UserError naming it (``what``: how to call the file)."""
+    import onnxruntime as ort
+
+    path = Path(path)
+    if not path.is_file():
+        raise UserError(f"{path}: {what} not found")
+    opts = ort.SessionOptions()
+    opts.intra_op_num_threads = int(intra_op_num_threads)
+    opts.inter_op_num_threads = 1
+    opts.log_severity_level = 3
+    try:
+        return ort.InferenceSession(str(path), sess_options=opts, providers=providers or ["CPUExecutionProvider"])
+    except Exception as e:
+        raise UserError(f"{path}: not a readable ONNX model: {_one_line(e)}") from None
+
+
 class OnnxDetector:
     """A :class:`reloc.frontend.detection.Detector` running a YOLO-style ONNX segmentation model.
 
@@ -192,8 +210,6 @@ class OnnxDetector:
                  iou_threshold: float = 0.7, max_detections: int = 100, mask_threshold: float = 0.5,
                  imgsz: int | tuple[int, int] | None = None, intra_op_num_threads: int = 1,
                  providers: list | None = None):
-        import onnxruntime as ort
-
         self.model_path = Path(model)
         self.score_threshold = float(score_threshold)
         self.iou_threshold = float(iou_threshold)
@@ -201,18 +217,7 @@ class OnnxDetector:
         self.mask_threshold = float(mask_threshold)
         self.vocabulary = set(vocabulary) if vocabulary is not None else None
         where = self.model_path
-
-        if not self.model_path.is_file():
-            raise UserError(f"{where}: ONNX model not found")
-        opts = ort.SessionOptions()
-        opts.intra_op_num_threads = int(intra_op_num_threads)
-        opts.inter_op_num_threads = 1
-        opts.log_severity_level = 3
-        try:
-            self.session = ort.InferenceSession(str(self.model_path), sess_options=opts,
-                                                providers=providers or ["CPUExecutionProvider"])
-        except Exception as e:
-            raise UserError(f"{where}: not a readable ONNX model: {_one_line(e)}") from None
+        self.session = open_session(where, "ONNX model", intra_op_num_threads, providers)
 
         # the image input
         inputs = self.session.get_inputs()
