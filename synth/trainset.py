@@ -147,6 +147,7 @@ def prepare(spec: TrainsetSpec, out: Path | None = None, progress: bool = True) 
     out = Path(out or spec.out)
     scenes = out / "scenes"
     shells = _shipped_shells()
+    presets = [load_lighting(name) for name in spec.lightings]
     designs = []
     for s in spec.seeds:
         base = generate_apartment(seed=s, name=f"train_{s}")
@@ -165,8 +166,7 @@ def prepare(spec: TrainsetSpec, out: Path | None = None, progress: bool = True) 
         for lay in layouts:
             lay_file = scenes / "layouts" / f"{lay.name}.yaml"
             _write_if_changed(lay_file, dump_yaml(layout_to_dict(lay)))
-            for li, preset_name in enumerate(spec.lightings):
-                preset = load_lighting(preset_name)
+            for li, preset in enumerate(presets):
                 for j in range(spec.jitter):
                     jseed = spec.seed * 1_000_003 + s * 1009 + li * 101 + j
                     lit = jitter_preset(preset, jseed)

@@ -24,7 +24,6 @@ import numpy as np
 from formats.tour import Tour
 
 from ..frontend.detection_learned import LearnedDetector
-from ..frontend.detector_base import FrameData
 
 IOU_MATCH = 0.5
 
@@ -77,9 +76,10 @@ def evaluate(model, tour_dirs, every: int = 1, min_pixels: int = 20, progress: b
             if f.rgb is None:
                 continue
             t0 = time.perf_counter()
-            dets = det.detect(FrameData(int(i), f.depth, tour.K, rgb=f.rgb))
+            pred = det.predict(f.rgb)  # what detect() does, keeping the class map for the pixel scores
+            dets = det.instances(*pred, f.depth)
             times.append(time.perf_counter() - t0)
-            cls, _, _ = det.predict(f.rgb)
+            cls = pred[0]
             gt_cls = sem_map[np.minimum(f.semantic, 65535).astype(np.int64)]
             a["conf"] += np.bincount(gt_cls.ravel() * n + cls.ravel(), minlength=n * n).reshape(n, n)
             gt_masks = {}

@@ -80,12 +80,6 @@ class LearnedDetector:
         self.depth_edge_abs_m = float(depth_edge_abs_m)
         self._input = self.session.get_inputs()[0].name
 
-    def record(self) -> dict:
-        """What run.json says about this detector."""
-        return {"name": self.name, "model": str(self.model_path), "classes": len(self.classes),
-                "min_pixels": self.min_pixels, "boundary_threshold": self.boundary_threshold,
-                "score_threshold": self.score_threshold}
-
     # -- the network -------------------------------------------------------------------------------
 
     def predict(self, rgb_linear: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -109,12 +103,15 @@ class LearnedDetector:
     def detect(self, frame: FrameData) -> list[Detection]:
         if frame.rgb is None:
             return []
+        return self.instances(*self.predict(frame.rgb), frame.depth)
+
+    def instances(self, cls: np.ndarray, conf: np.ndarray, bnd: np.ndarray, depth: np.ndarray | None) -> list[Detection]:
+        """Instances from a prediction (``predict``'s three maps) and the frame's depth (steps 2-4)."""
         from scipy import ndimage
 
-        cls, conf, bnd = self.predict(frame.rgb)
         cut = bnd > self.boundary_threshold
-        if frame.depth is not None:
-            cut |= depth_edges(frame.depth, self.depth_edge_rel, self.depth_edge_abs_m)
+        if depth is not None:
+            cut |= depth_edges(depth, self.depth_edge_rel, self.depth_edge_abs_m)
         out = []
         four = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], bool)
         for k in np.unique(cls):
