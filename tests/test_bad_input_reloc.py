@@ -331,7 +331,8 @@ def test_experiment_runs_record_the_spec_detector(world, tmp_path):
     from reloc.config import Config
 
     t, bmap = Tour(world["tour"]), BoxMap.load(world["map"])
-    det = _detector({"miss_rate": 0.1, "seed": 5}, t, bmap, Config().replace("detection.min_mask_pixels", 7))
+    det = _detector({"kind": "oracle", "corruption": {"miss_rate": 0.1, "seed": 5}}, t, bmap,
+                    Config().replace("detection.min_mask_pixels", 7))
     assert det.min_pixels == 7  # the config's detection settings reach the detector
     relocalize(t, bmap, tmp_path / "run", detector=det, poses="gt", frames=6, progress=False)
     c = json.loads((tmp_path / "run" / "run.json").read_text())["detector"]["corruption"]

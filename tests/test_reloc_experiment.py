@@ -4,6 +4,7 @@ and (with Blender) a whole tiny design end to end, rerun and resumed."""
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -114,6 +115,63 @@ def test_checks_pass_fail_and_exit_status(tmp_path, capsys):
     assert rows[0]["value"] == pytest.approx(0.7 / 0.9) and rows[1]["why"] == "no value"
 
 
+def _feasible(name: str) -> tuple[float, float]:
+    """The values a metric can take: fractions in [0, 1], differences of fractions in [-1, 1],
+    kept (a ratio) and sizes, counts and errors from 0 up."""
+    key = name.rsplit(".", 1)[-1]
+    if key in ("delta_L", "delta_R"):
+        return -1.0, 1.0
+    if key in ("kept", "map_bytes", "built", "gt", "matched", "missing", "extra", "class_errors") or key.endswith(
+            ("_m", "_deg")):
+        return 0.0, math.inf
+    return 0.0, 1.0
+
+
+def test_every_demo_check_can_fail(monkeypatch, tmp_path):
+    """Each check of render_jobs/demo_checks.yaml passes on constructed values and fails when its
+    metric moves (within what the metric can take) to the wrong side of its threshold: a check that
+    no possible result can fail would be a defect."""
+    from reloc.experiments import checks as ck
+
+    path = REPO / "render_jobs" / "demo_checks.yaml"
+    items = ck.parse_checks(path)
+    known = set(ck.metric_table({"methods": {m: {"primary": "closure", "modes": {
+        mode: {"all": {}, "factors": {}} for mode in ("causal", "closure")}} for m in
+        ("videoreloc", "videoreloc_oracle", "appearance", "fpfh_icp", "one_frame")},
+        "maps": {"boxes": {"by_kind": {k: {} for k in ("object", "wall", "floor", "ceiling")}},
+                 "boxes_oracle": {"by_kind": {}}}}))
+    good: dict[str, float] = {}
+    for c in items:  # a passing value for each metric: the threshold with a margin on the right side
+        for side in (c.left, c.right):
+            try:
+                float(side)
+            except ValueError:
+                assert side in known, f"{c.text}: unknown metric {side}"
+        if c.right in known:
+            if c.left in good and c.right not in good:  # the left side is set already: put the right below it
+                good[c.right] = good[c.left] - 0.05 if c.op in (">", ">=") else good[c.left] + 0.05
+                continue
+            good.setdefault(c.right, 0.5)
+        r = good[c.right] if c.right in known else float(c.right)
+        lo, hi = _feasible(c.left)
+        room = (hi - r) if c.op in (">", ">=") else (r - lo)  # how far the passing side reaches
+        assert room > 0, f"{c.text}: cannot pass"
+        step = 0.5 * room if math.isfinite(room) else max(abs(r) * 0.2, 0.05)
+        good[c.left] = r + step if c.op in (">", ">=") else r - step
+    monkeypatch.setattr(ck, "metric_table", lambda results: dict(good))
+    res_dir = tmp_path  # run_checks reads a results.json; the values come from the patched metric_table
+    (res_dir / "results.json").write_text("{}")
+    assert all(r["passed"] for r in ck.run_checks(path, res_dir)), "the demo-like values must pass"
+    for i, c in enumerate(items):
+        bad = dict(good)
+        r = good[c.right] if c.right in known else float(c.right)
+        lo, hi = _feasible(c.left)
+        bad[c.left] = max(lo, r - 0.01) if c.op in (">", ">=") else min(hi, r + 0.01)
+        monkeypatch.setattr(ck, "metric_table", lambda results, b=bad: dict(b))
+        rows = ck.run_checks(path, res_dir)
+        assert not rows[i]["passed"], f"{c.text} does not fail at {c.left} = {bad[c.left]}"
+
+
 @pytest.mark.parametrize("items, message", [
     (["videoreloc.closure.recal_1m_10deg >= 0.85"], "did you mean videoreloc.closure.recall_1m_10deg"),
     (["videoreloc.kept >= fast"], "unknown metric 'fast'"),
@@ -158,7 +216,9 @@ def _spec(tmp_path, **changes) -> Path:
 
 def test_shipped_experiment_spec_validates():
     s = load_experiment(REPO / "render_jobs" / "demo_experiment.yaml")
-    assert s.methods == ("videoreloc", "fpfh_icp", "appearance", "one_frame") and s.unchanged == "apt_0"
+    assert s.methods == ("videoreloc", "videoreloc_oracle", "fpfh_icp", "appearance", "one_frame")
+    assert s.unchanged == "apt_0" and s.detector["kind"] == "learned"
+    assert s.detector["model"] == str(REPO / "models" / "detector_160x120.onnx")
     assert s.render == (REPO / "render_jobs" / "demo.yaml").resolve()
 
 
@@ -168,8 +228,13 @@ def test_shipped_experiment_spec_validates():
     ({"methods": ["videoreloc", "hloc"]}, "methods[1]: unknown method 'hloc'"),
     ({"methods": ["fpfh_icp"]}, "reuse VideoReloc's clips: add videoreloc"),
     ({"tables": ["units", "bogus"]}, "tables: expected a list of units, ablation"),
-    ({"detector": {"miss_rate": 2.0}}, "detector: corruption.miss_rate"),
-    ({"detector": {"miss": 0.1}}, "detector.miss: unknown setting"),
+    ({"detector": {"kind": "oracle", "miss_rate": 2.0}}, "detector: corruption.miss_rate"),
+    ({"detector": {"kind": "oracle", "miss": 0.1}}, "detector.miss: unknown setting"),
+    ({"detector": {"miss_rate": 0.1}}, "detector.miss_rate: corrupts the oracle's detections (add kind: oracle)"),
+    ({"detector": "yolo"}, "detector: expected one of learned, oracle, onnx"),
+    ({"detector": {"kind": "learned", "model": "nowhere.onnx"}}, "detector.model: model file"),
+    ({"detector": {"kind": "oracle", "model": "x.onnx"}}, "detector.model: the oracle detector reads the rendered"),
+    ({"detector": "oracle"}, "methods: videoreloc_oracle is the oracle row beside another detector"),
     ({"config": {"clips": {"nope": 1}}}, "clips.nope: unknown setting"),
     ({"one_frame_stride": 0}, "one_frame_stride: expected a positive integer"),
     ({"unchanged": None}, "unchanged: missing"),
@@ -180,6 +245,70 @@ def test_bad_experiment_specs_are_one_line_exit_2(tmp_path, capsys, changes, mes
     err = capsys.readouterr().err.strip()
     assert err.startswith("reloc: error:") and message in err and len(err.splitlines()) == 1, err
     assert not (tmp_path / "exp").exists()
+
+
+def _render_spec(tmp_path, **design_changes) -> Path:
+    """render_jobs/demo.yaml with its query design changed (its out stays the tests' tours folder)."""
+    doc = yaml.safe_load((REPO / "render_jobs" / "demo.yaml").read_text())
+    doc["designs"][0].update(design_changes)
+    for k in [k for k, v in design_changes.items() if v is None]:
+        del doc["designs"][0][k]
+    p = tmp_path / "render.yaml"
+    p.write_text(yaml.safe_dump(doc))
+    return p
+
+
+@pytest.mark.parametrize("design, field, message", [
+    ({"rgb_every": 10}, "designs[0].rgb_every", "RGB on every 10th frame, but the learned detector looks at every 5th"),
+    ({"rgb_every": 3}, "designs[0].rgb_every", "every 5th query frame (config.observation.stride)"),
+    ({"lightings": None, "rgb_every": None}, "designs[0].lightings", "a geometry-only design renders no RGB"),
+])
+def test_a_render_job_without_rgb_where_the_detector_looks(tmp_path, capsys, design, field, message):
+    """The learned detector sees only RGB frames: the spec check names the render job's design field."""
+    render = _render_spec(tmp_path, **design)
+    assert reloc_main(["experiment", str(_spec(tmp_path, render=str(render))), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert f"{render}: {field}: " in err and message in err and len(err.splitlines()) == 1, err
+    assert not (tmp_path / "exp").exists()
+    # the oracle reads label images, which every frame has: the same render job is fine for it
+    assert reloc_main(["experiment", str(_spec(tmp_path, render=str(render), detector="oracle",
+                                               methods=["videoreloc"])), "--quiet"]) == 2
+    assert "no rendered design" in capsys.readouterr().err
+
+
+def test_one_frame_stride_must_fall_on_rgb_frames(tmp_path, capsys):
+    assert reloc_main(["experiment", str(_spec(tmp_path, one_frame_stride=12)), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "designs[0].rgb_every: RGB on every 5th frame" in err and "every 12th query frame (one_frame_stride)" in err
+
+
+@pytest.mark.parametrize("content, message", [
+    (b"", "not a readable ONNX model"),
+    (b"not a protobuf at all" * 10, "not a readable ONNX model"),
+])
+def test_corrupt_detector_model_is_one_line(tmp_path, capsys, content, message):
+    (tmp_path / "bad.onnx").write_bytes(content)
+    spec = _spec(tmp_path, detector={"kind": "learned", "model": "bad.onnx"})
+    assert reloc_main(["experiment", str(spec), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert f"{spec}: detector.model: {tmp_path / 'bad.onnx'}" in err and message in err, err
+    assert len(err.splitlines()) == 1, err
+    assert not (tmp_path / "exp").exists()
+
+
+def test_a_foreign_onnx_model_is_named(tmp_path, capsys):
+    """An ONNX file of another format (here: a YOLO-style test model) is not taken for the learned detector."""
+    onnx = pytest.importorskip("onnx")
+    from onnx import TensorProto, helper
+
+    g = helper.make_graph([helper.make_node("Identity", ["x"], ["y"])], "g",
+                          [helper.make_tensor_value_info("x", TensorProto.FLOAT, [1, 3, 8, 8])],
+                          [helper.make_tensor_value_info("y", TensorProto.FLOAT, [1, 3, 8, 8])])
+    onnx.save(helper.make_model(g, opset_imports=[helper.make_opsetid("", 17)]), tmp_path / "other.onnx")
+    spec = _spec(tmp_path, detector={"kind": "learned", "model": "other.onnx"})
+    assert reloc_main(["experiment", str(spec), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert f"{tmp_path / 'other.onnx'}: format: expected a videoreloc-segnet/1 model" in err, err
 
 
 def _planned_design(tmp_path) -> Path:
@@ -243,7 +372,8 @@ def tiny_design(tmp_path_factory):
     assert s["failed"] == {}
     exp = {"name": "tiny", "render": "render.yaml", "out": str(root / "exp"), "query": "query", "unchanged": "apt_0",
            "mapping": {"layout": "apt_0", "lighting": "day", "path": "mapping"}, "map": "ground-truth",
-           "methods": ["videoreloc", "fpfh_icp", "appearance", "one_frame"], "one_frame_stride": 50, "workers": 2}
+           "methods": ["videoreloc", "fpfh_icp", "appearance", "one_frame"], "one_frame_stride": 50, "workers": 2,
+           "detector": "oracle"}
     (root / "exp.yaml").write_text(yaml.safe_dump(exp))
     return root
 
@@ -536,7 +666,7 @@ def fast_design(tmp_path_factory):
     assert run_job(load_spec(root / "render.yaml"), progress=False)["failed"] == {}
     exp = {"name": "fast", "render": "render.yaml", "out": str(root / "exp"), "query": "query", "unchanged": "apt_0",
            "mapping": {"layout": "apt_0", "lighting": "geometry", "path": "mapping"}, "map": "ground-truth",
-           "methods": ["videoreloc", "one_frame"], "one_frame_stride": 50, "workers": 1}
+           "methods": ["videoreloc", "one_frame"], "one_frame_stride": 50, "workers": 1, "detector": "oracle"}
     (root / "exp.yaml").write_text(yaml.safe_dump(exp))
     return root
 
@@ -583,3 +713,82 @@ def test_a_code_change_recomputes_every_result(fast_design, capsys, monkeypatch,
     assert set(again) == set(marks) and {m["code"] for m in again.values()} == {changed}
     assert all(again[k]["key"] != marks[k]["key"] for k in marks)
     assert json.loads((exp / "results.json").read_text())["code"] == changed
+
+
+# ---------------------------------------------------------------------------------------------
+# the learned detector in runs, maps and experiments (tiny_design: query RGB every 150th frame,
+# mapping RGB every 120th)
+
+
+def test_learned_detector_needs_rgb_where_it_looks(tiny_design, tmp_path, capsys):
+    """``reloc run --detector learned`` on a tour whose RGB misses the observation frames: one line
+    naming the tour's meta.json and rgb_every, exit 2, nothing written."""
+    tour = tiny_design / "tours" / "apt_1__night__query"
+    gt_map = tmp_path / "gt.json"
+    assert reloc_main(["map", "ground-truth", str(tiny_design / "tours" / "apt_0__day__mapping"),
+                       "--out", str(gt_map)]) == 0
+    capsys.readouterr()
+    out = tmp_path / "run"
+    assert reloc_main(["run", "--map", str(gt_map), "--tour", str(tour), "--out", str(out), "--detector", "learned",
+                       "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert f"{tour}/meta.json: rgb_every: RGB on every 150th frame, but the learned detector looks at every 5th " \
+           f"(observation.stride)" in err and len(err.splitlines()) == 1, err
+    assert not out.exists()
+    cfg = tmp_path / "cfg.yaml"
+    cfg.write_text("observation: {stride: 150}\n")  # observe where the RGB is: it runs
+    assert reloc_main(["run", "--map", str(gt_map), "--tour", str(tour), "--out", str(out), "--detector", "learned",
+                       "--config", str(cfg), "--frames", "160", "--quiet"]) == 0
+    run = json.loads((out / "run.json").read_text())
+    assert run["detector"]["name"] == "learned" and run["detector"]["model"].endswith("detector_160x120.onnx")
+
+
+def test_geometry_only_tour_has_nothing_for_the_learned_detector(fast_design, tmp_path, capsys):
+    tour = fast_design / "tours" / "apt_0__geometry__mapping"
+    out = tmp_path / "map.json"
+    assert reloc_main(["map", "build", str(tour), "--out", str(out), "--detector", "learned", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert f"{tour}/meta.json: lighting: a geometry-only tour has no RGB" in err and len(err.splitlines()) == 1, err
+    assert not out.exists()
+
+
+def test_map_built_with_the_learned_detector(tiny_design, tmp_path, capsys):
+    """Without ground-truth ids: the learned detector on the mapping tour's RGB frames (every 120th),
+    fused across views by the untracked segmentation; its errors are reported against the truth."""
+    tour = tiny_design / "tours" / "apt_0__day__mapping"
+    out, rep = tmp_path / "map.json", tmp_path / "report.json"
+    assert reloc_main(["map", "build", str(tour), "--out", str(out), "--report", str(rep), "--detector", "learned",
+                       "--quiet"]) == 0
+    line = capsys.readouterr().out
+    r = json.loads(rep.read_text())
+    assert r["build"]["frames_in_tour"] == 1800 and r["build"]["frames_used"] == 15, r["build"]
+    doc = json.loads(out.read_text())
+    assert doc["mapping"]["ids"] != "track"  # the learned detector knows no instance ids
+    e = r["errors"]
+    assert e["match"] == "nearest" and len(e["boxes"]) >= 5  # 15 views of a whole apartment find some
+    assert "GT unobserved" in line and f"{len(doc['boxes'])} boxes" in line
+
+
+def test_experiment_with_the_learned_detector_and_the_oracle_row(tiny_design, capsys):
+    """The default detector is the learned one; ``videoreloc_oracle`` adds the labelled upper-bound
+    row with its own map; both maps are scored against the ground truth in results.json."""
+    spec = yaml.safe_load((tiny_design / "exp.yaml").read_text())
+    spec.update({"out": str(tiny_design / "exp_learned"), "map": "build", "detector": "learned",
+                 "methods": ["videoreloc", "videoreloc_oracle", "one_frame"], "one_frame_stride": 150,
+                 "config": {"observation": {"stride": 150}}})
+    (tiny_design / "exp_learned.yaml").write_text(yaml.safe_dump(spec))
+    assert reloc_main(["experiment", str(tiny_design / "exp_learned.yaml"), "--quiet", "--no-plots"]) == 0
+    text = capsys.readouterr().out
+    res = json.loads((tiny_design / "exp_learned" / "results.json").read_text())
+    assert res["detector"] == "learned (detector_160x120.onnx)" and "detections: learned" in text
+    keys = [r["key"] for r in res["rows"]]
+    assert {"videoreloc.closure", "videoreloc_oracle.closure", "one_frame.causal"} <= set(keys)
+    assert "VideoReloc (oracle detections), with clip closure" in text
+    assert set(res["maps"]) == {"boxes", "boxes_oracle"}
+    assert res["maps"]["boxes"]["frames_used"] == 15 and res["maps"]["boxes_oracle"]["frames_used"] == 360
+    assert "Box map built with the learned" in text and "Box map built from oracle detections" in text
+    runs = tiny_design / "exp_learned" / "runs"
+    assert json.loads((runs / "videoreloc" / "apt_1__night__query" / "run.json").read_text())["detector"]["name"] \
+        == "learned"
+    assert json.loads((runs / "videoreloc_oracle" / "apt_1__night__query" / "run.json").read_text())["detector"][
+        "name"] == "oracle"

@@ -34,6 +34,7 @@ from .online import Backend, ClipState
 from ..frontend.clips import fuse
 from ..config import Config
 from ..frontend.detection import Detector, detector_record
+from ..frontend.detector_base import check_rgb_schedule, needs_rgb
 from ..frontend.stream import FrontEnd, PoseEvent, default_detector, make_pose_stream, read_frame
 from ..geometry import inv_T
 from ..frontend.localize import localize_clip
@@ -178,6 +179,7 @@ def relocalize(tour, bmap: BoxMap, out, cfg: Config | None = None, detector: Det
     check_output_folder(out)  # before the tour is processed, not after
     cfg = cfg or Config()
     detector = detector or default_detector(tour, bmap, cfg)
+    check_rgb_schedule(tour, cfg.observation.stride, detector, "observation.stride")
     idx = [int(i) for i in tour.frame_indices][:frames]
     r = Relocalizer(bmap, tour.K, detector, make_pose_stream(poses, tour, cfg), cfg=cfg, budgets=budgets, seed=seed)
     bar = None
@@ -186,9 +188,9 @@ def relocalize(tour, bmap: BoxMap, out, cfg: Config | None = None, detector: Det
 
         bar = tqdm(total=len(idx), desc="reloc run", unit="frame", file=sys.stderr)
     t0 = time.perf_counter()
-    needs_rgb = getattr(detector, "name", "") != "oracle" or cfg.odometry.method == "hybrid"
+    rgb = needs_rgb(detector) or cfg.odometry.method == "hybrid"
     for i in idx:
-        r.add(read_frame(tour, i, detector, rgb=needs_rgb), tour.pose(i))
+        r.add(read_frame(tour, i, detector, rgb=rgb), tour.pose(i))
         if bar is not None:
             bar.update(1)
     r.finish()

@@ -17,7 +17,11 @@ Metric names (values are fractions, as in ``results.json``):
 * ``METHOD.KEY``: the same at the method's primary cutoff (videoreloc: closure, fpfh_icp: closure,
   appearance: causal, one_frame: causal);
 * ``METHOD.MODE.TOUR.KEY``: one query tour (``videoreloc.closure.apt_1__night__query.coverage``);
-* ``METHOD.map_bytes``.
+* ``METHOD.map_bytes``;
+* ``map.KEY`` (the box map built with the experiment's detector) and ``map_oracle.KEY`` (built
+  from oracle detections), against the mapping layout's ground truth: built, gt, matched, missing,
+  extra, class_errors, and ``map.KIND.KEY`` with KIND object, wall, floor, ceiling and KEY matched,
+  median_center_err_m, median_size_err_max_m, median_yaw_err_deg.
 
 Prints a table; exit status 0 when every check passes, 1 when any fails (a metric without a value,
 such as evening recall in a design without evening tours, fails), 2 when the check file or the
@@ -94,6 +98,15 @@ def metric_table(results: dict) -> dict[str, float | None]:
             for tour, s in d.get("tours", {}).items():
                 for k in METRICS:
                     vals[f"{m}.{mode}.{tour}.{k}"] = s.get(k)
+    for key, name in (("boxes", "map"), ("boxes_oracle", "map_oracle")):
+        q = (results.get("maps") or {}).get(key)
+        if q is None:
+            continue
+        for k in ("built", "gt", "matched", "missing", "extra", "class_errors"):
+            vals[f"{name}.{k}"] = q.get(k)
+        for kind, e in q.get("by_kind", {}).items():
+            for k in ("matched", "median_center_err_m", "median_size_err_max_m", "median_yaw_err_deg"):
+                vals[f"{name}.{kind}.{k}"] = e.get(k)
     return vals
 
 

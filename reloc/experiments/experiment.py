@@ -10,10 +10,13 @@ tour, the query path, the unchanged layout, the methods and the optional tables:
     query: query                       # every layout x lighting tour of this path is a query tour
     unchanged: apt_0                   # the reference layout for Delta_R and kept
     map: build                         # VideoReloc's box map: build (from the mapping tour) | ground-truth
-    methods: [videoreloc, fpfh_icp, appearance, one_frame]
+    methods: [videoreloc, videoreloc_oracle, fpfh_icp, appearance, one_frame]
     tables: [units, ablation]          # optional: Tables III and IV (Tables I and II, main and factors, always)
     one_frame_stride: 15               # one-frame units on every k-th frame (one registration each)
-    detector: {miss_rate: 0.1}         # optional oracle corruption (reloc.frontend.detection.Corruption)
+    detector: learned                  # the default: the shipped model (models/detector_160x120.onnx)
+    # detector: {kind: learned, model: ../models/mine.onnx}   (a path relative to this file)
+    # detector: {kind: oracle, miss_rate: 0.1}   (the rendered labels, optionally corrupted:
+    #                                             reloc.frontend.detection.Corruption)
     config: {}                         # VideoReloc threshold overrides (reloc/config.py sections)
     appearance: {}                     # AppearanceConfig overrides
     fpfh_icp: {}                       # FpfhConfig overrides
@@ -21,11 +24,21 @@ tour, the query path, the unchanged layout, the methods and the optional tables:
 
 Methods and the rows they give (``key`` = method.mode, used by ``reloc check``):
 
-* ``videoreloc``: ``videoreloc.causal`` and ``videoreloc.closure`` (paper Sec. IV-A);
+* ``videoreloc``: ``videoreloc.causal`` and ``videoreloc.closure`` (paper Sec. IV-A), with the spec's
+  detector on the queries and a map built with it;
+* ``videoreloc_oracle``: the same with oracle detections (the rendered labels) on the queries and
+  a map built from the oracle's (or the ground-truth map with ``map: ground-truth``): the upper
+  bound, ``VideoReloc (oracle detections)``, so the gap a real detector leaves is a reported figure;
 * ``appearance``: ORB (or SIFT) + retrieval + PnP-RANSAC per frame (``appearance.causal``; only frames
   with RGB are localized and evaluated) and its clip-rigid variant (``appearance.closure``);
 * ``fpfh_icp``: clip-rigid FPFH + RANSAC + ICP against a 5 cm point map (``fpfh_icp.closure``);
 * ``one_frame``: the one-frame object-based unit (``one_frame.causal``; every k-th frame).
+
+A detector that sees images (``learned``, ``onnx``) looks only at frames with RGB: every
+``config.observation.stride``-th query frame (the paper's every fifth frame) and every
+``one_frame_stride``-th for the one-frame unit, so the render job's query designs must render RGB
+there (``rgb_every`` dividing both), which the spec check says before anything runs; the map is
+built from the mapping tour's RGB frames.
 
 The clip-rigid controls reuse VideoReloc's clip partition and within-clip odometry
 (``clip_poses.npz`` of its run), as the paper's dagger rows do.
@@ -66,7 +79,8 @@ from .units import DEFAULT_LENGTHS
 
 SPEC_KEYS = {"name", "description", "render", "tours", "out", "mapping", "query", "unchanged", "map", "methods",
              "tables", "one_frame_stride", "detector", "config", "appearance", "fpfh_icp", "workers", "seed"}
-METHODS = ("videoreloc", "fpfh_icp", "appearance", "one_frame")
+METHODS = ("videoreloc", "videoreloc_oracle", "fpfh_icp", "appearance", "one_frame")
+DETECTORS = ("learned", "oracle", "onnx")
 TABLES = ("units", "ablation")
 DONE = "done.json"
 
@@ -85,13 +99,22 @@ class ExperimentSpec:
     methods: tuple = METHODS
     tables: tuple = ()
     one_frame_stride: int = 15
-    detector: dict = dataclasses.field(default_factory=dict)
+    detector: dict = dataclasses.field(default_factory=lambda: {"kind": "oracle"})
     config: dict = dataclasses.field(default_factory=dict)
     appearance: dict = dataclasses.field(default_factory=dict)
     fpfh_icp: dict = dataclasses.field(default_factory=dict)
     workers: int = 2
     seed: int = 0
     description: str = ""
+
+    @property
+    def detector_label(self) -> str:
+        """How tables name the detector: ``learned (detector_160x120.onnx)``, ``oracle``, ..."""
+        d = self.detector
+        if d.get("model"):
+            return f"{d['kind']} ({Path(d['model']).name})"
+        corr = {k: v for k, v in d.get("corruption", {}).items() if v and k != "seed"}
+        return d["kind"] + (" (corrupted: " + ", ".join(f"{k} {v}" for k, v in corr.items()) + ")" if corr else "")
 
 
 def _fail(src, field, msg):
@@ -116,7 +139,6 @@ def _check_overrides(cls, d: dict, src, field) -> None:
 def load_experiment(path) -> ExperimentSpec:
     """Read and validate an experiment spec; every error names the file and the key."""
     from ..config import Config
-    from ..frontend.detection import Corruption
 
     src = Path(path)
     if not src.is_file():
@@ -162,17 +184,20 @@ def load_experiment(path) -> ExperimentSpec:
         v = doc.get(k, 1)
         if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
             _fail(src, k, f"expected a positive integer, got {v!r}")
-    det = _mapping_of(doc.get("detector"), src, "detector")
-    _check_overrides(Corruption, det, src, "detector")
-    try:
-        Corruption(**det)
-    except (TypeError, ValueError) as e:
-        _fail(src, "detector", str(e))
     cfg = _mapping_of(doc.get("config"), src, "config")
     try:
-        Config.from_dict(cfg, source=str(src))
+        config = Config.from_dict(cfg, source=str(src))
     except (ValueError, TypeError) as e:
         raise UserError(str(e) if str(src) in str(e) else f"{src}: config: {e}") from None
+    det = _detector_spec(doc.get("detector", "learned"), src)
+    if det["kind"] == "oracle" and "videoreloc_oracle" in methods:
+        _fail(src, "methods", "videoreloc_oracle is the oracle row beside another detector; "
+                              "with detector: oracle it would repeat videoreloc")
+    if det["kind"] != "oracle":
+        strides = {"config.observation.stride": config.observation.stride}
+        if "one_frame" in methods or "units" in tables:
+            strides["one_frame_stride"] = int(doc.get("one_frame_stride", 15))
+        _check_render_rgb(render, render_doc, str(doc["query"]), mapping, strides, det["kind"])
     app = _mapping_of(doc.get("appearance"), src, "appearance")
     fp = _mapping_of(doc.get("fpfh_icp"), src, "fpfh_icp")
     if app:
@@ -191,6 +216,91 @@ def load_experiment(path) -> ExperimentSpec:
         detector=det, config=cfg, appearance=app, fpfh_icp=fp, workers=int(doc.get("workers", 2)),
         seed=int(doc.get("seed", 0)), description=str(doc.get("description", "")),
     )
+
+
+def _detector_spec(v, src) -> dict:
+    """The spec's ``detector``: ``learned`` (the shipped model), ``oracle`` or a mapping with ``kind``,
+    ``model`` (relative to the spec file) and, for the oracle, corruption settings. Returns
+    ``{"kind", "model" (absolute path or None), "corruption" (dict)}``; a model file is opened here,
+    so that a missing or corrupt one stops the experiment before anything runs."""
+    from ..frontend.detection import Corruption
+    from ..frontend.detection_learned import SHIPPED_MODEL
+
+    d = {"kind": v} if isinstance(v, str) else _mapping_of(v, src, "detector")
+    kind = d.pop("kind", "learned")
+    if kind not in DETECTORS:
+        _fail(src, "detector" if isinstance(v, str) else "detector.kind",
+              f"expected one of {', '.join(DETECTORS)}, got {kind!r}")
+    model = d.pop("model", None)
+    class_map = d.pop("class_map", None)
+    if kind == "oracle":
+        if model is not None:
+            _fail(src, "detector.model", "the oracle detector reads the rendered labels; it takes no model")
+        _check_overrides(Corruption, d, src, "detector")
+        try:
+            Corruption(**d)
+        except (TypeError, ValueError) as e:
+            _fail(src, "detector", str(e))
+        return {"kind": kind, "model": None, "corruption": dict(d)}
+    for k in d:
+        fields = {f.name for f in dataclasses.fields(Corruption)}
+        _fail(src, f"detector.{k}", "corrupts the oracle's detections (add kind: oracle)" if k in fields
+              else "unknown setting; allowed: kind, model" + (", class_map" if kind == "onnx" else ""))
+    if model is None:
+        if kind == "onnx":
+            _fail(src, "detector.model", "the onnx detector needs a model file")
+        path = SHIPPED_MODEL
+    else:
+        path = (src.parent / str(model)).resolve()
+    if not path.is_file():
+        _fail(src, "detector.model", f"model file {path} not found")
+    out = {"kind": kind, "model": str(path), "corruption": {}}
+    if class_map is not None:
+        if kind != "onnx":
+            _fail(src, "detector.class_map", "only the onnx detector takes a class map")
+        out["class_map"] = str((src.parent / str(class_map)).resolve())
+    try:  # a corrupt or foreign model: one line naming the spec's field and the model file
+        _open_detector(out, vocabulary=None)
+    except UserError as e:
+        raise UserError(f"{src}: detector.model: {e}") from None
+    return out
+
+
+def _open_detector(det: dict, vocabulary, classes=None, cfg=None):
+    """The detector a spec's ``detector`` names (``_detector_spec``'s dict)."""
+    from ..frontend.detection import Corruption, DetectorSpec, build_detector
+
+    spec = DetectorSpec(kind=det["kind"], corruption=Corruption(**det.get("corruption", {})), model=det.get("model"),
+                        class_map=det.get("class_map"))
+    return build_detector(spec, classes or {}, vocabulary=vocabulary, config=cfg)
+
+
+def _check_render_rgb(render: Path, doc, query: str, mapping: dict, strides: dict, kind: str) -> None:
+    """A detector that sees images needs RGB where it looks: in the render job's query designs on
+    every frame a multiple of each of ``strides`` ({setting: frames}), in the mapping design at all.
+    One line naming the render spec and the design's field otherwise."""
+    designs = doc.get("designs") if isinstance(doc, dict) else None
+    if not isinstance(designs, list):
+        return  # the render job's own check names what is wrong with it
+    for i, d in enumerate(designs):
+        if not isinstance(d, dict):
+            continue
+        p = d.get("path")
+        name = p.get("name") if isinstance(p, dict) else p
+        is_query, is_map = name == query, name == mapping.get("path")
+        if not (is_query or is_map):
+            continue
+        if not d.get("lightings"):
+            raise SceneFormatError(render, f"designs[{i}].lightings",
+                                   f"a geometry-only design renders no RGB, and the {kind} detector sees only RGB "
+                                   f"frames; give it lightings")
+        k = d.get("rgb_every", 1)
+        if is_query and isinstance(k, int) and k > 0:
+            for what, n in strides.items():
+                if n % k:
+                    raise SceneFormatError(render, f"designs[{i}].rgb_every",
+                                           f"RGB on every {k}th frame, but the {kind} detector looks at every "
+                                           f"{n}th query frame ({what}); use an rgb_every that divides {n}")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -240,6 +350,29 @@ def design_tours(spec: ExperimentSpec) -> tuple[dict, dict]:
         raise UserError(f"{root}: {len(missing)} tour(s) not rendered: {', '.join(missing[:4])}"
                         f"{' ...' if len(missing) > 4 else ''}; run: synth render {spec.render} --resume")
     return out, mapping
+
+
+def _check_detector_inputs(spec: ExperimentSpec, queries: dict, mapping: dict) -> None:
+    """Before anything is written: a detector that sees images has RGB where it looks in every
+    rendered tour (their meta.json), and its model knows the classes of a ground-truth map."""
+    det = spec.detector
+    if det["kind"] == "oracle":
+        return
+    from ..config import Config
+    from ..frontend.detector_base import check_rgb_schedule
+
+    detector = _open_detector(det, None)
+    stride = Config.from_dict(spec.config).observation.stride
+    for t in queries.values():
+        tour = Tour(t["dir"])
+        check_rgb_schedule(tour, stride, detector, "observation.stride")
+        if "one_frame" in spec.methods or "units" in spec.tables:
+            check_rgb_schedule(tour, spec.one_frame_stride, detector, "one_frame_stride")
+    mtour = Tour(mapping["dir"])
+    if spec.map == "ground-truth":
+        _open_detector(det, {b["class"] for b in mtour.objects()["boxes"]})
+    else:
+        check_rgb_schedule(mtour, mtour.rgb_every, detector, "mapping")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -383,10 +516,11 @@ def _config(spec_config: dict, variant=None):
 
 
 def _detector(det: dict, tour, bmap, cfg):
-    from ..frontend.detection import Corruption, DetectorSpec, build_detector
+    """The spec's detector for one query tour, asked for the map's classes."""
+    return _open_detector(det, bmap.class_set, tour.class_names(), cfg.detection)
 
-    return build_detector(DetectorSpec(corruption=Corruption(**det)), tour.class_names(), vocabulary=bmap.class_set,
-                          config=cfg.detection)
+
+ORACLE = {"kind": "oracle", "model": None, "corruption": {}}
 
 
 _CACHE: dict = {}
@@ -423,9 +557,15 @@ def run_map_task(task: dict) -> dict:
         if task["source"] == "ground-truth":
             doc = map_from_tour(tour.root)
         else:
-            doc, report = build_map(tour.root, progress=False)
+            det = task["detector"]
+            detector = None if det["kind"] == "oracle" else _open_detector(det, None, tour.class_names())
+            doc, report = build_map(tour.root, detector=detector, progress=False)
             if not doc["boxes"]:
                 raise UserError(report["warnings"][0] if report["warnings"] else f"{tour.root}: no boxes built")
+            from ..map.scoring import box_errors
+
+            errors = box_errors(doc, tour.objects()) if (tour.root / "objects.json").is_file() else None
+            write_json_atomic(out.with_name(out.stem + ".report.json"), {"build": report, "errors": errors})
         write_text_atomic(out, dumps_map(doc))
     elif task["kind"] == "appearance":
         from ..baselines.appearance import AppearanceConfig, AppearanceMap
@@ -452,7 +592,7 @@ def run_tour_task(task: dict) -> dict:
     tour = Tour(task["tour"])
     method = task["method"]
     extra: dict = {}
-    if method == "videoreloc" or method.startswith("ablation_"):
+    if method in ("videoreloc", "videoreloc_oracle") or method.startswith("ablation_"):
         bmap = _load("boxes", task["map"])
         cfg = _config(task["config"], task.get("variant"))
         s = relocalize(tour, bmap, d, cfg=cfg, detector=_detector(task["detector"], tour, bmap, cfg), seed=task["seed"],
@@ -569,6 +709,7 @@ def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int |
     check_output_folder(out)
     workers = workers or spec.workers
     queries, mapping = design_tours(spec)
+    _check_detector_inputs(spec, queries, mapping)
     out.mkdir(parents=True, exist_ok=True)
     maps_dir = out / "maps"
     maps_dir.mkdir(exist_ok=True)
@@ -576,24 +717,31 @@ def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int |
     # 1. maps from the mapping tour
     map_tasks = []
     files = {"boxes": maps_dir / "videoreloc_map.json"}
+    if "videoreloc_oracle" in spec.methods:
+        files["boxes_oracle"] = maps_dir / "videoreloc_oracle_map.json"
     if "fpfh_icp" in spec.methods:
         files["fpfh"] = maps_dir / "fpfh_map.npz"
     if "appearance" in spec.methods:
         files["appearance"] = maps_dir / "appearance_map.npz"
-    options = {"boxes": {}, "fpfh": spec.fpfh_icp, "appearance": spec.appearance}
+    options = {"boxes": {}, "boxes_oracle": {}, "fpfh": spec.fpfh_icp, "appearance": spec.appearance}
+    detectors = {"boxes": spec.detector, "boxes_oracle": ORACLE}
+    model_key = _file_key(spec.detector["model"]) if spec.detector.get("model") else None
     code = code_fingerprint()  # every key below holds it: a change of the code recomputes
     for kind, f in files.items():
-        source = None
-        if kind == "boxes":
+        source = det = None
+        if kind.startswith("boxes"):
             source = _ground_truth_key(mapping["dir"]) if spec.map == "ground-truth" else spec.map
-        key = _key(kind, _file_key(Path(mapping["dir"]) / "poses.txt"), mapping, source, options[kind], code)
+            det = None if spec.map == "ground-truth" else detectors[kind]
+        key = _key(kind, _file_key(Path(mapping["dir"]) / "poses.txt"), mapping, source, options[kind], code,
+                   det, model_key if det is spec.detector else None)
         try:
             done = json.loads(f.with_name(f.name + ".done.json").read_text()).get("key") == key and f.is_file()
         except (OSError, ValueError):
             done = False
         if not done:
-            map_tasks.append((f"map/{kind}", run_map_task, {"kind": kind, "file": str(f), "tour": mapping["dir"],
-                                                             "source": spec.map, "options": options[kind], "key": key,
+            map_tasks.append((f"map/{kind}", run_map_task, {"kind": kind.removesuffix("_oracle"), "file": str(f),
+                                                             "tour": mapping["dir"], "source": spec.map,
+                                                             "detector": det, "options": options[kind], "key": key,
                                                              "code": code}, []))
     runner = _Runner(workers, progress, len(map_tasks), f"{spec.name}: maps")
     try:
@@ -610,8 +758,8 @@ def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int |
                  + json.dumps(t, sort_keys=True) for n, t in queries.items()}
     tasks = []
     expected: dict[tuple[str, str], tuple[Path, str]] = {}
-    common = {"map": str(files["boxes"]), "config": spec.config, "detector": spec.detector, "seed": spec.seed,
-              "code": code}
+    common = {"map": str(files["boxes"]), "config": spec.config, "detector": spec.detector, "model": model_key,
+              "seed": spec.seed, "code": code}
     methods = list(spec.methods)
     variants = [v for v in ABLATIONS if v != (True, True, True)] if "ablation" in spec.tables else []
     for name, t in queries.items():
@@ -630,6 +778,8 @@ def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int |
         scheduled: set[str] = set()
         # the controls reuse VideoReloc's clips: their key holds VideoReloc's, so they rerun with it
         vr_key = add("videoreloc", []) if "videoreloc" in methods else None
+        if "videoreloc_oracle" in methods:
+            add("videoreloc_oracle", [], uses="boxes_oracle", map=str(files["boxes_oracle"]), detector=ORACLE, model=None)
         vr_dep = [f"videoreloc/{name}"]
         if "fpfh_icp" in methods:
             add("fpfh_icp", vr_dep, uses="fpfh", fpfh_map=str(files["fpfh"]), clips=str(vr_dir), options=spec.fpfh_icp,

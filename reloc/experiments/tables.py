@@ -54,11 +54,16 @@ ROWS = (
     ("appearance", "closure", "Appearance ({feature} + PnP)", True),
     ("videoreloc", "causal", "VideoReloc, causal", False),
     ("videoreloc", "closure", "VideoReloc, with clip closure", False),
+    # the upper bound: the same relocalizer on the rendered labels (map and queries), beside the
+    # detector the experiment uses
+    ("videoreloc_oracle", "causal", "VideoReloc (oracle detections), causal", False),
+    ("videoreloc_oracle", "closure", "VideoReloc (oracle detections), with clip closure", False),
 )
 # the cutoff ``reloc check`` reads for METHOD.KEY
-PRIMARY = {"videoreloc": "closure", "fpfh_icp": "closure", "appearance": "causal", "one_frame": "causal"}
-LABELS = {"videoreloc": "VideoReloc", "fpfh_icp": "FPFH-ICP", "appearance": "Appearance ({feature} + PnP)",
-          "one_frame": "One-frame object unit"}
+PRIMARY = {"videoreloc": "closure", "videoreloc_oracle": "closure", "fpfh_icp": "closure", "appearance": "causal",
+           "one_frame": "causal"}
+LABELS = {"videoreloc": "VideoReloc", "videoreloc_oracle": "VideoReloc (oracle detections)", "fpfh_icp": "FPFH-ICP",
+          "appearance": "Appearance ({feature} + PnP)", "one_frame": "One-frame object unit"}
 
 # Table IV rows, in the paper's order: (orientation-aware, run-level, adaptive); False = point-to-point
 # refinement, no run-level decision, fixed 100-frame clips. The last is VideoReloc itself.
@@ -131,10 +136,11 @@ def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: li
     feature = str(spec.appearance.get("feature", AppearanceConfig().feature)).upper()
     gts = {n: _gt(t["dir"]) for n, t in queries.items()}
     map_bytes = {k: f.stat().st_size for k, f in files.items() if f.is_file()}
-    method_map = {"videoreloc": "boxes", "one_frame": "boxes", "fpfh_icp": "fpfh", "appearance": "appearance"}
+    method_map = {"videoreloc": "boxes", "one_frame": "boxes", "videoreloc_oracle": "boxes_oracle", "fpfh_icp": "fpfh",
+                  "appearance": "appearance"}
     res: dict = {
         "format": FORMAT, "name": spec.name, "description": spec.description, "spec": str(spec.source),
-        "map": str(files["boxes"]), "unchanged": spec.unchanged, "one_frame_stride": spec.one_frame_stride,
+        "map": str(files["boxes"]), "detector": getattr(spec, "detector_label", "oracle"), "unchanged": spec.unchanged, "one_frame_stride": spec.one_frame_stride,
         "tours": queries, "rows": [], "methods": {},
     }
     modes_of = {m: [mode for (mm, mode, _, _) in ROWS if mm == m] for m in methods}
@@ -161,6 +167,8 @@ def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: li
             entry["modes"][mode] = {"tours": per, "all": _clean(summarize(pooled_est, pooled_gt)),
                                     "factors": factors(per, queries, spec.unchanged)}
         res["methods"][m] = entry
+    res["maps"] = {k: q for k in ("boxes", "boxes_oracle") if k in files
+                   and (q := map_quality(files[k].with_name(files[k].stem + ".report.json"))) is not None}
     for m, mode, label, dagger in ROWS:
         if m in methods:
             res["rows"].append({"key": f"{m}.{mode}", "method": m, "mode": mode, "label": label.format(feature=feature),
@@ -170,6 +178,37 @@ def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: li
     if variants:
         res["ablation"] = _ablation(res, variants)
     return res
+
+
+def map_quality(report_path: Path) -> dict | None:
+    """A built box map against the mapping layout's ground truth (``reloc.map.scoring.box_errors``
+    in the map's build report): boxes built, matched, missing and extra, median errors by kind."""
+    try:
+        rep = json.loads(Path(report_path).read_text())
+    except (OSError, ValueError):
+        return None
+    e = rep.get("errors")
+    if not e:
+        return None
+    bk = e["by_kind"]
+    return {
+        "frames_used": rep["build"].get("frames_used"),
+        "built": sum(k["built"] for k in bk.values()), "gt": sum(k["gt"] for k in bk.values()),
+        "matched": sum(k["matched"] for k in bk.values()), "missing": e["gt_unobserved"],
+        "extra": e["built_unmatched"], "class_errors": e["class_errors"],
+        "by_kind": {k: {x: v[x] for x in ("gt", "built", "matched", "median_center_err_m", "median_size_err_max_m",
+                                          "median_yaw_err_deg")} for k, v in bk.items()},
+    }
+
+
+def map_line(label: str, q: dict) -> str:
+    """One sentence on a built map's quality for the tables' notes."""
+    kinds = "; ".join(f"{k}s {v['matched']}/{v['gt']}" + (f", {100 * v['median_center_err_m']:.0f} cm" if
+                                                          v["median_center_err_m"] is not None else "")
+                      for k, v in q["by_kind"].items() if v["gt"])
+    return (f"{label}: {q['built']} boxes from {q['frames_used']} frames; against the {q['gt']} ground-truth boxes "
+            f"{q['matched']} matched, {q['missing']} missing, {q['extra']} extra ({kinds}: matched/ground truth, "
+            f"median center error).")
 
 
 def _units(out: Path, queries: dict, unchanged: str) -> list[dict]:
@@ -236,7 +275,9 @@ def _label(row: dict) -> str:
 def main_table(res: dict) -> tuple[str, list[dict]]:
     n_tours = len(res["tours"])
     frames = sum(t["frames"] for t in res["tours"].values())
-    lines = [f"**{table_title('main')}** ({n_tours} query tours, {frames} frames)", "",
+    det = res.get("detector")
+    lines = [f"**{table_title('main')}** ({n_tours} query tours, {frames} frames"
+             f"{f'; detections: {det}' if det else ''})", "",
              "| Method | Map size | Pos. / rot. | 1 m/10° | 0.25 m/5° | Coverage | Frames evaluated |",
              "|---|---|---|---|---|---|---|"]
     rows = []
@@ -252,6 +293,11 @@ def main_table(res: dict) -> tuple[str, list[dict]]:
               "one clip-to-map transform per clip at clip closure, no cross-clip back-end. Per-frame appearance "
               "is evaluated on the frames with RGB, the one-frame unit on every "
               f"{res['one_frame_stride']}th frame."]
+    maps = res.get("maps") or {}
+    for k, label in (("boxes", f"Box map built with the {res.get('detector') or 'oracle'} detector"),
+                     ("boxes_oracle", "Box map built from oracle detections")):
+        if k in maps:
+            lines += ["", map_line(label, maps[k])]
     return "\n".join(lines), rows
 
 

@@ -21,6 +21,7 @@ import numpy as np
 
 from ..config import Config
 from ..frontend.detection import Detector, detector_record
+from ..frontend.detector_base import check_rgb_schedule, needs_rgb
 from .evaluation import summarize
 from ..frontend.stream import FrontEnd, StaticPoses, default_detector, make_pose_stream, read_frame
 from ..map.boxmap import BoxMap
@@ -35,6 +36,10 @@ def run_units(tour, bmap: BoxMap, lengths=DEFAULT_LENGTHS, detector: Detector | 
     {length: {frame: pose}} of the placed units."""
     cfg = cfg or Config()
     detector = detector or default_detector(tour, bmap, cfg)
+    if any(L > 1 for L in lengths):
+        check_rgb_schedule(tour, cfg.observation.stride, detector, "observation.stride")
+    if 1 in lengths:
+        check_rgb_schedule(tour, one_frame_stride, detector, "one_frame_stride")
     idx = [int(i) for i in tour.frame_indices]
     if frames:
         idx = idx[:frames]
@@ -48,7 +53,7 @@ def run_units(tour, bmap: BoxMap, lengths=DEFAULT_LENGTHS, detector: Detector | 
     est: dict[int, dict[int, np.ndarray]] = {L: {} for L in lengths}
     placed: dict[int, list[int]] = {L: [0, 0] for L in lengths}
     io_t = odo_t = 0.0
-    needs_rgb = getattr(detector, "name", "") != "oracle"
+    rgb = needs_rgb(detector)
     bar = None
     if progress:
         from tqdm import tqdm
@@ -66,7 +71,7 @@ def run_units(tour, bmap: BoxMap, lengths=DEFAULT_LENGTHS, detector: Detector | 
     t_start = time.perf_counter()
     for i in idx:
         t = time.perf_counter()
-        fd = read_frame(tour, i, detector, rgb=needs_rgb)
+        fd = read_frame(tour, i, detector, rgb=rgb)
         io_t += time.perf_counter() - t
         t = time.perf_counter()
         events = shared.add(fd, gt[i]) if shared is not None else []

@@ -26,7 +26,7 @@ from scipy.ndimage import find_objects
 from formats.errors import UserError
 
 from ..config import DetectionConfig
-from .detection_learned import LearnedDetector
+from .detection_learned import SHIPPED_MODEL, LearnedDetector
 from .detection_onnx import OnnxDetector
 from .detector_base import STRUCTURE_CLASSES, Detection, Detector, FrameData
 
@@ -66,6 +66,7 @@ class OracleDetector:
     """
 
     name = "oracle"
+    needs_rgb = False
 
     def __init__(self, classes: dict[int, str], vocabulary=None, corruption: Corruption | None = None,
                  min_pixels: int = DetectionConfig.min_mask_pixels):
@@ -158,10 +159,8 @@ def build_detector(spec: DetectorSpec, classes: dict[int, str], vocabulary=None,
             raise UserError("--detector onnx needs --model FILE.onnx")
         return OnnxDetector(spec.model, class_map=spec.class_map, vocabulary=vocabulary)
     if spec.kind == "learned":
-        if not spec.model:
-            raise UserError("--detector learned needs --model FILE.onnx (reloc detector train)")
         cfg = config or DetectionConfig()
-        return LearnedDetector(spec.model, vocabulary=vocabulary, min_pixels=cfg.min_mask_pixels)
+        return LearnedDetector(spec.model or SHIPPED_MODEL, vocabulary=vocabulary, min_pixels=cfg.min_mask_pixels)
     raise UserError(f"unknown detector {spec.kind!r} (expected oracle, onnx or learned)")
 
 
@@ -186,7 +185,8 @@ def add_detector_arguments(p) -> None:
     g.add_argument("--detector", choices=("oracle", "onnx", "learned"), default="oracle",
                    help="oracle: the tour's rendered labels (default); onnx: a YOLO-style segmentation model; "
                         "learned: the toolkit's own model (reloc detector train)")
-    g.add_argument("--model", help="ONNX model file (with --detector onnx or learned)")
+    g.add_argument("--model", help="ONNX model file (with --detector onnx; with learned, default: the shipped "
+                                   "models/detector_160x120.onnx)")
     g.add_argument("--class-map", help="YAML/JSON mapping model class -> toolkit class (with --detector onnx)")
     g.add_argument("--miss-rate", type=float, default=0.0, help="oracle corruption: probability of missing an instance")
     g.add_argument("--confusion-rate", type=float, default=0.0, help="oracle corruption: probability of a wrong map class")

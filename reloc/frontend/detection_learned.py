@@ -33,6 +33,9 @@ from .detection_onnx import _one_line, open_session
 from .detector_base import Detection, FrameData
 
 MODEL_FORMAT = "videoreloc-segnet/1"
+# the model the toolkit ships (models/detector_160x120.md: its data, training and metrics); the
+# experiments' default detector
+SHIPPED_MODEL = Path(__file__).resolve().parents[2] / "models" / "detector_160x120.onnx"
 REGROW_PX = 3.0  # cut pixels this close to an instance rejoin it (predicted boundaries are 2-4 px wide)
 
 
@@ -54,6 +57,7 @@ class LearnedDetector:
     """A :class:`reloc.frontend.detection.Detector` running the toolkit's segmentation model."""
 
     name = "learned"
+    needs_rgb = True
 
     def __init__(self, model, vocabulary=None, *, min_pixels: int = 20, boundary_threshold: float = 0.5,
                  score_threshold: float = 0.3, depth_edge_rel: float = 0.04, depth_edge_abs_m: float = 0.03,

@@ -205,6 +205,7 @@ class OnnxDetector:
     """
 
     name = "onnx"
+    needs_rgb = True
 
     def __init__(self, model, class_map=None, vocabulary=None, *, score_threshold: float = 0.25,
                  iou_threshold: float = 0.7, max_detections: int = 100, mask_threshold: float = 0.5,

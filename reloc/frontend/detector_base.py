@@ -43,6 +43,31 @@ class Detection:
 
 class Detector(Protocol):
     name: str
+    needs_rgb: bool  # True: detects from the camera image, so only frames with RGB give detections
 
     def detect(self, frame: FrameData) -> list[Detection]:
         ...
+
+
+def needs_rgb(detector) -> bool:
+    """Whether a detector looks at the RGB image (the learned and ONNX ones) rather than the
+    rendered label images (the oracle)."""
+    return bool(getattr(detector, "needs_rgb", False))
+
+
+def check_rgb_schedule(tour, every: int, detector, what: str) -> None:
+    """A detector that needs RGB looks at every ``every``-th frame (``what`` names that setting,
+    e.g. ``observation.stride``): the tour must have RGB there. One-line ``UserError`` naming the
+    tour's meta.json and its ``rgb_every`` otherwise (a geometry-only tour has no RGB at all)."""
+    if not needs_rgb(detector):
+        return
+    from formats.errors import UserError
+
+    where = f"{tour.root}/meta.json"
+    if not tour.has_rgb():
+        raise UserError(f"{where}: lighting: a geometry-only tour has no RGB, and the {detector.name} detector "
+                        f"sees only RGB frames; render the tour with a lighting")
+    k = tour.rgb_every
+    if int(every) % k:
+        raise UserError(f"{where}: rgb_every: RGB on every {k}th frame, but the {detector.name} detector looks at "
+                        f"every {every}th ({what}); render with an rgb_every that divides {every}")

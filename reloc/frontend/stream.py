@@ -2,8 +2,10 @@
 
 :class:`FrontEnd` takes frames one at a time. A pose stream (RGB-D odometry, or ground truth for
 experiments that isolate registration) gives each frame its pose in the current odometry chain;
-a chain break (capture gap, inconsistent odometry) ends the clip. Every fifth frame of a clip and
-its last frame are detected and observed; at each checkpoint (100, 150, ... 600 frames) the
+a chain break (capture gap, inconsistent odometry) ends the clip. Every fifth frame of the video
+(frame index a multiple of ``observation.stride``: where a render job with ``rgb_every`` 5 puts
+RGB) and a clip's last frame are detected and observed (a detector that needs RGB finds nothing on
+a last frame without it); at each checkpoint (100, 150, ... 600 frames) the
 observations are fused and the clip closes once it has enough nodes and camera travel. A closed
 clip is localized (:func:`reloc.frontend.localize.localize_clip`) and returned as a :class:`ClipResult`.
 
@@ -23,6 +25,7 @@ import numpy as np
 from .clips import Clip, ClipPolicy, Node, fuse
 from ..config import Config
 from .detection import Detector, FrameData, OracleDetector
+from .detector_base import needs_rgb
 from ..geometry import inv_T
 from .localize import Placement, localize_clip
 from ..map.boxmap import BoxMap
@@ -208,7 +211,7 @@ class FrontEnd:
         self._chain_pose[ev.index] = ev.pose
         n = len(clip)
         checkpoint = self.policy.is_checkpoint(n) or n >= self.cfg.clips.max_frames
-        if (n - 1) % self.cfg.observation.stride == 0 or checkpoint:
+        if ev.index % self.cfg.observation.stride == 0 or checkpoint:
             self._observe(clip, frame)
         self._last = frame
         if self.on_frame:
@@ -294,7 +297,7 @@ def default_detector(tour, bmap: BoxMap, cfg: Config | None = None) -> Detector:
 
 def read_frame(tour, i: int, detector: Detector, rgb: bool) -> FrameData:
     """Frame i of a tour as the front-end reads it (label images only for the oracle)."""
-    oracle = isinstance(detector, OracleDetector)
+    oracle = not needs_rgb(detector)
     f = tour.frame(int(i), rgb=rgb, depth=True, instance=oracle, semantic=oracle)
     depth = f.depth if f.depth is not None else np.zeros((tour.intrinsics.height, tour.intrinsics.width), np.float32)
     return FrameData(index=int(i), depth=depth, K=tour.K, rgb=f.rgb, instance=f.instance, semantic=f.semantic)

@@ -6,7 +6,9 @@ walls, floors and ceilings. Here detector masks stand in for that pipeline (:fun
 with the knobs of :class:`~reloc.map.settings.MappingSettings`):
 
 * every ``stride``-th frame of the mapping tour is run through a detector (by default the
-  :class:`~reloc.frontend.detection.OracleDetector` of the tour's classes);
+  :class:`~reloc.frontend.detection.OracleDetector` of the tour's classes); a detector that sees
+  images (the learned one) gets the frames among them that have RGB (every
+  lcm(``stride``, the tour's ``rgb_every``)-th);
 * the depth-consistent pixels of each mask (valid depth; not on the far side of a depth
   discontinuity; near the mask's edge, within the depth range of the mask's interior around them;
   for objects, within a band around the mask's median depth) are back-projected with the frame's
@@ -46,6 +48,7 @@ The map's text form and the ground-truth map of a layout are in :mod:`reloc.map.
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from collections import Counter
@@ -57,6 +60,7 @@ from formats.boxes import BOXES_FORMAT, FRAME_TEXT, ID_BASE
 from formats.errors import UserError
 
 from ..frontend.detection import FrameData, OracleDetector
+from ..frontend.detector_base import check_rgb_schedule, needs_rgb
 from .document import kind_of
 from .fitting import fit_box
 from .pixels import _Backprojector, _depth_edges, _mask_pixels
@@ -102,6 +106,10 @@ def build_map(tour_dir, detector=None, stride: int | None = None, voxel: float |
     labels = _needs_labels(detector)
     want_rgb = not labels and tour.has_rgb()  # label images only for the oracle, RGB for the rest
     indices = [int(i) for i in tour.frame_indices[:: int(s.stride)]]
+    if needs_rgb(detector):  # a detector that sees images: every stride-th frame that has RGB
+        step = math.lcm(int(s.stride), tour.rgb_every)
+        check_rgb_schedule(tour, step, detector, f"mapping stride {s.stride}")
+        indices = [int(i) for i in tour.frame_indices if int(i) % step == 0]
     if max_frames is not None:
         indices = indices[: int(max_frames)]
     acc = _Accumulator(tour.K, s)

@@ -46,7 +46,14 @@ def cmd_build(args) -> int:
     check_output_file(args.out)
     if args.report:
         check_output_file(args.report)
-    doc, report = build_map(args.tour, stride=args.stride, voxel=args.voxel, progress=not args.quiet)
+    detector = None
+    if args.detector != "oracle":
+        from formats.tour import Tour
+
+        from ..frontend.detection import build_detector, detector_spec_from_args
+
+        detector = build_detector(detector_spec_from_args(args), Tour(args.tour).class_names())
+    doc, report = build_map(args.tour, detector=detector, stride=args.stride, voxel=args.voxel, progress=not args.quiet)
     for w in report["warnings"]:
         print(f"warning: {w}", file=sys.stderr)
     if not doc["boxes"]:
@@ -88,13 +95,16 @@ def register_cli(subparsers) -> None:
     a.add_argument("tour", metavar="TOUR_DIR", help="tour directory")
     a.add_argument("--out", required=True, help="map file (.json)")
     a.set_defaults(fn=cmd_ground_truth)
-    a = ms.add_parser("build", help="build a map from a rendered mapping tour (oracle detector)")
+    a = ms.add_parser("build", help="build a map from a rendered mapping tour (oracle or learned detector)")
     a.add_argument("tour", metavar="TOUR_DIR", help="tour directory")
     a.add_argument("--out", required=True, help="map file (.json)")
     a.add_argument("--stride", type=int, default=DEFAULT_STRIDE, help=f"use every N-th frame (default {DEFAULT_STRIDE})")
     a.add_argument("--voxel", type=float, default=0.05, help="voxel size in metres (default 0.05)")
     a.add_argument("--report", metavar="FILE.json", help="write the build report and per-box errors against the tour's ground truth")
     a.add_argument("--quiet", action="store_true", help="no progress bar")
+    from ..frontend.detection import add_detector_arguments
+
+    add_detector_arguments(a)
     a.set_defaults(fn=cmd_build)
     a = ms.add_parser("show", help="summary of a map file")
     a.add_argument("file")
