@@ -450,3 +450,29 @@ def test_bad_settings_are_user_errors(tour_dir):
         build_map(tour_dir, stride=0, progress=False)
     with pytest.raises(UserError, match="voxel"):
         build_map(tour_dir, voxel=-1.0, progress=False)
+
+
+def test_class_agnostic_fusion_of_untracked_segments():
+    """One thing under two labels (a sofa some views call an armchair) becomes one segment of the
+    majority class; a neighbour that only touches it keeps its own segment and class."""
+    from reloc.map.segmentation import _absorb_across_classes, _moments, _reduce, _Segment, voxel_keys
+
+    def seg(cls, lo, hi, npix, frame=0):
+        g = np.mgrid[lo[0]:hi[0]:0.05, lo[1]:hi[1]:0.05, lo[2]:hi[2]:0.05].reshape(3, -1).T + 0.025
+        k, sm, ct = _reduce(voxel_keys(g, 0.05), _moments(g), np.ones(len(g)))
+        s = _Segment(None)
+        s.add(frame, cls, k, sm, ct, np.zeros(3), npix)
+        return s
+
+    sofa = seg("sofa", (0, 0, 0), (2.0, 0.9, 0.8), 5000)
+    armchair = seg("armchair", (0.2, 0.0, 0.0), (1.0, 0.9, 0.8), 800)  # inside the sofa: the same thing
+    table = seg("table", (1.95, 0.0, 0.0), (3.0, 0.9, 0.7), 3000)  # shares one voxel column with the sofa
+    out = _absorb_across_classes([armchair, table, sofa], 0.5)
+    assert [g.cls for g in out] == ["sofa", "table"]
+    assert out[0].votes == {"sofa": 5000, "armchair": 800} and out[0].frames == 2
+    assert len(_absorb_across_classes([seg("sofa", (0, 0, 0), (2, 0.9, 0.8), 5), table], 0.5)) == 2
+    # the threshold is the fraction of the smaller segment's voxels: half inside joins, a quarter does not
+    half = seg("armchair", (1.5, 0.0, 0.0), (2.5, 0.9, 0.8), 100)
+    quarter = seg("armchair", (1.75, 0.0, 0.0), (2.75, 0.9, 0.8), 100)
+    assert len(_absorb_across_classes([seg("sofa", (0, 0, 0), (2, 0.9, 0.8), 5000), half], 0.5)) == 1
+    assert len(_absorb_across_classes([seg("sofa", (0, 0, 0), (2, 0.9, 0.8), 5000), quarter], 0.5)) == 2

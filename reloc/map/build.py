@@ -16,10 +16,14 @@ with the knobs of :class:`~reloc.map.settings.MappingSettings`):
 * the points are accumulated per *segment* (:mod:`reloc.map.segmentation`): the oracle's
   ``track_id`` plays the class-agnostic 3D segment id; object detections without one join an
   untracked segment of the same class by voxel overlap, containment in its bounding box or
-  proximity (and overlapping untracked segments are merged at the end); walls, floors and ceilings
+  proximity (and overlapping untracked segments are merged at the end); an untracked segment
+  sharing at least ``cross_class_shared`` of its voxels with a bigger one of another class is the
+  same thing under another label and joins it (class-agnostic fusion: a learned detector calls
+  one sofa an armchair in some views); walls, floors and ceilings
   without track ids are pooled per class and split geometrically at the end
   (:mod:`reloc.map.structure`): walls into straight vertical runs cut at T-junctions, floors and
-  ceilings into rooms separated by the walls;
+  ceilings into rooms separated by the walls (an untracked wall piece lower than
+  ``min_wall_height_m`` is a ceiling edge or skirting a detector called wall, and is dropped);
 * each segment is voxel-downsampled as it grows (per ``voxel`` cell: the point count, centroid
   and second moments), so memory is bounded by the observed surface area, not by the number of
   frames;
@@ -64,7 +68,7 @@ from ..frontend.detector_base import check_rgb_schedule, needs_rgb
 from .document import kind_of
 from .fitting import fit_box
 from .pixels import _Backprojector, _depth_edges, _mask_pixels
-from .segmentation import _associate, _merge_overlapping, _moments, _reduce, _Segment, _vote_voxels, voxel_keys
+from .segmentation import _absorb_across_classes, _associate, _merge_overlapping, _moments, _reduce, _Segment, _vote_voxels, voxel_keys
 from .settings import MappingSettings
 from .structure import _structure_camera, split_rooms, split_walls
 
@@ -117,6 +121,8 @@ def build_map(tour_dir, detector=None, stride: int | None = None, voxel: float |
         f = tour.frame(fi, rgb=want_rgb, instance=labels, semantic=labels)  # FrameFileError names the file
         acc.add_frame(fi, f, detector)
 
+    if s.cross_class_shared > 0:
+        acc.absorb_across_classes(s.cross_class_shared)
     # voxel ownership: a voxel claimed by several segments stays with those holding at least
     # vote_ratio of the best one's points (mask bleed onto neighbouring surfaces loses)
     voxels_disowned = _vote_voxels(acc.segments(), s.vote_ratio, 4 * s.min_voxels) if s.vote_ratio > 0 else 0
@@ -212,6 +218,14 @@ class _Accumulator:
             return seg
         return _associate(self.untracked.setdefault(d.cls, []), keys, sums[:, :3] / counts[:, None], self.s)
 
+    def absorb_across_classes(self, min_shared: float) -> None:
+        """Untracked object segments of different classes that hold one thing become one
+        (:func:`~reloc.map.segmentation._absorb_across_classes`), filed under its majority class."""
+        segs = _absorb_across_classes([g for v in self.untracked.values() for g in v], min_shared)
+        self.untracked = {}
+        for g in segs:
+            self.untracked.setdefault(g.cls, []).append(g)
+
     def segments(self) -> list[_Segment]:
         """Every segment: tracked, untracked, pooled."""
         return (list(self.tracked.values()) + [g for segs in self.untracked.values() for g in segs]
@@ -279,6 +293,9 @@ def _boxes(pieces: list[tuple], s: MappingSettings, movable_of: dict[str, bool],
         if kind != "object" and tid is None:
             camera = _structure_camera(kind, P, camera)
         center, size, yaw = fit_box(P, s.quantile, min_sizes[kind], camera, spread=V)
+        if kind == "wall" and tid is None and size[2] < s.min_wall_height_m:
+            dropped[kind] += 1  # a wall-labelled strip (a ceiling edge, a skirting) is no wall
+            continue
         if tid is None:
             tid = next_id[kind]
             while tid in used_ids:

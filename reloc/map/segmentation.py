@@ -172,6 +172,30 @@ def _associate(segs: list[_Segment], keys, pts, s: MappingSettings) -> _Segment:
     return best
 
 
+def _absorb_across_classes(segs: list[_Segment], min_shared: float) -> list[_Segment]:
+    """Class-agnostic fusion of untracked segments: a segment sharing at least ``min_shared`` of
+    its voxels with a bigger segment of any class is the same thing seen under another label (a
+    sofa some views call an armchair) and joins it; the class is the pixel-weighted majority of
+    the merged votes. Returns the surviving segments (biggest first)."""
+    for g in segs:
+        g.merge()
+    order = sorted((g for g in segs if len(g.keys)), key=lambda g: -len(g.keys))
+    kept: list[_Segment] = []
+    for g in order:
+        host = None
+        for h in kept:
+            if np.any(g.lo > h.hi) or np.any(g.hi < h.lo):
+                continue
+            if np.isin(g.keys, h.keys, assume_unique=True).mean() >= min_shared:
+                host = h
+                break
+        if host is None:
+            kept.append(g)
+        else:
+            host.absorb(g)
+    return kept
+
+
 def _merge_overlapping(segs: list[_Segment], min_shared: float = 0.5) -> list[_Segment]:
     """Merge untracked same-class segments whose bounding boxes share at least ``min_shared`` of
     the smaller box's volume (pieces of one thing that no single view tied together)."""

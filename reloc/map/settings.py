@@ -41,9 +41,15 @@ class MappingSettings:
     # association of untracked object detections to untracked segments
     assoc_min_overlap: float = 0.2  # fraction of the detection's voxels already in the segment
     assoc_radius_m: float = 0.3  # or centroids this close with touching bounding boxes
+    # class-agnostic fusion (no track ids): a segment sharing this fraction of its voxels with a
+    # bigger one of any class joins it (one thing under two labels); 0 = off
+    cross_class_shared: float = 0.5
     # geometric split of pooled (untracked) structure
     wall_line_tol_m: float = 0.06
     wall_gap_m: float = 0.5
+    # an untracked wall piece lower than this is dropped (walls run floor to ceiling; a strip along
+    # a ceiling edge or a skirting that a detector calls wall is not one)
+    min_wall_height_m: float = 1.0
 
     def __post_init__(self):
         if int(self.stride) != self.stride or self.stride < 1:
