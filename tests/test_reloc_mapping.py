@@ -476,3 +476,26 @@ def test_class_agnostic_fusion_of_untracked_segments():
     quarter = seg("armchair", (1.75, 0.0, 0.0), (2.75, 0.9, 0.8), 100)
     assert len(_absorb_across_classes([seg("sofa", (0, 0, 0), (2, 0.9, 0.8), 5000), half], 0.5)) == 1
     assert len(_absorb_across_classes([seg("sofa", (0, 0, 0), (2, 0.9, 0.8), 5000), quarter], 0.5)) == 2
+
+
+def test_low_wall_strips_are_no_walls():
+    """An untracked wall piece lower than min_wall_height_m (a ceiling edge a detector called wall)
+    gives no box; a floor-to-ceiling one does, and a tracked (oracle) wall is kept whatever its height."""
+    from collections import Counter
+
+    from reloc.map.build import _boxes
+    from reloc.map.settings import MappingSettings
+
+    def grid(x1, z0, z1):
+        g = np.mgrid[0:x1:0.05, 0:0.1:0.05, z0:z1:0.05].reshape(3, -1).T + 0.025
+        return g, np.zeros((len(g), 4))
+
+    s = MappingSettings()
+    strip, tall = grid(2.0, 2.55, 2.7), grid(2.0, 0.0, 2.6)
+    cam = np.array([1.0, 2.0, 1.5])
+    dropped = Counter()
+    boxes, _, _ = _boxes([("wall", *strip, cam, None, 5), ("wall", *tall, cam, None, 5),
+                          ("wall", *strip, cam, 1001, 5)], s, {}, dropped)
+    assert dropped["wall"] == 1 and len(boxes) == 2
+    heights = sorted(round(b["size"][2], 2) for b in boxes)
+    assert heights[0] < s.min_wall_height_m <= heights[1]
