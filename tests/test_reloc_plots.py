@@ -444,3 +444,12 @@ def test_report_without_plots_or_tables(tmp_path):
     md = md_path.read_text()
     assert "No tables were found" in md and "No plots were found" in md
     assert "<h1>VideoReloc experiment report: bare</h1>" in html_path.read_text()
+
+
+def test_oracle_rows_are_drawn_as_the_upper_bound():
+    from reloc.experiments.plots import _is_bound
+
+    assert _is_bound({"method": "videoreloc_oracle", "mode": "closure"})
+    assert _is_bound({"key": "videoreloc_oracle.causal"})
+    assert not _is_bound({"method": "videoreloc", "mode": "closure"})
+    assert not _is_bound({"key": "appearance.causal"})

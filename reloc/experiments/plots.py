@@ -294,6 +294,11 @@ def row_label(row: dict) -> str:
     return label + (" \u2020" if row.get("dagger") and "\u2020" not in label else "")
 
 
+def _is_bound(row: dict) -> bool:
+    """A row of oracle detections (``videoreloc_oracle``): the upper bound beside the detector's rows."""
+    return str(row.get("method") or row.get("key", "")).split(".")[0].endswith("_oracle")
+
+
 def recall_bars(results: dict, out_png, dpi: float = DPI) -> Path:
     """Grouped bars of recall at 1 m/10 deg per row: lightings (left), unchanged vs rearranged (right)."""
     import matplotlib
@@ -311,8 +316,11 @@ def recall_bars(results: dict, out_png, dpi: float = DPI) -> Path:
                           bottom=(legend_h + 0.45) / fig_h, wspace=0.15)
     palette = matplotlib.colormaps["tab10"].colors
     bar_w = 0.8 / nrow
-    styles = [{"color": palette[j % len(palette)], "hatch": "//" if row.get("dagger") else None,
-               "edgecolor": "0.25" if row.get("dagger") else "white"} for j, row in enumerate(rows)]
+    # clip-rigid controls (dagger rows) hatched //; oracle-detection rows, the upper bound, in grey, dotted
+    styles = [{"color": ("0.8" if row.get("mode") == "causal" else "0.6") if _is_bound(row)
+               else palette[j % len(palette)],
+               "hatch": "//" if row.get("dagger") else (".." if _is_bound(row) else None),
+               "edgecolor": "0.25" if row.get("dagger") or _is_bound(row) else "white"} for j, row in enumerate(rows)]
     for k, (groups, title) in enumerate(((groups_l, "lighting"), (groups_r, "layout change"))):
         ax = fig.add_subplot(gs[0, k])
         ax.set_ylim(0, 1.12)
