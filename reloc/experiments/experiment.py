@@ -81,6 +81,7 @@ SPEC_KEYS = {"name", "description", "render", "tours", "out", "mapping", "query"
              "tables", "one_frame_stride", "detector", "config", "appearance", "fpfh_icp", "workers", "seed"}
 METHODS = ("videoreloc", "videoreloc_oracle", "fpfh_icp", "appearance", "one_frame")
 DETECTORS = ("learned", "oracle", "onnx")
+ORACLE = {"kind": "oracle", "model": None, "corruption": {}}  # a spec's detector: the rendered labels
 TABLES = ("units", "ablation")
 DONE = "done.json"
 
@@ -99,7 +100,7 @@ class ExperimentSpec:
     methods: tuple = METHODS
     tables: tuple = ()
     one_frame_stride: int = 15
-    detector: dict = dataclasses.field(default_factory=lambda: {"kind": "oracle"})
+    detector: dict = dataclasses.field(default_factory=lambda: dict(ORACLE))
     config: dict = dataclasses.field(default_factory=dict)
     appearance: dict = dataclasses.field(default_factory=dict)
     fpfh_icp: dict = dataclasses.field(default_factory=dict)
@@ -242,8 +243,8 @@ def _detector_spec(v, src) -> dict:
         except (TypeError, ValueError) as e:
             _fail(src, "detector", str(e))
         return {"kind": kind, "model": None, "corruption": dict(d)}
+    fields = {f.name for f in dataclasses.fields(Corruption)}
     for k in d:
-        fields = {f.name for f in dataclasses.fields(Corruption)}
         _fail(src, f"detector.{k}", "corrupts the oracle's detections (add kind: oracle)" if k in fields
               else "unknown setting; allowed: kind, model" + (", class_map" if kind == "onnx" else ""))
     if model is None:
@@ -372,7 +373,7 @@ def _check_detector_inputs(spec: ExperimentSpec, queries: dict, mapping: dict) -
     if spec.map == "ground-truth":
         _open_detector(det, {b["class"] for b in mtour.objects()["boxes"]})
     else:
-        check_rgb_schedule(mtour, mtour.rgb_every, detector, "mapping")
+        check_rgb_schedule(mtour, None, detector, "mapping")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -520,9 +521,6 @@ def _detector(det: dict, tour, bmap, cfg):
     return _open_detector(det, bmap.class_set, tour.class_names(), cfg.detection)
 
 
-ORACLE = {"kind": "oracle", "model": None, "corruption": {}}
-
-
 _CACHE: dict = {}
 
 
@@ -562,10 +560,10 @@ def run_map_task(task: dict) -> dict:
             doc, report = build_map(tour.root, detector=detector, progress=False)
             if not doc["boxes"]:
                 raise UserError(report["warnings"][0] if report["warnings"] else f"{tour.root}: no boxes built")
-            from ..map.scoring import box_errors
+            from ..map.scoring import errors_against_ground_truth
 
-            errors = box_errors(doc, tour.objects()) if (tour.root / "objects.json").is_file() else None
-            write_json_atomic(out.with_name(out.stem + ".report.json"), {"build": report, "errors": errors})
+            write_json_atomic(tables.map_report_path(out),
+                              {"build": report, "errors": errors_against_ground_truth(tour, doc)})
         write_text_atomic(out, dumps_map(doc))
     elif task["kind"] == "appearance":
         from ..baselines.appearance import AppearanceConfig, AppearanceMap

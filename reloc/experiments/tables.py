@@ -140,7 +140,8 @@ def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: li
                   "appearance": "appearance"}
     res: dict = {
         "format": FORMAT, "name": spec.name, "description": spec.description, "spec": str(spec.source),
-        "map": str(files["boxes"]), "detector": getattr(spec, "detector_label", "oracle"), "unchanged": spec.unchanged, "one_frame_stride": spec.one_frame_stride,
+        "map": str(files["boxes"]), "detector": spec.detector_label, "unchanged": spec.unchanged,
+        "one_frame_stride": spec.one_frame_stride,
         "tours": queries, "rows": [], "methods": {},
     }
     modes_of = {m: [mode for (mm, mode, _, _) in ROWS if mm == m] for m in methods}
@@ -168,7 +169,7 @@ def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: li
                                     "factors": factors(per, queries, spec.unchanged)}
         res["methods"][m] = entry
     res["maps"] = {k: q for k in ("boxes", "boxes_oracle") if k in files
-                   and (q := map_quality(files[k].with_name(files[k].stem + ".report.json"))) is not None}
+                   and (q := map_quality(map_report_path(files[k]))) is not None}
     for m, mode, label, dagger in ROWS:
         if m in methods:
             res["rows"].append({"key": f"{m}.{mode}", "method": m, "mode": mode, "label": label.format(feature=feature),
@@ -178,6 +179,13 @@ def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: li
     if variants:
         res["ablation"] = _ablation(res, variants)
     return res
+
+
+def map_report_path(map_file) -> Path:
+    """Where an experiment keeps a built map's report (build counts, errors against the ground
+    truth): ``videoreloc_map.json`` -> ``videoreloc_map.report.json``."""
+    p = Path(map_file)
+    return p.with_name(p.stem + ".report.json")
 
 
 def map_quality(report_path: Path) -> dict | None:

@@ -67,6 +67,7 @@ class OracleDetector:
 
     name = "oracle"
     needs_rgb = False
+    needs_labels = True
 
     def __init__(self, classes: dict[int, str], vocabulary=None, corruption: Corruption | None = None,
                  min_pixels: int = DetectionConfig.min_mask_pixels):

@@ -44,21 +44,29 @@ class Detection:
 class Detector(Protocol):
     name: str
     needs_rgb: bool  # True: detects from the camera image, so only frames with RGB give detections
+    needs_labels: bool  # True: reads the rendered instance/semantic images (the oracle)
 
     def detect(self, frame: FrameData) -> list[Detection]:
         ...
 
 
+def needs_labels(detector) -> bool:
+    """Whether a detector reads the rendered label images (the oracle, and wrappers of it that say
+    so); a detector without the attribute does not."""
+    return bool(getattr(detector, "needs_labels", False))
+
+
 def needs_rgb(detector) -> bool:
-    """Whether a detector looks at the RGB image (the learned and ONNX ones) rather than the
-    rendered label images (the oracle)."""
-    return bool(getattr(detector, "needs_rgb", False))
+    """Whether a detector looks at the RGB image (the learned and ONNX ones); a detector without
+    the attribute does unless it reads labels."""
+    return bool(getattr(detector, "needs_rgb", not needs_labels(detector)))
 
 
-def check_rgb_schedule(tour, every: int, detector, what: str) -> None:
+def check_rgb_schedule(tour, every: int | None, detector, what: str) -> None:
     """A detector that needs RGB looks at every ``every``-th frame (``what`` names that setting,
-    e.g. ``observation.stride``): the tour must have RGB there. One-line ``UserError`` naming the
-    tour's meta.json and its ``rgb_every`` otherwise (a geometry-only tour has no RGB at all)."""
+    e.g. ``observation.stride``; None: at whichever frames have RGB): the tour must have RGB there.
+    One-line ``UserError`` naming the tour's meta.json and its ``rgb_every`` otherwise (a
+    geometry-only tour has no RGB at all)."""
     if not needs_rgb(detector):
         return
     from formats.errors import UserError
@@ -68,6 +76,6 @@ def check_rgb_schedule(tour, every: int, detector, what: str) -> None:
         raise UserError(f"{where}: lighting: a geometry-only tour has no RGB, and the {detector.name} detector "
                         f"sees only RGB frames; render the tour with a lighting")
     k = tour.rgb_every
-    if int(every) % k:
+    if every is not None and int(every) % k:
         raise UserError(f"{where}: rgb_every: RGB on every {k}th frame, but the {detector.name} detector looks at "
                         f"every {every}th ({what}); render with an rgb_every that divides {every}")

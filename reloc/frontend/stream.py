@@ -25,7 +25,7 @@ import numpy as np
 from .clips import Clip, ClipPolicy, Node, fuse
 from ..config import Config
 from .detection import Detector, FrameData, OracleDetector
-from .detector_base import needs_rgb
+from .detector_base import needs_labels
 from ..geometry import inv_T
 from .localize import Placement, localize_clip
 from ..map.boxmap import BoxMap
@@ -297,7 +297,7 @@ def default_detector(tour, bmap: BoxMap, cfg: Config | None = None) -> Detector:
 
 def read_frame(tour, i: int, detector: Detector, rgb: bool) -> FrameData:
     """Frame i of a tour as the front-end reads it (label images only for the oracle)."""
-    oracle = not needs_rgb(detector)
-    f = tour.frame(int(i), rgb=rgb, depth=True, instance=oracle, semantic=oracle)
+    labels = needs_labels(detector)
+    f = tour.frame(int(i), rgb=rgb, depth=True, instance=labels, semantic=labels)
     depth = f.depth if f.depth is not None else np.zeros((tour.intrinsics.height, tour.intrinsics.width), np.float32)
     return FrameData(index=int(i), depth=depth, K=tour.K, rgb=f.rgb, instance=f.instance, semantic=f.semantic)

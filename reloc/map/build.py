@@ -64,7 +64,7 @@ from formats.boxes import BOXES_FORMAT, FRAME_TEXT, ID_BASE
 from formats.errors import UserError
 
 from ..frontend.detection import FrameData, OracleDetector
-from ..frontend.detector_base import check_rgb_schedule, needs_rgb
+from ..frontend.detector_base import check_rgb_schedule, needs_labels, needs_rgb
 from .document import kind_of
 from .fitting import fit_box
 from .pixels import _Backprojector, _depth_edges, _mask_pixels
@@ -77,10 +77,6 @@ def _struct_slab() -> float:
     from formats.boxes import STRUCT_SLAB
 
     return float(STRUCT_SLAB)
-
-
-def _needs_labels(detector) -> bool:
-    return isinstance(detector, OracleDetector) or bool(getattr(detector, "needs_labels", False))
 
 
 def build_map(tour_dir, detector=None, stride: int | None = None, voxel: float | None = None, progress: bool = True,
@@ -107,12 +103,12 @@ def build_map(tour_dir, detector=None, stride: int | None = None, voxel: float |
         if not classes:
             raise UserError(f"{tour.root}: no class table in objects.json; the oracle detector needs one")
         detector = OracleDetector(classes)
-    labels = _needs_labels(detector)
+    labels = needs_labels(detector)
     want_rgb = not labels and tour.has_rgb()  # label images only for the oracle, RGB for the rest
     indices = [int(i) for i in tour.frame_indices[:: int(s.stride)]]
     if needs_rgb(detector):  # a detector that sees images: every stride-th frame that has RGB
+        check_rgb_schedule(tour, None, detector, "mapping")
         step = math.lcm(int(s.stride), tour.rgb_every)
-        check_rgb_schedule(tour, step, detector, f"mapping stride {s.stride}")
         indices = [int(i) for i in tour.frame_indices if int(i) % step == 0]
     if max_frames is not None:
         indices = indices[: int(max_frames)]

@@ -13,7 +13,7 @@ from formats.errors import UserError, check_output_file
 
 from .build import build_map
 from .document import dumps_map, map_from_tour
-from .scoring import box_errors
+from .scoring import errors_against_ground_truth
 from .settings import DEFAULT_STRIDE
 
 
@@ -46,14 +46,15 @@ def cmd_build(args) -> int:
     check_output_file(args.out)
     if args.report:
         check_output_file(args.report)
+    from formats.tour import Tour
+
+    tour = Tour(args.tour)  # UserError when missing or malformed
     detector = None
     if args.detector != "oracle":
-        from formats.tour import Tour
-
         from ..frontend.detection import build_detector, detector_spec_from_args
 
-        detector = build_detector(detector_spec_from_args(args), Tour(args.tour).class_names())
-    doc, report = build_map(args.tour, detector=detector, stride=args.stride, voxel=args.voxel, progress=not args.quiet)
+        detector = build_detector(detector_spec_from_args(args), tour.class_names())
+    doc, report = build_map(tour.root, detector=detector, stride=args.stride, voxel=args.voxel, progress=not args.quiet)
     for w in report["warnings"]:
         print(f"warning: {w}", file=sys.stderr)
     if not doc["boxes"]:
@@ -62,14 +63,7 @@ def cmd_build(args) -> int:
 
     BoxMap(doc, source=str(args.out))  # validates what is about to be written
     out = write_text_atomic(args.out, dumps_map(doc))
-    errors = None
-    try:
-        from formats.tour import Tour
-
-        gt = Tour(args.tour).objects()
-        errors = box_errors(doc, gt)
-    except UserError:
-        pass  # no ground truth: no errors to report
+    errors = errors_against_ground_truth(tour, doc)  # None without ground truth
     if args.report:
         write_text_atomic(args.report, json.dumps({"build": report, "errors": errors}, indent=1) + "\n")
     print(f"{out}: " + summary_line(doc, out.stat().st_size, errors, report))

@@ -114,5 +114,17 @@ def box_errors(doc: dict, gt_doc: dict, match: str = "auto", max_match_m: float 
     }
 
 
+def errors_against_ground_truth(tour, doc: dict) -> dict | None:
+    """:func:`box_errors` of a map built from ``tour`` (a ``formats.tour.Tour``) against the tour's
+    ground-truth boxes (objects.json); None when the tour has none."""
+    from formats.errors import UserError
+
+    try:
+        gt = tour.objects()
+    except UserError:
+        return None
+    return box_errors(doc, gt)
+
+
 def _med(v):
     return round(float(np.median(v)), 4) if len(v) else None
