@@ -4,7 +4,8 @@ It writes the same depth, instance and semantic images as the Blender geometry p
 parts (``synth.meshes``), with an independent camera model: for pixel (u, v) the ray leaves the
 camera centre along ``R @ K^-1 [u, v, 1]``, whose camera-frame z is 1, so Open3D's hit parameter
 is the planar depth itself. It is the fast mode for relocalization experiments and the independent
-check of the Blender camera conventions.
+check of the Blender camera conventions. Parts of mesh assets carry their glTF materials
+(``mesh.visual``, ``synth.gltf``); only their vertices and faces are read here.
 """
 
 from __future__ import annotations

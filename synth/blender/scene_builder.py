@@ -27,12 +27,22 @@ def reset_scene() -> bpy.types.Scene:
 def add_parts(scene, parts, with_materials: bool) -> dict[str, bpy.types.Material]:
     """One Blender object per part, mesh in the part's local frame, ``pass_index`` = instance id.
 
+    With materials, a part whose material is ``"gltf"`` (``synth.meshes.GLTF_MATERIAL``) gets its
+    UVs (a UV map "UVMap", per loop), its glTF normals when the file has them (custom normals on
+    smooth faces) and a material built from its glTF PBR material
+    (``synth.blender.materials.get_gltf_material``); the geometry pass (no materials) builds the
+    same plain meshes as for procedural parts.
+
     Returns the materials of emitting parts by fixture id (for the lighting to switch)."""
+    from ..meshes import GLTF_MATERIAL
+
     emitters: dict[str, list] = {}
     coll = scene.collection
     if with_materials:
-        from .materials import get_material
+        from ..gltf import pbr
+        from .materials import get_gltf_material, get_material
     for p in parts:
+        gltf = with_materials and p.material == GLTF_MATERIAL
         mesh = bpy.data.meshes.new(p.name)
         v = np.asarray(p.mesh.vertices, dtype=np.float32)
         f = np.asarray(p.mesh.faces, dtype=np.int32)
@@ -43,16 +53,30 @@ def add_parts(scene, parts, with_materials: bool) -> dict[str, bpy.types.Materia
         mesh.polygons.add(len(f))
         mesh.polygons.foreach_set("loop_start", np.arange(0, f.size, 3, dtype=np.int32))
         mesh.polygons.foreach_set("loop_total", np.full(len(f), 3, dtype=np.int32))
+        normals = None
+        if gltf:
+            uv = getattr(p.mesh.visual, "uv", None)
+            if uv is not None:
+                layer = mesh.uv_layers.new(name="UVMap")
+                layer.data.foreach_set("uv", np.asarray(uv, dtype=np.float32)[f.ravel()].ravel())
+            if p.mesh.metadata.get("gltf", {}).get("normals"):
+                normals = np.asarray(p.mesh.vertex_normals, dtype=np.float32)
+                mesh.polygons.foreach_set("use_smooth", np.ones(len(f), dtype=bool))
         mesh.update(calc_edges=True)
         mesh.validate(verbose=False)
+        if normals is not None and len(mesh.vertices) == len(normals):
+            mesh.normals_split_custom_set_from_vertices(normals)
         obj = bpy.data.objects.new(p.name, mesh)
         obj.matrix_world = Matrix(np.asarray(p.matrix).tolist())
         obj.pass_index = int(p.instance_id)
         if with_materials:
             key = p.fixture if p.emissive else None
-            mat = get_material(p.material, p.color, p.emissive, key=key, seed=p.seed)
+            if gltf:
+                mat = get_gltf_material(pbr(p.mesh), emissive=p.emissive, key=key)
+            else:
+                mat = get_material(p.material, p.color, p.emissive, key=key, seed=p.seed)
             mesh.materials.append(mat)
-            if p.emissive and p.fixture:
+            if p.emissive and p.fixture and mat.node_tree.nodes.get("emission") is not None:
                 emitters.setdefault(p.fixture, []).append(mat)
         coll.objects.link(obj)
     return emitters
@@ -126,7 +150,11 @@ def add_lighting(scene, lighting: ResolvedLighting, emitters: dict[str, list]) -
             node = mat.node_tree.nodes.get("emission")
             if node is None:
                 continue
-            node.inputs["Color"].default_value = (*color, 1.0)
+            light = mat.node_tree.nodes.get("emission_light")  # glTF emitters: texture x factor x light colour
+            if light is not None:
+                light.outputs[0].default_value = (*color, 1.0)
+            else:
+                node.inputs["Color"].default_value = (*color, 1.0)
             node.inputs["Strength"].default_value = strength
 
 
