@@ -16,7 +16,7 @@ from scipy import ndimage
 
 from . import assets
 from . import geometry as geo
-from .placement import door_zone, opening_box
+from .placement import door_zone, mesh_surfaces, opening_box
 from .scene import Layout, object_box
 
 Z_TOL = 0.003  # how far an object may float above / sink into its support (m)
@@ -94,9 +94,12 @@ def _support_problem(layout: Layout, o, box: geo.OrientedBox, by_id, boxes) -> s
         parent = by_id.get(pid)
         if parent is None:
             return f"stands on object {pid}, which is missing"
-        if not parent.asset.startswith("proc:"):
-            return _rests_on_some_box(box, [boxes[pid]], floor)
-        surfs = assets.support_surfaces(parent.cls, parent.size, parent.params)
+        if parent.asset.startswith("proc:"):
+            surfs = assets.support_surfaces(parent.cls, parent.size, parent.params)
+        else:  # a mesh object: its box top and the levels below it (synth.placement.mesh_surfaces)
+            surfs = mesh_surfaces(parent, layout.meta.get("root"))
+            if not surfs:
+                return _rests_on_some_box(box, [boxes[pid]], floor)
         if k >= len(surfs):
             return f"surface {k} of object {pid} ({parent.cls}) does not exist"
         s = surfs[k]
@@ -167,7 +170,8 @@ def check_layout(layout: Layout) -> CheckReport:
     st = layout.stage
 
     # the shell: a procedural stage needs rooms (free space, floors, ceilings) and walls; a stage
-    # mesh (ReplicaCAD) is its own shell and carries neither (synth.replicacad)
+    # mesh (ReplicaCAD) carries what synth.stage_structure derived from it, or nothing when it was
+    # imported without structure
     if st.asset is None:
         if not st.rooms:
             rep.structure.append({"what": "rooms", "why": "no rooms (stage.rooms is empty): a layout needs at least one"})

@@ -83,16 +83,19 @@ def cmd_show(args) -> int:
 
 
 def cmd_stats(args) -> int:
-    from .stats import PAPER_RANGES, change_stats, within_paper_ranges
+    from .rearrange import target_ranges
+    from .stats import PAPER_RANGES, change_stats
 
-    st = change_stats(_load(args.ref), _load(args.var))
+    ref = _load(args.ref)
+    st = change_stats(ref, _load(args.var))
     if args.json:
         _print_json(st)
         return 0
-    ok = within_paper_ranges(st)
+    ranges = target_ranges(ref)
+    what = "paper" if ranges == PAPER_RANGES else "scaled"  # an imported flat of another size: synth.stats.scaled_ranges
     print(f"{st['variant']} against {st['reference']}:")
-    for k, (lo, hi) in PAPER_RANGES.items():
-        print(f"  {k:<16} {st[k]:>7}   paper {lo}-{hi}  {'ok' if ok[k] else 'OUT OF RANGE'}")
+    for k, (lo, hi) in ranges.items():
+        print(f"  {k:<16} {st[k]:>7}   {what} {lo}-{hi}  {'ok' if lo <= st[k] <= hi else 'OUT OF RANGE'}")
     return 0
 
 
@@ -196,15 +199,18 @@ def cmd_build(args) -> int:
     return 0 if all(r.ok for _, r, _ in rows) else 1
 
 
-def _print_stats_table(rows) -> None:
-    """Objects, check and change statistics per layout against the paper's ranges (rows: (layout, report, stats|None))."""
+def _print_stats_table(rows, ranges: dict | None = None) -> None:
+    """Objects, check and change statistics per layout against the paper's ranges, or ``ranges``
+    (scaled for an imported flat) (rows: (layout, report, stats|None))."""
     from .stats import PAPER_RANGES
 
+    ranges = ranges or PAPER_RANGES
+    label = "paper" if ranges == PAPER_RANGES else "target"
     w = max([7] + [len(lay.name) for lay, _, _ in rows])
-    print(f"{'layout':<{w}} {'objects':>7} {'check':>6} " + " ".join(f"{k:>15}" for k in PAPER_RANGES))
-    print(f"{'paper':<{w}} {'':>7} {'':>6} " + " ".join(f"{f'{lo}-{hi}':>15}" for lo, hi in PAPER_RANGES.values()))
+    print(f"{'layout':<{w}} {'objects':>7} {'check':>6} " + " ".join(f"{k:>15}" for k in ranges))
+    print(f"{label:<{w}} {'':>7} {'':>6} " + " ".join(f"{f'{lo}-{hi}':>15}" for lo, hi in ranges.values()))
     for lay, rep, st in rows:
-        vals = " ".join(f"{st[k]:>15}" for k in PAPER_RANGES) if st else " ".join(f"{'-':>15}" for _ in PAPER_RANGES)
+        vals = " ".join(f"{st[k]:>15}" for k in ranges) if st else " ".join(f"{'-':>15}" for _ in ranges)
         print(f"{lay.name:<{w}} {len(lay.objects):>7} {'ok' if rep.ok else 'FAIL':>6} {vals}")
 
 
@@ -221,7 +227,7 @@ def _check_out_file(out: Path, suffixes=(".yaml", ".yml")) -> None:
 def cmd_rearrange(args) -> int:
     """A new rearranged variant of BASE from a seed: the operator, ranges and checks of apt_1..apt_5."""
     from .checks import check_layout
-    from .rearrange import NoVariantFound, RearrangePlan, VariantSpec, make_variant, reference_walkway
+    from .rearrange import NoVariantFound, RearrangePlan, VariantSpec, make_variant, new_problems, reference_walkway, target_ranges
     from .scene import save_layout
     from .stats import PAPER_RANGES, change_stats
 
@@ -240,27 +246,32 @@ def cmd_rearrange(args) -> int:
         var = make_variant(ref, VariantSpec(name, args.seed, RearrangePlan()), walkway=walkway, max_attempts=args.attempts)
     except NoVariantFound as e:
         last = e.last or {}
-        detail = ", ".join(f"{k} {last[k]} (paper {lo}-{hi})" for k, (lo, hi) in PAPER_RANGES.items() if k in last)
+        ranges = getattr(e, "ranges", None) or PAPER_RANGES
+        label = "paper" if ranges == PAPER_RANGES else "target"
+        detail = ", ".join(f"{k} {last[k]} ({label} {lo}-{hi})" for k, (lo, hi) in ranges.items() if k in last)
         why = "" if e.last_check_ok is not False else "; it was in range but failed the layout checks"
-        raise UserError(f"no variant of {ref.name} from seed {args.seed} within the paper's ranges that checks clean "
+        raise UserError(f"no variant of {ref.name} from seed {args.seed} within the {label} ranges that checks clean "
                         f"after {e.attempts} attempt(s) (last: {detail}{why}); try another --seed") from None
     save_layout(var, out)
-    rep = check_layout(var)
+    rep, ref_rep = check_layout(var), check_layout(ref)
     st = change_stats(ref, var)
     print(f"{var.name}: rearranged from {ref.name} (seed {args.seed}, attempt {var.meta['attempt']}), "
           f"{len(var.objects)} objects")
-    _print_stats_table([(ref, check_layout(ref), None), (var, rep, st)])
+    _print_stats_table([(ref, ref_rep, None), (var, rep, st)], target_ranges(ref))
     print(f"wrote {out}")
-    return 0 if rep.ok else 1
+    # a reference that does not check clean (an imported scene) only asks the variant to add no problem
+    return 0 if (rep.ok or (not ref_rep.ok and not new_problems(ref_rep, rep))) else 1
 
 
 def cmd_import_replicacad(args) -> int:
     from .replicacad import load_replicacad
     from .scene import save_layout
 
-    lay = load_replicacad(args.root, args.scene, allow_unknown=args.allow_unknown)
+    lay = load_replicacad(args.root, args.scene, allow_unknown=args.allow_unknown, structure=not args.no_structure)
     out = save_layout(lay, args.out)
-    print(f"wrote {out}: {len(lay.objects)} objects in {len({o.cls for o in lay.objects})} classes")
+    st = lay.stage
+    print(f"wrote {out}: {len(lay.objects)} objects in {len({o.cls for o in lay.objects})} classes; stage: "
+          f"{len(st.walls)} walls, {len(st.rooms)} rooms, {len(st.openings)} openings, {len(lay.fixtures)} light fixtures")
     return 0
 
 
@@ -341,6 +352,9 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("scene", help="scene instance name, e.g. apt_0")
     a.add_argument("--out", required=True)
     a.add_argument("--allow-unknown", action="store_true", help="map unknown templates to class 'other'")
+    a.add_argument("--no-structure", action="store_true",
+                   help="keep the stage one mesh: no walls, rooms or openings derived from it, no articulated objects, "
+                        "no fixtures (camera paths and variants then cannot be planned)")
     a.set_defaults(fn=cmd_import_replicacad)
     tr = sub.add_parser("tour", help="render one tour: a layout x a lighting x a camera path")
     ts = tr.add_subparsers(dest="cmd", required=True)

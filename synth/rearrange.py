@@ -6,6 +6,41 @@ moved object along with it, adds new instances and removes some. ``make_variant`
 derived sub-seeds until the change statistics fall inside the requested ranges (by default the
 paper's, Sec. IV-A) and the layout checks clean; which sub-seed was taken is recorded in the
 variant's ``meta`` so the result is reproducible from the files alone.
+
+Imported layouts (ReplicaCAD)
+    The same operator works on a layout whose objects carry mesh assets (``is_imported``: its
+    ``meta["source"]`` is ``"replicacad"`` or any object is not procedural). It needs the stage's
+    rooms, walls and openings (derived from the stage mesh on import). What differs:
+
+    * Moving: a mesh object is moved as itself (``synth.placement.placed_copy``: same asset, scale
+      and local box; its world box goes where a procedural one would). Mesh objects hold things on
+      the top of their box when their mesh has a top there (``synth.placement.mesh_surfaces``).
+    * ``free`` objects (resting on something the importer could not name) are not moved, and
+      neither is an object whose box holds a ``free`` object's box centre (lifting it would leave
+      the ``free`` one in the air): both stay put, though they may be removed when nothing stands
+      on them.
+    * Adding: copies of the layout's own movable templates (``template_pool``: asset, class, size,
+      box offset, scale and ``params`` -- ``params.template`` names the ReplicaCAD template) instead
+      of procedural ``ADDABLE`` classes; a copy goes where its template's support says (floor, a
+      surface, a wall).
+    * Plan and ranges (``make_variant``): the paper's numbers are for an apartment of apt_0's size.
+      ``scaled_plan`` and ``synth.stats.scaled_ranges`` scale the counts by
+      f = (movable objects of the layout) / (movable objects of the built-in apt_0), counting movable
+      objects whose support is not ``free``. In the plan, added and removed scale by f; the move
+      counts scale per kind -- floor moves and nudges by the ratio of movable floor objects,
+      surface moves by that of objects on surfaces, wall moves by that of wall objects -- which is
+      f when the layout's mix of kinds is apt_0's, and keeps the same share of each kind moving
+      when it is not (a ReplicaCAD flat holds more small things on tables than apt_0). Counts are
+      rounded half up, and never exceed what the layout holds. The median-distance criterion is
+      capped by the flat's size (see ``synth.stats.scaled_ranges``). The plan and ranges used are
+      recorded in ``meta["plan"]`` and ``meta["ranges"]``.
+    * New objects take ids above all of the reference's (a removed object's id is not reused).
+    * The variant keeps the reference's import record (``meta`` ``source``, ``root``, ``scene``,
+      ...), so its meshes are found again; lamps' light fixtures follow their lamps, fixtures of the
+      stage (ceiling lights of the lighting config, placed ones) stay
+      (``synth.apartment.layout_fixtures``).
+    * Checks: ``make_variant`` asks of a variant of a reference that does not check clean (real
+      scans: chairs pushed under tables) that it adds no problem the reference did not have.
 """
 
 from __future__ import annotations
@@ -15,12 +50,14 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from formats.errors import UserError
+
 from . import geometry as geo
 from .apartment import layout_fixtures
-from .checks import check_layout
+from .checks import CheckReport, check_layout
 from .placement import Placer
 from .scene import Layout, ObjectInstance, object_box
-from .stats import PAPER_RANGES, change_stats
+from .stats import PAPER_RANGES, change_stats, is_imported, movable_counts, reference_counts, scaled_ranges
 
 # classes that go with their back to a wall; the others stand anywhere
 AGAINST_WALL = {"sofa", "bookshelf", "tv_stand", "cabinet", "desk", "bed", "nightstand", "shoe_rack", "wardrobe"}
@@ -108,11 +145,32 @@ def _replace(layout: Layout, objs: list[ObjectInstance]) -> None:
     layout.objects = [new.get(o.id, o) for o in layout.objects]
 
 
+def _is_proc(o: ObjectInstance) -> bool:
+    return o.asset.startswith("proc:")
+
+
+def _shape(o: ObjectInstance):
+    """(size, template) that the ``Placer`` primitives take to move ``o``: its procedural size, or
+    its world box size and itself for a mesh object (``synth.placement.placed_copy``)."""
+    if _is_proc(o):
+        return o.size, None
+    return object_box(o).size, o
+
+
+def _xy(o: ObjectInstance):
+    """Where an object stands: its origin (procedural: the bottom centre) or its box centre (meshes)."""
+    if _is_proc(o):
+        return o.position[:2]
+    return object_box(o).center[:2]
+
+
 def _pick_room(placer: Placer, current, p_other: float, cls: str):
     rooms = [r for r in placer.stage.rooms if room_accepts(r.type, cls)]
     if current is not None and (placer.rng.random() >= p_other or len(rooms) < 2):
         return current
     others = [r for r in rooms if current is None or r.name != current.name]
+    if not others:
+        return current
     w = np.array([r.area for r in others])
     return others[placer.rng.choice(len(others), p=w / w.sum())]
 
@@ -142,49 +200,131 @@ def _move_family(placer: Placer, obj: ObjectInstance, propose, tries: int = 12) 
 
 def _relocate_floor(placer: Placer, obj: ObjectInstance, p_other: float) -> bool:
     """Somewhere else on the floor, in the same room or (with probability ``p_other``) another."""
-    cur_room = placer.stage.room_at(obj.position[:2])
+    cur_room = placer.stage.room_at(_xy(obj))
+    size, tmpl = _shape(obj)
 
     def propose(ids):
         room = _pick_room(placer, cur_room, p_other, obj.cls)
+        if room is None:
+            return None
         if obj.cls in AGAINST_WALL:
-            return placer.against_wall(obj.id, obj.cls, obj.size, obj.params, room, tries=10)
-        return placer.free_spot(obj.id, obj.cls, obj.size, obj.params, room, tries=10, jitter_deg=12.0)
+            return placer.against_wall(obj.id, obj.cls, size, obj.params, room, tries=10, template=tmpl)
+        return placer.free_spot(obj.id, obj.cls, size, obj.params, room, tries=10, jitter_deg=12.0, template=tmpl)
 
     return _move_family(placer, obj, propose)
 
 
 def _nudge(placer: Placer, obj: ObjectInstance) -> bool:
     """Push a floor object 0.15-0.45 m in a random direction and turn it by up to 20 deg."""
+    size, tmpl = _shape(obj)
+    x0, y0 = _xy(obj)
+    yaw0 = obj.yaw if tmpl is None else object_box(obj).yaw
 
     def propose(ids):
         ang = placer.rng.uniform(-math.pi, math.pi)
         dist = placer.rng.uniform(0.15, 0.45)
-        xy = (obj.position[0] + dist * math.cos(ang), obj.position[1] + dist * math.sin(ang))
-        yaw = geo.wrap_angle(obj.yaw + math.radians(placer.rng.uniform(-20, 20)))
-        return placer.floor_at(obj.id, obj.cls, obj.size, obj.params, xy, yaw, ignore=ids)
+        xy = (x0 + dist * math.cos(ang), y0 + dist * math.sin(ang))
+        yaw = geo.wrap_angle(yaw0 + math.radians(placer.rng.uniform(-20, 20)))
+        return placer.floor_at(obj.id, obj.cls, size, obj.params, xy, yaw, ignore=ids, template=tmpl)
 
     return _move_family(placer, obj, propose)
 
 
+FREE_HOLD_TOL = 0.02  # m: a free object whose bottom is this close to (or inside) a box's z range rests in or on it
+
+
+def pinned_ids(layout: Layout) -> set[int]:
+    """Objects the operator leaves in place because a ``free`` object rests in or on them: those
+    whose footprint holds the box centre of a ``free`` object whose bottom lies within their height
+    range (2 cm tolerance). Lifting them would leave the ``free`` object in the air. (A layout
+    without ``free`` objects -- every procedural one -- has none.)"""
+    from .placement import distance_to_box_2d
+
+    free = [object_box(o) for o in layout.objects if o.support == "free"]
+    if not free:
+        return set()
+    centres = np.array([b.center[:2] for b in free])
+    out = set()
+    for o in layout.objects:
+        if o.support == "free":
+            continue
+        b = object_box(o)
+        inside = distance_to_box_2d(centres, b) <= 0.0
+        for k, fb in enumerate(free):
+            if inside[k] and b.zmin - FREE_HOLD_TOL <= fb.zmin <= b.zmax + FREE_HOLD_TOL:
+                out.add(o.id)
+                break
+    return out
+
+
+def template_pool(ref: Layout) -> list[ObjectInstance]:
+    """The movable objects of ``ref`` whose copies an imported layout's variants may add: one per
+    distinct (asset, scale, local box, template name), in order of first id; ``free`` and
+    ceiling-mounted objects are left out (where a copy of them could go is not known)."""
+    seen, out = set(), []
+    for o in sorted(ref.objects, key=lambda o: o.id):
+        if not o.movable or o.support in ("free", "ceiling"):
+            continue
+        key = (o.asset, tuple(o.scale), tuple(o.size), tuple(o.box_offset), str(o.params.get("template", "")))
+        if key not in seen:
+            seen.add(key)
+            out.append(o)
+    return out
+
+
+def _add_copy(placer: Placer, t: ObjectInstance, oid: int, rng) -> ObjectInstance | None:
+    """A copy of template ``t`` placed as its own support says (floor, a surface, a wall)."""
+    lay = placer.layout
+    size = object_box(t).size
+    rooms = [r for r in placer.stage.rooms if room_accepts(r.type, t.cls)]
+    if not rooms:
+        return None
+    room = rooms[rng.integers(len(rooms))]
+    if t.support.startswith("object:"):
+        holders = [o for o in lay.objects if placer.surfaces(o)]
+        return placer.on_surface(oid, t.cls, size, t.params, holders, yaw_mode="free" if t.cls in ("bowl", "vase") else "aligned",
+                                 template=t)
+    if t.support.startswith("wall:"):
+        return placer.on_wall(oid, t.cls, size, t.params, room, template=t)
+    if t.cls in AGAINST_WALL:
+        return placer.against_wall(oid, t.cls, size, t.params, room, tries=20, template=t)
+    return placer.free_spot(oid, t.cls, size, t.params, room, tries=20, jitter_deg=15.0, template=t)
+
+
+# meta keys of a variant that are its own, not carried over from an imported reference
+_VARIANT_META = ("generator", "generator_version", "plan", "walkway", "variant_seed", "attempt", "ranges")
+
+
 def rearrange(ref: Layout, name: str, seed: int, plan: RearrangePlan = RearrangePlan(),
               walkway: np.ndarray | None = None) -> Layout:
-    """One rearranged variant of ``ref``. Non-movable objects and the stage are never touched;
-    nothing is placed within ``WALKWAY_CLEARANCE`` of the ``walkway`` points (if given)."""
+    """One rearranged variant of ``ref``. Non-movable objects and the stage are never touched, nor
+    are ``free`` objects and what holds them (``pinned_ids``); nothing is placed within
+    ``WALKWAY_CLEARANCE`` of the ``walkway`` points (if given). ``plan`` is used as given (see
+    ``scaled_plan`` for imported layouts)."""
+    imported = is_imported(ref)
+    if imported and not ref.stage.rooms:
+        raise UserError(f"layout '{ref.name}': rearranging needs the stage's rooms, walls and openings "
+                        "(derived from the stage mesh on import); this layout has none")
     lay = ref.copy()
     lay.name, lay.reference, lay.seed = name, ref.name, seed
     lay.meta = {"generator": "synth.rearrange", "plan": asdict(plan)}
+    if imported:  # keep the import record (where the meshes are)
+        lay.meta = {**{k: v for k, v in ref.meta.items() if k not in _VARIANT_META}, **lay.meta}
     if walkway is not None:
         lay.meta["walkway"] = {"planned_on": ref.name, "clearance_m": WALKWAY_CLEARANCE, "frames": WALKWAY_FRAMES}
     rng = np.random.default_rng(seed)
-    placer = Placer(lay, rng, keepout=None if walkway is None else (walkway, WALKWAY_CLEARANCE))
+    # an imported layout's new objects never take a removed object's id (the statistics match by id)
+    placer = Placer(lay, rng, keepout=None if walkway is None else (walkway, WALKWAY_CLEARANCE),
+                    used_ids=max([o.id for o in ref.objects] + [0]) if imported else 0)
+    pinned = pinned_ids(lay)
 
     # remove: movable objects that hold nothing
-    leaves = [o for o in lay.objects if o.movable and not placer.children(o.id)]
+    leaves = [o for o in lay.objects if o.movable and not placer.children(o.id) and o.id not in pinned]
     for k in rng.permutation(len(leaves))[: plan.removed]:
         placer.remove(leaves[k].id)
 
     # relocate floor furniture (with whatever stands on it)
-    floor = [o for o in lay.objects if o.movable and o.support == "floor"]
+    floor = [o for o in lay.objects if o.movable and o.support == "floor" and o.id not in pinned]
     order = list(rng.permutation(len(floor)))
     done = 0
     while order and done < plan.floor_moves:
@@ -199,19 +339,22 @@ def rearrange(ref: Layout, name: str, seed: int, plan: RearrangePlan = Rearrange
             done += 1
 
     # small objects onto other surfaces, anywhere in the flat
-    small = [o for o in lay.objects if o.movable and o.support.startswith("object:") and not placer.children(o.id)]
+    small = [o for o in lay.objects if o.movable and o.support.startswith("object:") and not placer.children(o.id)
+             and o.id not in pinned]
     done = 0
     for k in rng.permutation(len(small)):
         if done >= plan.surface_moves:
             break
         obj = lay.object(small[k].id)
+        size, tmpl = _shape(obj)
         holders = [o for o in lay.objects if o.id != obj.id and placer.surfaces(o)]
         if rng.random() >= plan.other_room:  # most small things stay in their room
-            here = placer.stage.room_at(obj.position[:2])
-            local = [o for o in holders if placer.stage.room_at(o.position[:2]) is here]
+            here = placer.stage.room_at(_xy(obj))
+            local = [o for o in holders if placer.stage.room_at(_xy(o)) is here]
             holders = local or holders
         saved = placer.boxes.pop(obj.id)
-        cand = placer.on_surface(obj.id, obj.cls, obj.size, obj.params, holders, yaw_mode="free" if obj.cls in ("bowl", "vase") else "aligned")
+        cand = placer.on_surface(obj.id, obj.cls, size, obj.params, holders,
+                                 yaw_mode="free" if obj.cls in ("bowl", "vase") else "aligned", template=tmpl)
         if cand is None:
             placer.boxes[obj.id] = saved
             continue
@@ -220,15 +363,17 @@ def rearrange(ref: Layout, name: str, seed: int, plan: RearrangePlan = Rearrange
         done += 1
 
     # pictures to other walls
-    hung = [o for o in lay.objects if o.movable and o.support.startswith("wall:")]
+    hung = [o for o in lay.objects if o.movable and o.support.startswith("wall:") and o.id not in pinned]
     done = 0
     for k in rng.permutation(len(hung)):
         if done >= plan.wall_moves:
             break
         obj = hung[k]
+        size, tmpl = _shape(obj)
         saved = placer.boxes.pop(obj.id)
-        room = _pick_room(placer, placer.stage.room_at(obj.position[:2]), plan.other_room, obj.cls)
-        cand = placer.on_wall(obj.id, obj.cls, obj.size, obj.params, room, z_center=obj.position[2] + obj.size[2] / 2)
+        room = _pick_room(placer, placer.stage.room_at(_xy(obj)), plan.other_room, obj.cls)
+        zc = obj.position[2] + obj.size[2] / 2 if tmpl is None else object_box(obj).center[2] - placer.stage.floor_z
+        cand = None if room is None else placer.on_wall(obj.id, obj.cls, size, obj.params, room, z_center=zc, template=tmpl)
         if cand is None:
             placer.boxes[obj.id] = saved
             continue
@@ -236,11 +381,21 @@ def rearrange(ref: Layout, name: str, seed: int, plan: RearrangePlan = Rearrange
         placer.boxes[obj.id] = object_box(cand)
         done += 1
 
-    # add new instances
+    # add new instances: procedural classes in a procedural flat, copies of its own templates in an imported one
     added = 0
     attempts = 0
+    pool = template_pool(ref) if imported else []
     while added < plan.added and attempts < 20 * plan.added:
         attempts += 1
+        if imported:
+            if not pool:
+                break
+            t = pool[rng.integers(len(pool))]
+            cand = _add_copy(placer, t, placer.next_id(), rng)
+            if cand is not None:
+                placer.add(cand)
+                added += 1
+            continue
         cls = ADDABLE[rng.integers(len(ADDABLE))]
         size, params = placer.sample(cls)
         oid = placer.next_id()
@@ -259,8 +414,56 @@ def rearrange(ref: Layout, name: str, seed: int, plan: RearrangePlan = Rearrange
             added += 1
 
     lay.objects.sort(key=lambda o: o.id)
-    lay.fixtures = layout_fixtures(lay)
+    lay.fixtures = layout_fixtures(lay, previous=ref)
     return lay
+
+
+def _round_half_up(x: float) -> int:
+    return int(math.floor(x + 0.5 + 1e-9))
+
+
+def scaled_plan(ref: Layout, plan: RearrangePlan = RearrangePlan()) -> RearrangePlan:
+    """``plan`` (made for an apartment of apt_0's size) for a layout of ``ref``'s size and mix of
+    objects: the rules are in the module docstring. ``scaled_plan(apt_0, plan) == plan``."""
+    have, base = movable_counts(ref), reference_counts()[0]
+
+    def by(n: int, kind: str) -> int:
+        return _round_half_up(n * have[kind] / base[kind]) if base[kind] else 0
+
+    f = have["total"] / base["total"]
+    floor_moves = min(by(plan.floor_moves, "floor"), have["floor"])
+    nudges = min(by(plan.nudges, "floor"), have["floor"])  # tried on the floor objects not relocated
+    surface_moves = min(by(plan.surface_moves, "surface"), have["surface"])
+    wall_moves = min(by(plan.wall_moves, "wall"), have["wall"])
+    added = _round_half_up(plan.added * f)
+    removed = _round_half_up(plan.removed * f)
+    if plan.added > 0:
+        added = max(1, added)
+    if plan.removed > 0:
+        removed = max(1, removed)
+    return RearrangePlan(floor_moves=floor_moves, surface_moves=surface_moves, wall_moves=wall_moves, nudges=nudges,
+                         added=added, removed=min(removed, have["total"]), other_room=plan.other_room)
+
+
+def target_ranges(ref: Layout) -> dict:
+    """The change ranges a variant of ``ref`` must meet: the paper's for a procedural layout,
+    ``scaled_ranges(ref)`` for an imported one."""
+    return scaled_ranges(ref) if is_imported(ref) else PAPER_RANGES
+
+
+def _problems(rep: CheckReport) -> set[tuple]:
+    out = {("structure", p["what"]) for p in rep.structure}
+    out |= {("collision",) + tuple(sorted((str(c["a"]), str(c["b"])))) for c in rep.collisions}
+    out |= {("unsupported", u["id"]) for u in rep.unsupported}
+    out |= {("blocked_door", d["door"]) for d in rep.blocked_doors}
+    out |= {("covered_opening", c["opening"], c["id"]) for c in rep.covered_openings}
+    return out
+
+
+def new_problems(ref_report: CheckReport, var_report: CheckReport) -> list[tuple]:
+    """Problems of a variant's check report that its reference's report does not have (same object
+    ids, doors and openings), sorted."""
+    return sorted(_problems(var_report) - _problems(ref_report), key=str)
 
 
 def in_ranges(stats: dict, ranges: dict) -> bool:
@@ -270,28 +473,41 @@ def in_ranges(stats: dict, ranges: dict) -> bool:
 class NoVariantFound(RuntimeError):
     """``make_variant`` found no rearrangement within the ranges that checks clean."""
 
-    def __init__(self, message: str, attempts: int, last: dict | None, last_check_ok: bool | None):
+    def __init__(self, message: str, attempts: int, last: dict | None, last_check_ok: bool | None, ranges: dict | None = None):
         super().__init__(message)
         self.attempts, self.last, self.last_check_ok = attempts, last, last_check_ok
+        self.ranges = ranges if ranges is not None else PAPER_RANGES
 
 
-def make_variant(ref: Layout, spec: VariantSpec, ranges: dict = PAPER_RANGES, max_attempts: int = 40,
+def make_variant(ref: Layout, spec: VariantSpec, ranges: dict | None = None, max_attempts: int = 40,
                  walkway: np.ndarray | None = None) -> Layout:
     """``rearrange`` with sub-seeds ``spec.seed * 1000 + k`` until stats are in range and checks pass.
 
+    ``ranges`` default to ``target_ranges(ref)``: the paper's for a procedural layout. For an
+    imported layout the plan is ``scaled_plan(ref, spec.plan)`` and the ranges ``scaled_ranges(ref)``
+    (both recorded in the variant's ``meta``); when the reference itself does not check clean, a
+    variant passes when it adds no problem the reference does not have (``new_problems``).
     Raises ``NoVariantFound`` (a RuntimeError) after ``max_attempts``."""
+    imported = is_imported(ref)
+    plan = scaled_plan(ref, spec.plan) if imported else spec.plan
+    if ranges is None:
+        ranges = target_ranges(ref)
+    ref_report = check_layout(ref) if imported else None
     last, last_ok = None, None
     for k in range(max_attempts):
         sub = spec.seed * 1000 + k
-        var = rearrange(ref, spec.name, sub, spec.plan, walkway)
+        var = rearrange(ref, spec.name, sub, plan, walkway)
         st = change_stats(ref, var)
         last = st
         last_ok = None
         if in_ranges(st, ranges):
-            last_ok = check_layout(var).ok
+            rep = check_layout(var)
+            last_ok = rep.ok if ref_report is None or ref_report.ok else not new_problems(ref_report, rep)
             if last_ok:
                 var.meta["variant_seed"] = spec.seed
                 var.meta["attempt"] = k
+                if imported:
+                    var.meta["ranges"] = {key: [lo, hi] for key, (lo, hi) in ranges.items()}
                 return var
     raise NoVariantFound(f"no rearrangement of {ref.name} within the target ranges after {max_attempts} attempts "
-                         f"(last: {last})", max_attempts, last, last_ok)
+                         f"(last: {last})", max_attempts, last, last_ok, ranges)

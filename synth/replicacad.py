@@ -38,275 +38,67 @@ Templates
     (preferring one whose path ends with the template name). Stages likewise under ``configs/stages``.
     Paths inside configs (``render_asset``) are relative to the config file's folder.
 
+Structure, articulated objects, supports, lights (``structure=True``, the default)
+    * The stage's walls, doors, windows, rooms, floor and ceiling are derived from its mesh
+      (``synth.stage_structure``), so a ReplicaCAD layout has structure boxes, rooms for camera
+      paths and rearrangement, and per-triangle wall/floor/ceiling instance ids in renders.
+    * Articulated objects (``articulated_object_instances``, URDF) load as one static object each in
+      their default joint state (``synth.urdf``; asset ``"replicacad-urdf:<urdf path>"``), ids after
+      the rigid objects.
+    * Supports are inferred from the boxes (``infer_supports``): floor, the top of another object, or
+      ``free``.
+    * Light fixtures come from the scene's ``default_lighting`` config (``synth.habitat_lighting``).
+    ``structure=False`` keeps the older reading: the stage is one mesh without structure and
+    articulated objects are skipped (listed in ``layout.meta["skipped_articulated"]``).
+
 Not supported
-    * Articulated objects (``articulated_object_instances``, URDF): not loaded; their template names
-      are listed in ``layout.meta["skipped_articulated"]``.
-    * Room structure: ``Stage.rooms``, ``walls`` and ``openings`` stay empty. Structure boxes (walls,
-      floors, ceilings) are not derived from ReplicaCAD stage meshes; the stage is one mesh asset.
     * Object or stage configs with a non-default ``up``/``front`` frame, scaled stages, a stage
-      ``origin`` other than zero (all rejected with ``SceneFormatError``); lighting, navmeshes,
-      semantic descriptors, ``units_to_meters``, ``is_instance_visible`` and ``user_defined``
-      are ignored.
+      ``origin`` other than zero (all rejected with ``SceneFormatError``); navmeshes, semantic
+      descriptors, ``units_to_meters``, ``is_instance_visible`` and ``user_defined`` are ignored.
 """
 
 from __future__ import annotations
 
-import json
 import logging
-import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import trimesh
-
 from formats.boxes import MAX_OBJECT_ID
-from formats.errors import SceneFormatError, UnknownNameError
+from formats.errors import UnknownNameError
 
 from .classes import ClassTable, class_table
+from .habitat_format import (  # noqa: F401 - Y_UP_TO_Z_UP, ASSET_PREFIX, URDF_PREFIX: re-exported for readers
+    ASSET_PREFIX, MIN_EXTENT, MOTION_TYPES, UNKNOWN_CLASS, URDF_PREFIX, Y_UP_TO_Z_UP, ConfigFinder, asset_name, check_frame,
+    convert_quat, dataset_root, fail, hab_matrix, mapping, number, numbers, quat, read_json, render_asset, string,
+    translation_origin, vec,
+)
+from .gltf import glb_geometry
+from .mesh_assets import load_asset_mesh  # noqa: F401 - part of this module's interface
 from .scene import Layout, ObjectInstance, Stage
 
 log = logging.getLogger(__name__)
 
-Y_UP_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
-"""Maps ReplicaCAD/habitat world coordinates (Y up, -Z forward) to ours (Z up): (x, y, z) -> (x, -z, y)."""
+__all__ = ["ASSET_PREFIX", "URDF_PREFIX", "Y_UP_TO_Z_UP", "infer_supports", "list_scenes", "load_asset_mesh", "load_replicacad"]
 
-ASSET_PREFIX = "replicacad:"
+LIGHTING_SUFFIX = ".lighting_config.json"
+SUPPORT_SNAP = 0.03  # m: an object whose bottom is this close to the floor or to another object's top rests on it
 SCENE_SUFFIX = ".scene_instance.json"
 OBJECT_SUFFIX = ".object_config.json"
 STAGE_SUFFIX = ".stage_config.json"
-MOTION_TYPES = ("STATIC", "KINEMATIC", "DYNAMIC")
-UNKNOWN_CLASS = "other"
-MIN_EXTENT = 1e-3  # metres; flat meshes (pictures, rugs) get boxes at least this thick
-
-_DEFAULT_UP = (0.0, 1.0, 0.0)
-_DEFAULT_FRONT = (0.0, 0.0, -1.0)
 _C = Y_UP_TO_Z_UP
-
-# --------------------------------------------------------------------------------------------
-# field checks: every error names the file and the field
-
-
-def _fail(file, field: str | None, msg: str):
-    raise SceneFormatError(file, field, msg)
-
-
-def _number(file, v, field: str, positive: bool = False) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
-        _fail(file, field, f"expected a finite number, got {v!r}")
-    if positive and v <= 0:
-        _fail(file, field, f"must be > 0, got {v!r}")
-    return float(v)
-
-
-def _numbers(file, v, field: str, n: int, what: str = "", positive: bool = False) -> np.ndarray:
-    ok = isinstance(v, list) and len(v) == n and all(
-        not isinstance(x, bool) and isinstance(x, (int, float)) and math.isfinite(float(x)) for x in v
-    )
-    if not ok:
-        _fail(file, field, f"expected {n} numbers{what}, got {v!r}")
-    if positive and any(x <= 0 for x in v):
-        _fail(file, field, f"expected {n} numbers > 0{what}, got {v!r}")
-    return np.array([float(x) for x in v])
-
-
-def _quat(file, v, field: str) -> np.ndarray:
-    q = _numbers(file, v, field, 4, " (w, x, y, z)")
-    n = float(np.linalg.norm(q))
-    if abs(n - 1.0) > 1e-3:
-        _fail(file, field, f"expected a unit quaternion (w, x, y, z), got {v!r} (norm {n:.4f})")
-    return q / n
-
-
-def _string(file, v, field: str) -> str:
-    if not isinstance(v, str) or not v:
-        _fail(file, field, f"expected a non-empty string, got {v!r}")
-    return v
-
-
-def _mapping(file, v, field: str | None) -> dict:
-    if not isinstance(v, dict):
-        _fail(file, field, f"expected a JSON object, got {type(v).__name__}")
-    return v
-
-
-def _read_json(path: Path):
-    if not path.is_file():
-        _fail(path, None, "file not found")
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError) as e:
-        problem = f"cannot read: {e}"
-    except ValueError as e:  # json.JSONDecodeError
-        problem = f"malformed JSON: {e}"
-    _fail(path, None, problem)
-
-
-def _check_frame(file, cfg: dict) -> None:
-    """Accept only the glTF default frame (up +Y, front -Z), given or implied."""
-    up = _numbers(file, cfg["up"], "up", 3) if "up" in cfg else np.array(_DEFAULT_UP)
-    front = _numbers(file, cfg["front"], "front", 3) if "front" in cfg else np.array(_DEFAULT_FRONT)
-    for field, vec, ref in (("up", up, _DEFAULT_UP), ("front", front, _DEFAULT_FRONT)):
-        n = np.linalg.norm(vec)
-        if n == 0 or not np.allclose(vec / n, ref, atol=1e-6):
-            _fail(file, field, f"only the default frame (up {list(_DEFAULT_UP)}, front {list(_DEFAULT_FRONT)}) "
-                               f"is supported, got {cfg.get(field)!r}")
-
-
-def _translation_origin(file, v, field: str) -> str | None:
-    """'asset_local', 'COM' or None (unknown / not given)."""
-    if v is None:
-        return None
-    s = _string(file, v, field).lower()
-    if s == "asset_local":
-        return "asset_local"
-    if s == "com":
-        return "COM"
-    if s == "unknown":
-        return None
-    _fail(file, field, f"expected 'asset_local' or 'COM', got {v!r}")
-
 
 # --------------------------------------------------------------------------------------------
 # dataset paths
 
 
-def _root(root) -> Path:
-    p = Path(root).expanduser()
-    if not p.is_dir():
-        _fail(p, None, "ReplicaCAD dataset folder not found")
-    return p.resolve()
-
-
 def list_scenes(root) -> list[str]:
     """Names of the scenes in ``<root>/configs/scenes`` (``apt_0``, ``v3_sc0_staging_00``, ...)."""
-    d = _root(root) / "configs" / "scenes"
+    d = dataset_root(root) / "configs" / "scenes"
     if not d.is_dir():
-        _fail(d, None, "folder not found (not a ReplicaCAD dataset root?)")
+        fail(d, None, "folder not found (not a ReplicaCAD dataset root?)")
     return sorted(p.name[: -len(SCENE_SUFFIX)] for p in d.glob("*" + SCENE_SUFFIX) if p.is_file())
-
-
-class _ConfigFinder:
-    """Template name -> config file, the way habitat-sim matches handles against registered configs."""
-
-    def __init__(self, root: Path, folder: str, suffix: str):
-        self.root, self.folder, self.suffix = root, folder, suffix
-        self._index: dict[str, list[Path]] | None = None
-
-    def find(self, template: str) -> Path | None:
-        t = template.replace("\\", "/").strip("/")
-        if t.endswith(self.suffix):
-            t = t[: -len(self.suffix)]
-        base = t.rsplit("/", 1)[-1]
-        configs = self.root / "configs"
-        for cand in (configs / f"{t}{self.suffix}", configs / self.folder / f"{base}{self.suffix}"):
-            if cand.is_file():
-                return cand
-        if self._index is None:
-            self._index = {}
-            for p in sorted((configs / self.folder).rglob("*" + self.suffix)):
-                self._index.setdefault(p.name[: -len(self.suffix)], []).append(p)
-        hits = self._index.get(base, [])
-        for p in hits:
-            if p.as_posix()[: -len(self.suffix)].endswith("/" + t):
-                return p
-        return hits[0] if hits else None
-
-
-def _asset_name(root: Path, glb: Path) -> str:
-    return ASSET_PREFIX + Path(os.path.relpath(glb, root)).as_posix()
-
-
-def _render_asset(root: Path, config: Path, cfg: dict) -> Path:
-    rel = _string(config, cfg.get("render_asset"), "render_asset")
-    glb = Path(os.path.normpath(config.parent / rel))
-    if not glb.is_file():
-        _fail(config, "render_asset", f"GLB not found: {glb}")
-    return glb
-
-
-# --------------------------------------------------------------------------------------------
-# meshes
-
-_MESH_CACHE: dict[tuple[str, int, int], trimesh.Trimesh] = {}
-_MESH_CACHE_MAX = 64
-
-
-def _read_glb(path: Path) -> trimesh.Trimesh:
-    """All triangles of a GLB (node transforms applied), in the file's own Y-up frame."""
-    mesh = None
-    err: Exception | None = None
-    for kwargs in ({}, {"skip_materials": True}):  # textures that fail to decode: geometry only
-        try:
-            mesh = trimesh.load(str(path), file_type="glb", force="mesh", process=False, **kwargs)
-            break
-        except Exception as e:  # noqa: BLE001 - trimesh raises many types for broken files
-            err = e
-    if mesh is None:
-        _fail(path, None, f"cannot read GLB: {err}")
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        _fail(path, None, "GLB has no triangles")
-    return mesh
-
-
-def _converted_mesh(path: Path) -> trimesh.Trimesh:
-    """The GLB's mesh with vertices ``C v`` (cached by path, size and modification time)."""
-    st = path.stat()
-    key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
-    mesh = _MESH_CACHE.get(key)
-    if mesh is None:
-        mesh = _read_glb(path)
-        T = np.eye(4)
-        T[:3, :3] = _C
-        mesh.apply_transform(T)
-        if len(_MESH_CACHE) >= _MESH_CACHE_MAX:
-            _MESH_CACHE.pop(next(iter(_MESH_CACHE)))
-        _MESH_CACHE[key] = mesh
-    return mesh
-
-
-def load_asset_mesh(root, asset: str) -> trimesh.Trimesh:
-    """Mesh of ``"replicacad:<glb path relative to root>"`` in our Z-up local frame, unscaled.
-
-    Vertices are ``Y_UP_TO_Z_UP @ v`` for the GLB's vertices ``v`` (node transforms applied). Place it
-    with ``ObjectInstance.scale`` (per axis, first) and then ``ObjectInstance.matrix()``; for the
-    stage with ``Stage.position``/``Stage.rotation``. Returns a new copy on every call.
-    """
-    r = _root(root)
-    if not isinstance(asset, str) or not asset.startswith(ASSET_PREFIX) or len(asset) == len(ASSET_PREFIX):
-        raise UnknownNameError(f"not a ReplicaCAD asset name: {asset!r} (expected '{ASSET_PREFIX}<relative glb path>')")
-    path = r / asset[len(ASSET_PREFIX):]
-    if not path.is_file():
-        _fail(path, None, f"GLB not found (asset {asset!r})")
-    return _converted_mesh(path).copy()
-
-
-# --------------------------------------------------------------------------------------------
-# poses
-
-
-def _convert_quat(q) -> tuple[float, float, float, float]:
-    """Habitat (w, x, y, z) -> ours: the rotation C R C^T, i.e. (w, x, -z, y), with w >= 0."""
-    w, x, y, z = (float(v) for v in q)
-    out = np.array([w, x, -z, y])
-    out /= np.linalg.norm(out)
-    if out[0] < 0:
-        out = -out
-    return tuple(float(v) + 0.0 for v in out)  # + 0.0: no negative zeros in the files
-
-
-def _hab_matrix(q) -> np.ndarray:
-    w, x, y, z = q
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
-
-
-def _vec(v) -> tuple[float, float, float]:
-    return tuple(float(x) + 0.0 for x in v)
 
 
 @dataclass
@@ -331,85 +123,107 @@ class _Instance:
     asset_local: bool
 
 
+def _check_glb(glb: Path) -> None:
+    """A GLB whose textures are missing is named with the field (``images[i].uri``), before any render."""
+    try:
+        from .gltf import check_glb
+    except ImportError:  # pragma: no cover - synth.gltf is part of the package
+        return
+    check_glb(glb)
+
+
 def _object_template(root: Path, config: Path) -> _Template:
-    cfg = _mapping(config, _read_json(config), None)
-    glb = _render_asset(root, config, cfg)
-    scale = _numbers(config, cfg["scale"], "scale", 3, positive=True) if "scale" in cfg else np.ones(3)
-    com = _numbers(config, cfg["COM"], "COM", 3) if "COM" in cfg else None
-    _check_frame(config, cfg)
-    return _Template(config, glb, _asset_name(root, glb), scale, com)
+    cfg = mapping(config, read_json(config), None)
+    glb = render_asset(root, config, cfg)
+    _check_glb(glb)
+    scale = numbers(config, cfg["scale"], "scale", 3, positive=True) if "scale" in cfg else np.ones(3)
+    com = numbers(config, cfg["COM"], "COM", 3) if "COM" in cfg else None
+    check_frame(config, cfg)
+    return _Template(config, glb, asset_name(root, glb), scale, com)
 
 
-def _load_stage(root: Path, scene_path: Path, doc: dict) -> Stage:
+def _load_stage(root: Path, scene_path: Path, doc: dict, structure: bool = True) -> tuple[Stage, dict]:
     if "stage_instance" not in doc:
-        _fail(scene_path, "stage_instance", "missing (every scene needs a stage)")
-    st = _mapping(scene_path, doc["stage_instance"], "stage_instance")
-    name = _string(scene_path, st.get("template_name"), "stage_instance.template_name")
+        fail(scene_path, "stage_instance", "missing (every scene needs a stage)")
+    st = mapping(scene_path, doc["stage_instance"], "stage_instance")
+    name = string(scene_path, st.get("template_name"), "stage_instance.template_name")
     if name.upper() == "NONE":
-        _fail(scene_path, "stage_instance.template_name", "scenes without a stage ('NONE') are not supported")
-    config = _ConfigFinder(root, "stages", STAGE_SUFFIX).find(name)
+        fail(scene_path, "stage_instance.template_name", "scenes without a stage ('NONE') are not supported")
+    config = ConfigFinder(root, "stages", STAGE_SUFFIX).find(name)
     if config is None:
-        _fail(scene_path, "stage_instance.template_name",
+        fail(scene_path, "stage_instance.template_name",
               f"no stage config for '{name}' (looked for {name.rsplit('/', 1)[-1]}{STAGE_SUFFIX} under {root / 'configs'})")
-    cfg = _mapping(config, _read_json(config), None)
-    glb = _render_asset(root, config, cfg)
-    _check_frame(config, cfg)
-    if "scale" in cfg and not np.allclose(_numbers(config, cfg["scale"], "scale", 3), 1.0):
-        _fail(config, "scale", f"scaled stages are not supported, got {cfg['scale']!r}")
-    if "origin" in cfg and not np.allclose(_numbers(config, cfg["origin"], "origin", 3), 0.0):
-        _fail(config, "origin", f"a stage origin other than [0, 0, 0] is not supported, got {cfg['origin']!r}")
+    cfg = mapping(config, read_json(config), None)
+    glb = render_asset(root, config, cfg)
+    check_frame(config, cfg)
+    if "scale" in cfg and not np.allclose(numbers(config, cfg["scale"], "scale", 3), 1.0):
+        fail(config, "scale", f"scaled stages are not supported, got {cfg['scale']!r}")
+    if "origin" in cfg and not np.allclose(numbers(config, cfg["origin"], "origin", 3), 0.0):
+        fail(config, "origin", f"a stage origin other than [0, 0, 0] is not supported, got {cfg['origin']!r}")
     f = "stage_instance"
-    t = _numbers(scene_path, st["translation"], f + ".translation", 3) if "translation" in st else np.zeros(3)
-    q = _quat(scene_path, st["rotation"], f + ".rotation") if "rotation" in st else np.array([1.0, 0, 0, 0])
-    if "uniform_scale" in st and _number(scene_path, st["uniform_scale"], f + ".uniform_scale") != 1.0:
-        _fail(scene_path, f + ".uniform_scale", f"scaled stages are not supported, got {st['uniform_scale']!r}")
-    if "non_uniform_scale" in st and not np.allclose(_numbers(scene_path, st["non_uniform_scale"], f + ".non_uniform_scale", 3), 1.0):
-        _fail(scene_path, f + ".non_uniform_scale", f"scaled stages are not supported, got {st['non_uniform_scale']!r}")
+    t = numbers(scene_path, st["translation"], f + ".translation", 3) if "translation" in st else np.zeros(3)
+    q = quat(scene_path, st["rotation"], f + ".rotation") if "rotation" in st else np.array([1.0, 0, 0, 0])
+    if "uniform_scale" in st and number(scene_path, st["uniform_scale"], f + ".uniform_scale") != 1.0:
+        fail(scene_path, f + ".uniform_scale", f"scaled stages are not supported, got {st['uniform_scale']!r}")
+    if "non_uniform_scale" in st and not np.allclose(numbers(scene_path, st["non_uniform_scale"], f + ".non_uniform_scale", 3), 1.0):
+        fail(scene_path, f + ".non_uniform_scale", f"scaled stages are not supported, got {st['non_uniform_scale']!r}")
 
-    position = _vec(_C @ t)
-    rotation = _convert_quat(q)
-    mesh = _converted_mesh(glb)
-    R = _hab_matrix(rotation)  # same formula, our frame
-    z = mesh.vertices @ R[2] + position[2]
-    zmin, zmax = float(z.min()), float(z.max())
-    if zmax - zmin <= 0:
-        _fail(glb, None, "stage mesh has no height")
-    return Stage(ceiling_height=zmax - zmin, floor_z=zmin, asset=_asset_name(root, glb), position=position, rotation=rotation)
+    position = vec(_C @ t)
+    rotation = convert_quat(q)
+    _check_glb(glb)
+    mesh = glb_geometry(glb)
+    R = hab_matrix(rotation)  # same formula, our frame
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, position
+    world = mesh.copy()
+    world.apply_transform(T)
+    if float(np.ptp(world.vertices[:, 2])) <= 0:
+        fail(glb, None, "stage mesh has no height")
+    if not structure:
+        z = world.vertices[:, 2]
+        zmin, zmax = float(z.min()), float(z.max())
+        return Stage(ceiling_height=zmax - zmin, floor_z=zmin, asset=asset_name(root, glb), position=position, rotation=rotation), {}
+    from .stage_structure import derive_structure
+
+    st = derive_structure(world, str(glb))
+    stage = Stage(ceiling_height=st.ceiling_height, floor_z=st.floor_z, rooms=st.rooms, walls=st.walls, openings=st.openings,
+                  asset=asset_name(root, glb), position=position, rotation=rotation)
+    return stage, st.report
 
 
 def _parse_instances(root: Path, scene_path: Path, doc: dict, classes: ClassTable) -> list[_Instance]:
     raw = doc.get("object_instances", [])
     if not isinstance(raw, list):
-        _fail(scene_path, "object_instances", f"expected a list, got {type(raw).__name__}")
+        fail(scene_path, "object_instances", f"expected a list, got {type(raw).__name__}")
     if len(raw) > MAX_OBJECT_ID:
-        _fail(scene_path, "object_instances", f"{len(raw)} objects; at most {MAX_OBJECT_ID} are supported")
-    scene_origin = _translation_origin(scene_path, doc.get("translation_origin"), "translation_origin")
-    finder = _ConfigFinder(root, "objects", OBJECT_SUFFIX)
+        fail(scene_path, "object_instances", f"{len(raw)} objects; at most {MAX_OBJECT_ID} are supported")
+    scene_origin = translation_origin(scene_path, doc.get("translation_origin"), "translation_origin")
+    finder = ConfigFinder(root, "objects", OBJECT_SUFFIX)
     templates: dict[Path, _Template] = {}
     out = []
     for i, inst in enumerate(raw):
         f = f"object_instances[{i}]"
-        _mapping(scene_path, inst, f)
-        name = _string(scene_path, inst.get("template_name"), f + ".template_name")
-        t = _numbers(scene_path, inst["translation"], f + ".translation", 3) if "translation" in inst else np.zeros(3)
-        q = _quat(scene_path, inst["rotation"], f + ".rotation") if "rotation" in inst else np.array([1.0, 0, 0, 0])
+        mapping(scene_path, inst, f)
+        name = string(scene_path, inst.get("template_name"), f + ".template_name")
+        t = numbers(scene_path, inst["translation"], f + ".translation", 3) if "translation" in inst else np.zeros(3)
+        q = quat(scene_path, inst["rotation"], f + ".rotation") if "rotation" in inst else np.array([1.0, 0, 0, 0])
         scale = np.ones(3)
         if "uniform_scale" in inst:
-            scale = scale * _number(scene_path, inst["uniform_scale"], f + ".uniform_scale", positive=True)
+            scale = scale * number(scene_path, inst["uniform_scale"], f + ".uniform_scale", positive=True)
         if "non_uniform_scale" in inst:
-            scale = scale * _numbers(scene_path, inst["non_uniform_scale"], f + ".non_uniform_scale", 3, positive=True)
+            scale = scale * numbers(scene_path, inst["non_uniform_scale"], f + ".non_uniform_scale", 3, positive=True)
         if "motion_type" in inst:
-            mt = _string(scene_path, inst["motion_type"], f + ".motion_type").upper()
+            mt = string(scene_path, inst["motion_type"], f + ".motion_type").upper()
             if mt not in MOTION_TYPES:
-                _fail(scene_path, f + ".motion_type", f"expected one of {', '.join(MOTION_TYPES)}, got {inst['motion_type']!r}")
+                fail(scene_path, f + ".motion_type", f"expected one of {', '.join(MOTION_TYPES)}, got {inst['motion_type']!r}")
         else:
             mt = "UNDEFINED"
-        origin = _translation_origin(scene_path, inst.get("translation_origin"), f + ".translation_origin")
+        origin = translation_origin(scene_path, inst.get("translation_origin"), f + ".translation_origin")
         asset_local = origin == "asset_local" or (origin is None and scene_origin == "asset_local")
         config = finder.find(name)
         if config is None:
             base = name.replace("\\", "/").rsplit("/", 1)[-1]
-            _fail(scene_path, f + ".template_name",
+            fail(scene_path, f + ".template_name",
                   f"no object config for '{name}' (looked for {base}{OBJECT_SUFFIX} under {root / 'configs' / 'objects'})")
         if config not in templates:
             templates[config] = _object_template(root, config)
@@ -421,19 +235,19 @@ def _parse_instances(root: Path, scene_path: Path, doc: dict, classes: ClassTabl
 def _articulated_names(scene_path: Path, doc: dict) -> list[str]:
     raw = doc.get("articulated_object_instances", [])
     if not isinstance(raw, list):
-        _fail(scene_path, "articulated_object_instances", f"expected a list, got {type(raw).__name__}")
+        fail(scene_path, "articulated_object_instances", f"expected a list, got {type(raw).__name__}")
     names = []
     for i, a in enumerate(raw):
         f = f"articulated_object_instances[{i}]"
-        _mapping(scene_path, a, f)
-        names.append(_string(scene_path, a.get("template_name"), f + ".template_name"))
+        mapping(scene_path, a, f)
+        names.append(string(scene_path, a.get("template_name"), f + ".template_name"))
     return names
 
 
 def _object(inst: _Instance, oid: int, cls: str) -> ObjectInstance:
-    mesh = _converted_mesh(inst.template.glb)  # vertices C v, unscaled
+    mesh = glb_geometry(inst.template.glb)  # vertices C v, unscaled
     S_h = inst.scale
-    R_h = _hab_matrix(inst.rotation)
+    R_h = hab_matrix(inst.rotation)
     if inst.asset_local:
         origin_h = np.zeros(3)
     elif inst.template.com is not None:
@@ -447,35 +261,113 @@ def _object(inst: _Instance, oid: int, cls: str) -> ObjectInstance:
         id=oid,
         cls=cls,
         asset=inst.template.asset,
-        position=_vec(position),
-        rotation=_convert_quat(inst.rotation),
-        size=_vec(np.maximum(hi - lo, MIN_EXTENT)),
-        box_offset=_vec((lo + hi) / 2.0),
+        position=vec(position),
+        rotation=convert_quat(inst.rotation),
+        size=vec(np.maximum(hi - lo, MIN_EXTENT)),
+        box_offset=vec((lo + hi) / 2.0),
         support="free",  # ReplicaCAD places objects by physics: no support relation is recorded
         movable=inst.motion_type != "STATIC",
-        scale=_vec(scale),
+        scale=vec(scale),
         params={"template": inst.template_name, "motion_type": inst.motion_type},
     )
 
 
-def load_replicacad(root, scene: str, classes: ClassTable | None = None, allow_unknown: bool = False) -> Layout:
+def _lighting_config(root: Path, scene_path: Path, doc: dict) -> Path | None:
+    """The scene's ``default_lighting`` config file, or None when it names none ("", "default", "no_lights")."""
+    name = doc.get("default_lighting")
+    if name is None:
+        return None
+    name = string(scene_path, name, "default_lighting") if name != "" else ""
+    if name.lower() in ("", "default", "no_lights", "none"):
+        return None
+    config = ConfigFinder(root, "lighting", LIGHTING_SUFFIX).find(name)
+    if config is None:
+        fail(scene_path, "default_lighting",
+              f"no lighting config for '{name}' (looked for {name.rsplit('/', 1)[-1]}{LIGHTING_SUFFIX} under {root / 'configs'})")
+    return config
+
+
+def infer_supports(objects: list[ObjectInstance], floor_z: float, root=None) -> list[ObjectInstance]:
+    """What each object rests on, from the boxes and the supporting surfaces of the meshes
+    (ReplicaCAD records no support relation).
+
+    An object whose box bottom lies within ``SUPPORT_SNAP`` of the floor stands on the floor; else one
+    whose bottom lies within it of a supporting surface of another object (``synth.placement.
+    mesh_surfaces``: the box top, a seat, a shelf board), with its footprint centre on that surface,
+    stands on it (``object:<id>:<surface>``; the highest such surface); else one whose bottom meets
+    the top of another object's box that its footprint overlaps stands on that object (surface 0;
+    objects of classes that hold nothing); else it stays ``free`` (hanging, leaning, or placed by
+    physics in a way boxes do not explain). A supported object is moved vertically onto its support
+    (physics leaves gaps of a few millimetres; the shift is recorded in ``params.snapped_m``), so the
+    layout checks, which allow 3 mm, hold. Objects are processed bottom-up so that a stack snaps in
+    order.
+    """
+    from . import geometry as geo
+    from .placement import mesh_surfaces
+    from .scene import object_box
+
+    by_z = sorted(objects, key=lambda o: (object_box(o).zmin, o.id))
+    placed: dict[int, ObjectInstance] = {}
+    for o in by_z:
+        box = object_box(o)
+        support, target = "free", None
+        centre = np.asarray(box.center[:2], float)
+        if abs(box.zmin - floor_z) <= SUPPORT_SNAP:
+            support, target = "floor", floor_z
+        else:
+            best = None
+            for p in placed.values():
+                pb = object_box(p)
+                if pb.zmin >= box.zmin:
+                    continue
+                local = geo.rot_z(p.yaw)[:2, :2].T @ (centre - np.asarray(p.position[:2], float))
+                for k, srf in enumerate(mesh_surfaces(p, root) if root is not None else []):
+                    zs = p.position[2] + srf.z
+                    if abs(zs - box.zmin) <= SUPPORT_SNAP and srf.xmin <= local[0] <= srf.xmax and srf.ymin <= local[1] <= srf.ymax:
+                        if best is None or zs > best[2]:
+                            best = (p.id, k, zs)
+                if best is None or best[0] != p.id:
+                    if abs(pb.zmax - box.zmin) <= SUPPORT_SNAP and geo.polygons_overlap_2d(pb.corners_2d(), box.corners_2d()):
+                        if best is None or pb.zmax > best[2]:
+                            best = (p.id, 0, pb.zmax)
+            if best is not None:
+                support, target = f"object:{best[0]}:{best[1]}", best[2]
+        params = dict(o.params)
+        pos = o.position
+        if target is not None and box.zmin != target:
+            dz = target - box.zmin
+            pos = (pos[0], pos[1], pos[2] + dz)
+            if abs(dz) >= 5e-5:
+                params["snapped_m"] = round(dz, 4)
+        placed[o.id] = ObjectInstance(o.id, o.cls, o.asset, pos, o.rotation, o.size, o.box_offset, support, o.movable, o.scale, params)
+    return [placed[o.id] for o in objects]
+
+
+def load_replicacad(root, scene: str, classes: ClassTable | None = None, allow_unknown: bool = False,
+                    structure: bool = True) -> Layout:
     """Read ``<root>/configs/scenes/<scene>.scene_instance.json`` into a Layout (see the module docstring).
 
-    Object ids are 1.. in file order of ``object_instances``; classes come from
+    Object ids are 1.. in file order of ``object_instances``, then the articulated objects
+    (``articulated_object_instances``, one static object each: ``synth.urdf``); classes come from
     ``ClassTable.replicacad_class``. Templates without a class rule raise ``UnknownNameError``
     naming all of them, unless ``allow_unknown`` maps them to class ``"other"``. Bad files or
     fields raise ``SceneFormatError`` naming the file and the field.
+
+    With ``structure`` (the default) the stage's walls, openings, rooms, floor and ceiling are
+    derived from its mesh (``synth.stage_structure``), supports are inferred (``infer_supports``) and
+    light fixtures come from the scene's lighting config (``synth.habitat_lighting``); without it
+    the stage is one mesh with no structure, as before (for datasets whose stage the derivation
+    cannot read).
     """
-    r = _root(root)
+    r = dataset_root(root)
     classes = classes or class_table()
     scene_path = r / "configs" / "scenes" / f"{scene}{SCENE_SUFFIX}"
     if not isinstance(scene, str) or not scene or not scene_path.is_file():
         known = ", ".join(list_scenes(r)) if (r / "configs" / "scenes").is_dir() else "none"
-        _fail(scene_path, None, f"scene {scene!r} not found; scenes in {r}: {known or 'none'}")
-    doc = _mapping(scene_path, _read_json(scene_path), "(top level)")
+        fail(scene_path, None, f"scene {scene!r} not found; scenes in {r}: {known or 'none'}")
+    doc = mapping(scene_path, read_json(scene_path), "(top level)")
 
     instances = _parse_instances(r, scene_path, doc, classes)
-    skipped = _articulated_names(scene_path, doc)
     unknown = sorted({inst.template_name for inst in instances if inst.cls is None})
     if unknown and not allow_unknown:
         raise UnknownNameError(
@@ -487,10 +379,29 @@ def load_replicacad(root, scene: str, classes: ClassTable | None = None, allow_u
     for inst in instances:
         if inst.cls is not None and classes.get(inst.cls).structure:
             raise UnknownNameError(f"{scene_path}: template '{inst.template_name}' maps to structure class '{inst.cls}'")
+    lighting = _lighting_config(r, scene_path, doc) if structure else None
 
-    stage = _load_stage(r, scene_path, doc)
+    stage, report = _load_stage(r, scene_path, doc, structure)
     objects = [_object(inst, k + 1, inst.cls or UNKNOWN_CLASS) for k, inst in enumerate(instances)]
-    if skipped:
-        log.info("%s: skipped %d articulated object(s) (URDF, not supported): %s", scene_path, len(skipped), ", ".join(skipped))
-    meta = {"source": "replicacad", "root": str(r), "scene": scene, "skipped_articulated": skipped}
-    return Layout(name=scene, stage=stage, objects=objects, meta=meta)
+    meta = {"source": "replicacad", "root": str(r), "scene": scene}
+    if structure:
+        from .urdf import load_articulated_instances
+
+        objects += load_articulated_instances(r, scene_path, doc, len(objects) + 1, classes, allow_unknown=allow_unknown)
+        if len(objects) > MAX_OBJECT_ID:
+            fail(scene_path, "articulated_object_instances", f"{len(objects)} objects in all; at most {MAX_OBJECT_ID} are supported")
+        objects = infer_supports(objects, stage.floor_z, r)
+        meta["structure"] = report
+    else:
+        skipped = _articulated_names(scene_path, doc)
+        meta["skipped_articulated"] = skipped
+        if skipped:
+            log.info("%s: skipped %d articulated object(s): %s", scene_path, len(skipped), ", ".join(skipped))
+    layout = Layout(name=scene, stage=stage, objects=objects, meta=meta)
+    if structure:
+        from .habitat_lighting import fixtures_for_imported, read_lighting_config
+
+        lights = read_lighting_config(lighting) if lighting is not None else []
+        layout.fixtures = fixtures_for_imported(layout, lights)
+        meta["lighting_config"] = None if lighting is None else Path(os.path.relpath(lighting, r)).as_posix()
+    return layout

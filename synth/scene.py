@@ -42,6 +42,7 @@ from .classes import ClassTable, class_table
 from .resources import layouts_dir
 
 FORMAT = "synth-layout/1"
+MESH_ASSET_PREFIXES = ("replicacad:", "replicacad-urdf:")  # mesh assets, relative to the layout's meta.root
 
 # --------------------------------------------------------------------------------------------
 # stored precision
@@ -192,7 +193,8 @@ class Stage:
 class ObjectInstance:
     id: int
     cls: str
-    asset: str  # "proc:<class>" (synth.assets generator) or "replicacad:<glb path relative to meta.root>"
+    asset: str  # "proc:<class>" (synth.assets generator), "replicacad:<glb path relative to meta.root>" or
+    #             "replicacad-urdf:<urdf path relative to meta.root>" (an articulated object in its default joint state)
     position: tuple[float, float, float]
     rotation: geo.Quat
     size: tuple[float, float, float]
@@ -554,8 +556,8 @@ def layout_from_dict(doc, source: str = "<memory>", classes: ClassTable | None =
             gen = asset[5:]
             if gen not in classes or classes.get(gen).structure:
                 rd.fail(f + ".asset", f"unknown procedural asset '{gen}' (generators exist for the object classes of {classes.source})")
-        elif not asset.startswith("replicacad:") or len(asset) == len("replicacad:"):
-            rd.fail(f + ".asset", f"expected 'proc:<class>' or 'replicacad:<glb path>', got {asset!r}")
+        elif not any(asset.startswith(pre) and len(asset) > len(pre) for pre in MESH_ASSET_PREFIXES):
+            rd.fail(f + ".asset", f"expected 'proc:<class>', 'replicacad:<glb path>' or 'replicacad-urdf:<urdf path>', got {asset!r}")
         objects.append(ObjectInstance(
             id=oid, cls=cls, asset=asset, position=rd.vec(o["position"], f + ".position", 3), rotation=rot, size=size,
             box_offset=rd.vec(o.get("box_offset", [0.0, 0.0, size[2] / 2.0]), f + ".box_offset", 3),

@@ -2,9 +2,25 @@
 
 Objects are matched by id. An object "moved" by the distance between its box centres in the two
 layouts; the median is taken over the objects that moved by more than 0.1 m.
+
+Scenes of another size (``scaled_ranges``)
+    ``PAPER_RANGES`` are the paper's numbers for an apartment of apt_0's size (82 movable objects,
+    97 m2). For another layout ``ref`` (an imported ReplicaCAD scene) the counts scale by
+    f = (movable objects of ref) / (movable objects of the built-in apt_0), where an object counts
+    when it is movable and its support is not ``free`` (the operator does not move those): a range
+    (lo, hi) becomes (floor(lo f), ceil(hi f)), at least 1 where the paper's lower bound is, and
+    never empty. The distances keep the paper's range where the flat allows: the median-moved
+    range is multiplied by min(1, L(ref) / L(apt_0)), where L is the mean distance between two
+    points drawn uniformly on the flat's floor (the union of its room rectangles, computed on a
+    grid; about 5.2 m for apt_0). A flat at least as large as apt_0 keeps 1.9-3.5 m; a smaller one
+    asks for proportionally shorter moves, since moving a thing across a small flat cannot take it
+    as far. ``scaled_ranges(apt_0)`` is ``PAPER_RANGES``.
 """
 
 from __future__ import annotations
+
+import functools
+import math
 
 import numpy as np
 
@@ -46,3 +62,87 @@ def change_stats(ref: Layout, var: Layout) -> dict:
 
 def within_paper_ranges(stats: dict) -> dict[str, bool]:
     return {k: lo <= stats[k] <= hi for k, (lo, hi) in PAPER_RANGES.items()}
+
+
+# --------------------------------------------------------------------------------------------
+# scenes of another size
+
+
+def is_imported(layout: Layout) -> bool:
+    """True for a layout that is not the procedural kind: imported from ReplicaCAD (``meta["source"]``)
+    or holding any object whose asset is not procedural."""
+    return layout.meta.get("source") == "replicacad" or any(not o.asset.startswith("proc:") for o in layout.objects)
+
+
+def movable_counts(layout: Layout) -> dict[str, int]:
+    """Movable objects the operator may move (support not ``free``): in all and per support kind
+    (``floor``, ``surface`` -- standing on another object --, ``wall``)."""
+    objs = [o for o in layout.objects if o.movable and o.support != "free"]
+    return {
+        "total": len(objs),
+        "floor": sum(o.support == "floor" for o in objs),
+        "surface": sum(o.support.startswith("object:") for o in objs),
+        "wall": sum(o.support.startswith("wall:") for o in objs),
+    }
+
+
+def flat_mean_distance(layout: Layout, max_cells: int = 3000) -> float:
+    """Mean distance (m) between two points drawn uniformly on the floor of the flat (the union of
+    its room rectangles), on a grid of at least 0.25 m and at most ``max_cells`` cells; 0 without rooms."""
+    rooms = layout.stage.rooms
+    if not rooms:
+        return 0.0
+    area = sum(r.area for r in rooms)
+    step = max(0.25, math.sqrt(area / max_cells))
+    x0, y0 = min(r.rect[0] for r in rooms), min(r.rect[1] for r in rooms)
+    x1, y1 = max(r.rect[2] for r in rooms), max(r.rect[3] for r in rooms)
+    xs = x0 + (np.arange(max(1, int(math.ceil((x1 - x0) / step)))) + 0.5) * step
+    ys = y0 + (np.arange(max(1, int(math.ceil((y1 - y0) / step)))) + 0.5) * step
+    gx, gy = np.meshgrid(xs, ys)
+    pts = np.stack([gx.ravel(), gy.ravel()], axis=1)
+    inside = np.zeros(len(pts), bool)
+    for r in rooms:
+        inside |= (pts[:, 0] >= r.rect[0]) & (pts[:, 0] <= r.rect[2]) & (pts[:, 1] >= r.rect[1]) & (pts[:, 1] <= r.rect[3])
+    p = pts[inside]
+    if len(p) < 2:
+        return 0.0
+    total = 0.0
+    for k in range(0, len(p), 512):  # blocks: bounded memory
+        d = p[k : k + 512, None, :] - p[None, :, :]
+        total += float(np.sqrt((d * d).sum(axis=2)).sum())
+    return total / (len(p) * len(p))
+
+
+@functools.lru_cache(maxsize=1)
+def reference_counts() -> tuple[dict[str, int], float]:
+    """``movable_counts`` and ``flat_mean_distance`` of the built-in apt_0 (what ``PAPER_RANGES`` and
+    the default ``RearrangePlan`` are for)."""
+    from .scene import load_layout
+
+    apt0 = load_layout("apt_0")
+    return movable_counts(apt0), flat_mean_distance(apt0)
+
+
+def count_scale(layout: Layout) -> float:
+    """f = movable objects of ``layout`` / movable objects of the built-in apt_0 (see the module docstring)."""
+    return movable_counts(layout)["total"] / reference_counts()[0]["total"]
+
+
+def distance_scale(layout: Layout) -> float:
+    """min(1, L(layout) / L(apt_0)) with L = ``flat_mean_distance``."""
+    return min(1.0, flat_mean_distance(layout) / reference_counts()[1])
+
+
+def scaled_ranges(ref: Layout, ranges: dict = PAPER_RANGES) -> dict:
+    """``ranges`` (the paper's) for a layout of ``ref``'s size (rules in the module docstring)."""
+    f, d = count_scale(ref), distance_scale(ref)
+    out = {}
+    for k, (lo, hi) in ranges.items():
+        if k == "moved_median_m":
+            out[k] = (round(lo * d, 2), round(hi * d, 2))
+            continue
+        a = math.floor(lo * f + 1e-9)
+        if lo > 0:
+            a = max(1, a)
+        out[k] = (a, max(a, math.ceil(hi * f - 1e-9)))
+    return out

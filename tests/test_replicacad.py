@@ -1,5 +1,10 @@
 """synth.replicacad: a tiny ReplicaCAD-shaped dataset built here, expected values worked out by hand.
 
+These tests cover the conversion of scene instances, poses, scales and frames, so they import with
+``structure=False`` (the stage stays one mesh, articulated objects are skipped); the full import
+(structure from the stage mesh, URDF furniture, supports, fixtures) is tested on the
+ReplicaCAD-shaped fixture in tests/test_replicacad_import.py.
+
 Frames: habitat/glTF is Y up, -Z forward; ours is Z up. C maps (x, y, z) -> (x, -z, y).
 """
 
@@ -133,7 +138,7 @@ def dataset(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def layout(dataset):
-    return load_replicacad(dataset, SCENE, classes=CLASSES, allow_unknown=True)
+    return load_replicacad(dataset, SCENE, classes=CLASSES, allow_unknown=True, structure=False)
 
 
 def _scene_file(root: Path) -> Path:
@@ -285,14 +290,14 @@ def test_one_vertex_by_hand(layout, dataset):
 
 def test_unknown_template(dataset):
     with pytest.raises(UnknownNameError) as e:
-        load_replicacad(dataset, SCENE, classes=CLASSES)
+        load_replicacad(dataset, SCENE, classes=CLASSES, structure=False)
     assert "frl_apartment_zzgadget" in str(e.value)
     assert "chair" not in str(e.value)
 
 
 def test_default_class_table(tmp_path):
     root = _make_dataset(tmp_path / "d", instances=INSTANCES[:2])
-    lay = load_replicacad(root, SCENE)
+    lay = load_replicacad(root, SCENE, structure=False)
     assert [o.cls for o in lay.objects] == ["chair", "chair"]
 
 
@@ -306,7 +311,7 @@ def test_round_trip(layout, tmp_path):
 
 def _error(root: Path, **kw) -> str:
     with pytest.raises(SceneFormatError) as e:
-        load_replicacad(root, SCENE, classes=CLASSES, allow_unknown=True, **kw)
+        load_replicacad(root, SCENE, classes=CLASSES, allow_unknown=True, **kw, structure=False)
     return str(e.value)
 
 
@@ -366,12 +371,12 @@ def test_non_default_frame_rejected(tmp_path):
 
 def test_missing_root_and_scene(tmp_path):
     with pytest.raises(SceneFormatError, match="not found"):
-        load_replicacad(tmp_path / "nowhere", SCENE, classes=CLASSES)
+        load_replicacad(tmp_path / "nowhere", SCENE, classes=CLASSES, structure=False)
     with pytest.raises(SceneFormatError, match="not found"):
         list_scenes(tmp_path / "nowhere")
     root = _make_dataset(tmp_path / "d")
     with pytest.raises(SceneFormatError) as e:
-        load_replicacad(root, "apt_9", classes=CLASSES)
+        load_replicacad(root, "apt_9", classes=CLASSES, structure=False)
     assert "apt_9.scene_instance.json" in str(e.value) and SCENE in str(e.value)
 
 
@@ -396,7 +401,7 @@ def test_translation_origin_defaults_to_com(tmp_path):
         dict(INSTANCES[0], translation_origin="asset_local"),
     ])
     _edit_scene(root, lambda d: d.pop("translation_origin"))
-    a, b = load_replicacad(root, SCENE, classes=CLASSES).objects
+    a, b = load_replicacad(root, SCENE, classes=CLASSES, structure=False).objects
     # COM: the chair's box centre lands on C (1, 0.2, -3) = (1, 3, 0.2); its origin is 0.45 lower
     assert object_box(a).center == pytest.approx((1.0, 3.0, 0.2), abs=1e-6)
     assert a.position == pytest.approx((1.0, 3.0, 0.2 - 0.45), abs=1e-6)
@@ -406,13 +411,13 @@ def test_translation_origin_defaults_to_com(tmp_path):
 
 
 def test_config_com_and_scene_without_objects(dataset, tmp_path):
-    lay = load_replicacad(dataset, "other_scene", classes=CLASSES)  # stage template without folder prefix
+    lay = load_replicacad(dataset, "other_scene", classes=CLASSES, structure=False)  # stage template without folder prefix
     assert lay.objects == [] and lay.meta["skipped_articulated"] == []
     assert lay.stage.ceiling_height == pytest.approx(2.6, abs=1e-6)
 
     root = _make_dataset(tmp_path / "d", instances=[dict(INSTANCES[3], translation_origin="COM")])
     _write_json(root / "configs/objects/lights/frl_apartment_lamp_01.object_config.json",
                 {"render_asset": "../../../objects/lamp.glb", "COM": [0.3, 0.0, -0.2]})
-    (o,) = load_replicacad(root, SCENE, classes=CLASSES).objects
+    (o,) = load_replicacad(root, SCENE, classes=CLASSES, structure=False).objects
     # the config COM (0.3, 0, -0.2) is placed at (3, 0, -2): GLB origin at (2.7, 0, -1.8) -> ours (2.7, 1.8, 0)
     assert o.position == pytest.approx((2.7, 1.8, 0.0), abs=1e-12)
