@@ -45,7 +45,7 @@ from .tour import TourSpec, make_output_folder, prepare, tour_meta, write_static
 
 STATE_FILE = "job_state.json"
 SPEC_KEYS = {"name", "description", "out", "renderer", "geometry", "quality", "size", "hfov_deg", "seed", "device",
-             "chunk_size", "retries", "previews", "designs"}
+             "chunk_size", "retries", "previews", "designs", "replicacad"}
 DESIGN_KEYS = {"layouts", "lightings", "path", "rgb_every"}
 PATH_KEYS = {"name", "frames"}
 
@@ -77,6 +77,7 @@ class JobSpec:
     previews: bool = False
     description: str = ""
     source: str = ""
+    replicacad: dict | None = None  # layouts are scenes of a ReplicaCAD folder (synth.replicacad_job)
 
 
 def _fail(src, field, msg):
@@ -174,7 +175,16 @@ def parse_spec(doc, source: str) -> JobSpec:
         hfov_deg=float(hfov), seed=seed, device=device,
         chunk_size=_pos_int(doc.get("chunk_size", 50), source, "chunk_size"), retries=retries,
         previews=bool(doc.get("previews", False)), description=str(doc.get("description", "")), source=source,
+        replicacad=_replicacad_section(doc, source),
     )
+
+
+def _replicacad_section(doc: dict, source: str) -> dict | None:
+    if "replicacad" not in doc:
+        return None
+    from .replicacad_job import parse_section
+
+    return parse_section(doc["replicacad"], source)
 
 
 def load_spec(path) -> JobSpec:
@@ -524,13 +534,27 @@ def run_ray(plan: Plan, state: JobState, todo: list[Chunk], address: str | None,
 
 
 def run_job(spec: JobSpec, out: Path | None = None, workers: int = 1, backend: str = "local", ray_address: str | None = None,
-            resume: bool = False, progress: bool = True, allow_clearance_breach: bool = False) -> dict:
-    """Render everything the spec asks for that is not on disk yet. Returns a summary."""
+            resume: bool = False, progress: bool = True, allow_clearance_breach: bool = False,
+            replicacad_root: str | None = None) -> dict:
+    """Render everything the spec asks for that is not on disk yet. Returns a summary.
+
+    A spec with ``replicacad:`` first imports its scenes and plans its paths into ``OUT/replicacad``
+    (``synth.replicacad_job.prepare``; ``replicacad_root`` overrides the spec's dataset folder)."""
     t0 = time.time()
     if workers <= 0:
         raise UserError(f"--workers must be positive, got {workers}")
     if backend not in ("local", "ray"):
         raise UserError(f"unknown backend '{backend}'; use local or ray")
+    if spec.replicacad is not None:
+        from .replicacad_job import prepare as prepare_replicacad
+
+        target = Path(out or spec.out)
+        try:
+            check_output_folder(target)
+        except UserError as e:
+            _out_error(spec, out is not None, e)
+        spec = prepare_replicacad(spec, target, replicacad_root,
+                                  progress=(lambda m: print(m, file=sys.stderr)) if progress else (lambda m: None))
     plan = expand(spec, out, check_clearance=not allow_clearance_breach)
     try:
         make_output_folder(plan.out)
@@ -684,10 +708,19 @@ def fmt_duration(s: float) -> str:
 
 def cmd_render(args) -> int:
     spec = load_spec(args.spec)
+    if args.replicacad_root and spec.replicacad is None:
+        raise UserError(f"--replicacad-root: {args.spec} has no replicacad: section (its layouts are not ReplicaCAD scenes)")
     if args.dry_run:
-        plan = expand(spec, Path(args.out) if args.out else None, check_clearance=not args.allow_clearance_breach)
-        print(describe(plan))
-        per = calibrate(plan)
+        import tempfile
+
+        with tempfile.TemporaryDirectory(prefix="synth_dry_run_") as tmp:  # a dry run leaves nothing behind
+            if spec.replicacad is not None:
+                from .replicacad_job import prepare as prepare_replicacad
+
+                spec = prepare_replicacad(spec, Path(tmp), args.replicacad_root, progress=lambda m: print(m, file=sys.stderr))
+            plan = expand(spec, Path(args.out) if args.out else None, check_clearance=not args.allow_clearance_breach)
+            print(describe(plan))
+            per = calibrate(plan)
         eta = estimate(plan, per, args.workers)
         print("  calibration (s/frame on this machine): " + ", ".join(f"{k} {v:.3f}" for k, v in per.items()))
         print(f"  estimate with {args.workers} worker(s): {fmt_duration(eta)} on this machine "
@@ -695,7 +728,7 @@ def cmd_render(args) -> int:
         return 0
     s = run_job(spec, Path(args.out) if args.out else None, workers=args.workers, backend=args.backend,
                 ray_address=args.ray_address, resume=args.resume, progress=not args.quiet,
-                allow_clearance_breach=args.allow_clearance_breach)
+                allow_clearance_breach=args.allow_clearance_breach, replicacad_root=args.replicacad_root)
     print(f"{s['job']}: {s['tours']} tours, {s['frames_rendered_now']} frames rendered in {s['wall_time_s']:.1f} s "
           f"({s['frames_per_s']} frames/s), chunks {s['chunks']} -> {s['out']}")
     for cid, err in s["failed"].items():
@@ -715,5 +748,7 @@ def register_cli(subparsers) -> None:
     a.add_argument("--allow-clearance-breach", action="store_true",
                    help="render even where a path comes closer to an object than its declared clearance "
                         "(checked for layouts the path was not planned on)")
+    a.add_argument("--replicacad-root", metavar="DIR",
+                   help="ReplicaCAD folder for a spec with a replicacad: section (default: its root, else $REPLICACAD_ROOT)")
     a.add_argument("--quiet", action="store_true")
     a.set_defaults(fn=cmd_render)
