@@ -20,11 +20,13 @@ import numpy as np
 
 from formats.errors import SceneFormatError
 
+from .scene import GLB_ASSET_PREFIX, URDF_ASSET_PREFIX
+
 Y_UP_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 """Maps ReplicaCAD/habitat world coordinates (Y up, -Z forward) to ours (Z up): (x, y, z) -> (x, -z, y)."""
 
-ASSET_PREFIX = "replicacad:"  # a GLB, relative to the dataset root
-URDF_PREFIX = "replicacad-urdf:"  # an articulated object's URDF, relative to the dataset root (synth.urdf)
+ASSET_PREFIX = GLB_ASSET_PREFIX  # a GLB, relative to the dataset root (names: synth.scene)
+URDF_PREFIX = URDF_ASSET_PREFIX  # an articulated object's URDF, relative to the dataset root (synth.urdf)
 MOTION_TYPES = ("STATIC", "KINEMATIC", "DYNAMIC")
 UNKNOWN_CLASS = "other"
 MIN_EXTENT = 1e-3  # metres; flat meshes (pictures, rugs) get boxes at least this thick

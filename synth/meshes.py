@@ -55,13 +55,13 @@ from formats.errors import SceneFormatError, UnknownNameError
 from . import assets
 from . import geometry as geo
 from .classes import class_table
-from .scene import Layout, ObjectInstance, Stage
+from .scene import GLB_ASSET_PREFIX, URDF_ASSET_PREFIX, Layout, ObjectInstance, Stage
 
 ROOM_FLOOR_MATERIAL = {"bathroom": "floor_tile", "kitchen": "floor_tile"}  # others: floor_wood
 GLTF_MATERIAL = "gltf"  # RenderPart.material: draw the mesh's own glTF material (mesh.visual)
 EMITTER_FIXTURE_RADIUS = 1.5  # m: an emissive glTF part belongs to a light fixture at most this far away
-GLB_PREFIX = "replicacad:"
-URDF_PREFIX = "replicacad-urdf:"
+GLB_PREFIX = GLB_ASSET_PREFIX
+URDF_PREFIX = URDF_ASSET_PREFIX
 
 
 @dataclass

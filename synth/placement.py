@@ -43,7 +43,7 @@ import numpy as np
 from . import assets
 from . import geometry as geo
 from .classes import class_table
-from .scene import Layout, ObjectInstance, Opening, Room, Stage, Wall, object_box
+from .scene import MESH_ASSET_PREFIXES, Layout, ObjectInstance, Opening, Room, Stage, Wall, object_box
 
 GAP = 0.01  # distance kept from walls and between touching objects (m)
 DOOR_CLEARANCE = 0.9  # depth of the free zone on each side of a door (m)
@@ -119,19 +119,10 @@ def mesh_top_coverage(vertices, faces) -> float:
 
 def _asset_geometry(root: str, asset: str):
     """(vertices, faces) of a mesh asset in its Z-up local frame, unscaled; None when unknown."""
-    if asset.startswith("replicacad:"):
+    if any(asset.startswith(p) for p in MESH_ASSET_PREFIXES):
         from .mesh_assets import load_asset_mesh
 
         m = load_asset_mesh(root, asset)
-        return m.vertices, m.faces
-    if asset.startswith("replicacad-urdf:"):
-        try:
-            from .urdf import urdf_geometry  # written alongside the articulated-object import
-        except ImportError:
-            return None
-        m = urdf_geometry(root, asset)
-        if m is None or not hasattr(m, "vertices") or not hasattr(m, "faces"):
-            return None
         return m.vertices, m.faces
     return None
 

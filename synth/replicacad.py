@@ -74,7 +74,7 @@ from .habitat_format import (  # noqa: F401 - Y_UP_TO_Z_UP, ASSET_PREFIX, URDF_P
     convert_quat, dataset_root, fail, hab_matrix, mapping, number, numbers, quat, read_json, render_asset, string,
     translation_origin, vec,
 )
-from .gltf import glb_geometry
+from .gltf import check_glb, glb_geometry
 from .mesh_assets import load_asset_mesh  # noqa: F401 - part of this module's interface
 from .scene import Layout, ObjectInstance, Stage
 
@@ -123,19 +123,10 @@ class _Instance:
     asset_local: bool
 
 
-def _check_glb(glb: Path) -> None:
-    """A GLB whose textures are missing is named with the field (``images[i].uri``), before any render."""
-    try:
-        from .gltf import check_glb
-    except ImportError:  # pragma: no cover - synth.gltf is part of the package
-        return
-    check_glb(glb)
-
-
 def _object_template(root: Path, config: Path) -> _Template:
     cfg = mapping(config, read_json(config), None)
     glb = render_asset(root, config, cfg)
-    _check_glb(glb)
+    check_glb(glb)  # a missing texture is named (images[i].uri) at import, not at render time
     scale = numbers(config, cfg["scale"], "scale", 3, positive=True) if "scale" in cfg else np.ones(3)
     com = numbers(config, cfg["COM"], "COM", 3) if "COM" in cfg else None
     check_frame(config, cfg)
@@ -170,7 +161,7 @@ def _load_stage(root: Path, scene_path: Path, doc: dict, structure: bool = True)
 
     position = vec(_C @ t)
     rotation = convert_quat(q)
-    _check_glb(glb)
+    check_glb(glb)  # a missing texture is named (images[i].uri) at import, not at render time
     mesh = glb_geometry(glb)
     R = hab_matrix(rotation)  # same formula, our frame
     T = np.eye(4)

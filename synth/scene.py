@@ -42,7 +42,9 @@ from .classes import ClassTable, class_table
 from .resources import layouts_dir
 
 FORMAT = "synth-layout/1"
-MESH_ASSET_PREFIXES = ("replicacad:", "replicacad-urdf:")  # mesh assets, relative to the layout's meta.root
+GLB_ASSET_PREFIX = "replicacad:"  # a GLB mesh, relative to the layout's meta.root
+URDF_ASSET_PREFIX = "replicacad-urdf:"  # an articulated object's URDF (synth.urdf), relative to meta.root
+MESH_ASSET_PREFIXES = (GLB_ASSET_PREFIX, URDF_ASSET_PREFIX)
 
 # --------------------------------------------------------------------------------------------
 # stored precision

@@ -109,11 +109,10 @@ from formats.errors import SceneFormatError, UnknownNameError
 
 from . import habitat_format as hf
 from .classes import ClassTable
-from .scene import ObjectInstance
+from .scene import URDF_ASSET_PREFIX, ObjectInstance
 
 log = logging.getLogger(__name__)
 
-URDF_ASSET_PREFIX = "replicacad-urdf:"
 JOINT_TYPES = ("fixed", "revolute", "continuous", "prismatic")
 MOVABLE_JOINT_TYPES = ("revolute", "continuous", "prismatic")
 JOINT_STATE_DECIMALS = 9
