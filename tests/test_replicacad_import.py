@@ -18,7 +18,8 @@ import numpy as np
 import pytest
 import trimesh
 from replicacad_fixture import (
-    CEILING_Z, COUNTER_BOX, DOOR, FLOOR_Z, LIGHTS, OBJECT_BOXES, ROOMS, SCENES, URDF_LINK_BOXES, WALL_BOXES, WINDOW,
+    CEILING_Z, COUNTER_BOX, DOOR, FLOOR_Z, LIGHTS, OBJECT_BOXES, ROOMS, SCENES, TEXTURE_SRGB, URDF_LINK_BOXES, WALL_BOXES,
+    WINDOW,
     make_fixture,
 )
 
@@ -304,6 +305,37 @@ def test_shipped_replicacad_spec_plans_the_paper_design(root, tmp_path):
 
 # ---- the whole pipeline on the fixture -------------------------------------------------------------
 
+def _linear(srgb) -> np.ndarray:
+    c = np.asarray(srgb[:3], float) / 255.0
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def _check_texture_colours(tour_dir: Path, layout_file: Path) -> None:
+    from scipy import ndimage
+
+    from formats.tour import Tour
+
+    want = {k: _linear(v) / _linear(v).sum() for k, v in TEXTURE_SRGB.items()}
+    tour, lay = Tour(tour_dir), load_layout(layout_file)
+    seen = set()
+    for i in range(len(tour)):
+        f = tour.frame(i)
+        if f.rgb is None:
+            continue
+        for o in lay.objects:
+            mask = ndimage.binary_erosion(f.instance == o.id, iterations=1)
+            if mask.sum() < 100:
+                continue
+            key = o.params["template"].rsplit("/", 1)[-1]
+            key = key if key in want else f"{key}:body"  # the counter: its body's texture
+            rgb = f.rgb[mask].mean(axis=0)
+            chroma = rgb / rgb.sum()
+            assert np.abs(chroma - want[key]).max() < 0.1, (i, o.cls, chroma, want[key])
+            assert min(want, key=lambda k: np.abs(chroma - want[k]).max()) == key, (i, o.cls)
+            seen.add(o.cls)
+    assert {"dining_table", "chair", "sofa", "floor_lamp", "kitchen_counter"} <= seen, seen
+
+
 PIPELINE = """name: fx_pipeline
 replicacad: {root: %s}
 out: %s
@@ -336,6 +368,10 @@ def test_pipeline_render_map_run_eval_on_the_fixture(root, tmp_path, capsys):
     assert synth_main(["render", str(spec), "--workers", "2", "--quiet"]) == 0
     for tour in ("apt_0__day__query", "apt_1__day__query", "apt_0__geometry__mapping"):
         check_tour(job / tour)  # raises on a missing or malformed frame
+    # textures: where a textured object projects (its instance mask, one pixel in), the day render
+    # carries its texture's colour: chromaticity within 0.1 of the texture's, and nearer to it than
+    # to any other texture of the fixture
+    _check_texture_colours(job / "apt_0__day__query", job / "replicacad" / "layouts" / "apt_0.yaml")
     # the map built from the mapping tour holds every object and wall of the ground truth
     report = tmp_path / "map_report.json"
     assert reloc_main(["map", "build", str(job / "apt_0__geometry__mapping"), "--out", str(tmp_path / "map.json"),
