@@ -384,7 +384,7 @@ def build_parser() -> argparse.ArgumentParser:
     paths_cli.register_cli(sub)  # synth path plan|show|check|preview|generate
     jobs.register_cli(sub)  # synth render SPEC.yaml
     trainset.register_cli(sub)  # synth trainset render SPEC.yaml (detector training data)
-    dataset.register_cli(sub)  # synth dataset check|show
+    dataset.register_cli(sub)  # synth dataset check|show|export
     bench.register_cli(sub)  # synth bench
     return p
 

@@ -677,6 +677,15 @@ def cmd_show(args) -> int:
     return 0
 
 
+def cmd_export(args) -> int:
+    from formats import export
+
+    m = export.export_tour(args.dir, args.format, args.out, role=args.role, exposure=args.exposure,
+                           progress=not args.quiet and sys.stderr.isatty())
+    print(export.summary_line(m, args.out))
+    return 0
+
+
 def register_cli(subparsers) -> None:
     """Add the ``dataset`` command group to ``synth``'s subparsers."""
     g = subparsers.add_parser("dataset", help="rendered tours: check them, look at frames")
@@ -693,3 +702,14 @@ def register_cli(subparsers) -> None:
     a.add_argument("--out", required=True, help="output image (.png)")
     a.add_argument("--exposure", type=float, help="linear RGB scale (default: automatic)")
     a.set_defaults(fn=cmd_show)
+    a = ds.add_parser("export", help="write a tour in a layout other relocalizers read: 7scenes (DSAC*, ACE, hloc), "
+                                     "ace (ACE/DSAC* train|test), tum-rgbd (RGB-D SLAM, evo), colmap (hloc)")
+    a.add_argument("dir", help="tour directory")
+    a.add_argument("--format", required=True, help="7scenes | ace | tum-rgbd | colmap")
+    a.add_argument("--out", required=True, help="export folder (new or empty; the same export again resumes "
+                                                "or does nothing)")
+    a.add_argument("--role", default="query", help="mapping (ACE train/, 7-Scenes train split) | query (default)")
+    a.add_argument("--exposure", default="auto", help="auto (per frame, default) | fixed (one factor per tour: "
+                                                      "the median auto factor) | FACTOR (linear RGB scale)")
+    a.add_argument("--quiet", action="store_true", help="no progress bar")
+    a.set_defaults(fn=cmd_export)
