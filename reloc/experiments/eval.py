@@ -3,6 +3,12 @@
 For each trajectory (causal, closure, and any budget_B), over ALL ground-truth frames: recall at
 1 m/10 deg and 0.25 m/5 deg (a frame without a pose is a failure), median position and rotation
 error over the returned poses, and pose coverage.
+
+``--poses CONVENTION``: OUT is instead one pose file of another relocalizer, written in that
+convention (``formats.poses``: tum, ace, colmap, mapfree; always stated, never guessed); named
+conventions map file names to tour frames through ``--names`` (the export folder, whose
+``export.json`` "frames" is used, or a JSON file ``{"frames": {name: index}}``). The report is the
+same, with one output labelled by the file's name.
 """
 
 from __future__ import annotations
@@ -44,8 +50,35 @@ def evaluate_run(out_dir, tour) -> dict:
     return rep
 
 
+def evaluate_poses(pose_file, convention: str, tour, names=None) -> dict:
+    """Recall and errors of one pose file in ``convention`` (``formats.poses``) against ``tour``.
+
+    ``names`` (named conventions): an export folder, a manifest JSON file, or its ``"frames"`` dict.
+    Tour frames without a pose are misses. The report has ``evaluate_run``'s shape, its one output
+    labelled by the file's name."""
+    from formats.poses import NAMED, check_convention, load_names, read_poses
+
+    conv = check_convention(convention)
+    path = Path(pose_file)
+    if conv in NAMED:
+        if names is None:
+            raise UserError(f"{path}: the {conv} convention names frames by file name: give --names EXPORT_DIR "
+                            f"(its export.json) or a JSON file {{\"frames\": {{name: frame index}}}}")
+        if not isinstance(names, dict):
+            names = load_names(names)
+    gt = {int(i): T for i, T in zip(tour.frame_indices, tour.poses)}
+    est = read_poses(path, conv, names=names if conv in NAMED else None, fps=tour.fps, frames=set(gt))
+    s = summarize(est, gt)
+    s.pop("frames", None)
+    rep: dict = {"run": str(path), "convention": conv, "gt": str(tour.root), "frames": len(gt)}
+    label = path.name if path.name not in rep else f"{path.name} (poses)"
+    rep[label] = s
+    return rep
+
+
 def format_eval(rep: dict) -> str:
-    lines = [f"{rep['run']} against {rep['gt']} ({rep['frames']} frames)", "",
+    conv = f" ({rep['convention']} poses)" if rep.get("convention") else ""
+    lines = [f"{rep['run']}{conv} against {rep['gt']} ({rep['frames']} frames)", "",
              "| output | 1 m/10 deg | 0.25 m/5 deg | median pos (m) | median rot (deg) | coverage |",
              "|---|---|---|---|---|---|"]
     for k, v in rep.items():
@@ -58,10 +91,25 @@ def format_eval(rep: dict) -> str:
 
 
 def cmd_eval(args) -> int:
+    from formats.errors import check_output_file
+    from formats.poses import NAMED, check_convention
     from formats.tour import Tour
 
+    if args.poses is None:
+        if args.names is not None:
+            raise UserError(f"--names {args.names}: only with --poses CONVENTION (a reloc run folder needs no names)")
+    else:
+        conv = check_convention(args.poses, where="--poses")
+        if conv in NAMED and args.names is None:
+            raise UserError(f"{args.out_dir}: --poses {conv} names frames by file name: give --names EXPORT_DIR "
+                            f"(its export.json) or a JSON file {{\"frames\": {{name: frame index}}}}")
+    if args.save:
+        check_output_file(args.save)
     tour = Tour(args.gt)
-    rep = evaluate_run(args.out_dir, tour)
+    if args.poses is None:
+        rep = evaluate_run(args.out_dir, tour)
+    else:
+        rep = evaluate_poses(args.out_dir, args.poses, tour, names=args.names)
     if args.save:
         write_json_atomic(args.save, rep)
     print(json.dumps(rep, indent=2) if args.json else format_eval(rep))
@@ -69,8 +117,15 @@ def cmd_eval(args) -> int:
 
 
 def register_cli(subparsers) -> None:
-    p = subparsers.add_parser("eval", help="recall at 1 m/10 deg and 0.25 m/5 deg of a reloc run output")
-    p.add_argument("out_dir", metavar="OUT", help="a reloc run output directory")
+    p = subparsers.add_parser("eval", help="recall at 1 m/10 deg and 0.25 m/5 deg of a reloc run output or a pose file")
+    p.add_argument("out_dir", metavar="OUT", help="a reloc run output directory, or with --poses a pose file")
+    p.add_argument("--poses", metavar="CONVENTION", default=None,
+                   help="OUT is a pose file in this convention: tum (t tx ty tz qx qy qz qw, camera-to-world), "
+                        "ace (ACE test_ace.py poses_*.txt), colmap (hloc results: name qw qx qy qz tx ty tz), "
+                        "mapfree (map-free benchmark: name qw..tz confidence); the last three are world-to-camera")
+    p.add_argument("--names", metavar="EXPORT", default=None,
+                   help="for ace/colmap/mapfree: the export folder (its export.json) or a JSON file "
+                        "{\"frames\": {file name: tour frame index}} mapping the file's names to frames")
     p.add_argument("--gt", required=True, metavar="TOUR_DIR", help="the tour with the ground-truth poses")
     p.add_argument("--json", action="store_true")
     p.add_argument("--save", metavar="FILE.json", help="also write the JSON here")
