@@ -32,7 +32,9 @@ Methods and the rows they give (``key`` = method.mode, used by ``reloc check``):
 * ``appearance``: ORB (or SIFT) + retrieval + PnP-RANSAC per frame (``appearance.causal``; only frames
   with RGB are localized and evaluated) and its clip-rigid variant (``appearance.closure``);
 * ``fpfh_icp``: clip-rigid FPFH + RANSAC + ICP against a 5 cm point map (``fpfh_icp.closure``);
-* ``one_frame``: the one-frame object-based unit (``one_frame.causal``; every k-th frame).
+* ``one_frame``: the one-frame object-based unit (``one_frame.causal``; every k-th frame);
+* external methods (mappings in ``methods``: another relocalizer as a command on exported tours, or a
+  folder of its trajectories): ``NAME.causal`` (or ``NAME.closure``), see :mod:`reloc.experiments.external`.
 
 A detector that sees images (``learned``, ``onnx``) looks only at frames with RGB: every
 ``config.observation.stride``-th query frame (the paper's every fifth frame) and every
@@ -107,6 +109,7 @@ class ExperimentSpec:
     workers: int = 2
     seed: int = 0
     description: str = ""
+    externals: tuple = ()  # external.ExternalMethod, named in methods too
 
     @property
     def detector_label(self) -> str:
@@ -168,10 +171,19 @@ def load_experiment(path) -> ExperimentSpec:
     if isinstance(methods, str):
         methods = [methods]
     if not isinstance(methods, list) or not methods:
-        _fail(src, "methods", f"expected a non-empty list of {', '.join(METHODS)}")
+        _fail(src, "methods", f"expected a non-empty list of {', '.join(METHODS)} or external methods")
+    externals = []
     for i, m in enumerate(methods):
-        if m not in METHODS:
-            _fail(src, f"methods[{i}]", f"unknown method {m!r}; known: {', '.join(METHODS)}")
+        if isinstance(m, dict):  # another relocalizer: a command on exported tours, or trajectories (external.py)
+            from .external import parse_external
+
+            externals.append(parse_external(m, src, f"methods[{i}]", METHODS))
+            if externals[-1].name in [e.name for e in externals[:-1]]:
+                _fail(src, f"methods[{i}].name", f"{externals[-1].name!r} is used twice")
+        elif m not in METHODS:
+            _fail(src, f"methods[{i}]", f"unknown method {m!r}; known: {', '.join(METHODS)}, or a mapping with name and "
+                                        "command (or trajectories)")
+    methods = [m["name"] if isinstance(m, dict) else m for m in methods]
     if "videoreloc" not in methods and {"fpfh_icp", "appearance"} & set(methods):
         _fail(src, "methods", "the clip-rigid controls reuse VideoReloc's clips: add videoreloc")
     tables = doc.get("tables") or []
@@ -215,7 +227,7 @@ def load_experiment(path) -> ExperimentSpec:
         mapping=mapping, query=str(doc["query"]), unchanged=str(doc["unchanged"]), map=doc.get("map", "build"),
         methods=tuple(methods), tables=tuple(tables), one_frame_stride=int(doc.get("one_frame_stride", 15)),
         detector=det, config=cfg, appearance=app, fpfh_icp=fp, workers=int(doc.get("workers", 2)),
-        seed=int(doc.get("seed", 0)), description=str(doc.get("description", "")),
+        seed=int(doc.get("seed", 0)), description=str(doc.get("description", "")), externals=tuple(externals),
     )
 
 
@@ -688,7 +700,7 @@ class _Runner:
             r = get()
             self.seconds[tid] = r["seconds"]
             done.add(tid)
-        except (Exception, cf.process.BrokenProcessPool) as e:  # one failure must not lose the others
+        except Exception as e:  # one failure must not lose the others (a BrokenProcessPool is a RuntimeError)
             msg = str(e) if isinstance(e, UserError) else f"{type(e).__name__}: {e}"
             self.failed[tid] = msg.splitlines()[0] if msg else type(e).__name__
         self.bar.update(1)
@@ -790,6 +802,8 @@ def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int |
                 lengths=list(DEFAULT_LENGTHS if "units" in spec.tables else (1,)))
         for v in variants:
             add(ablation_name(v), [], variant=list(v))
+    if spec.externals:
+        _external_tasks(spec, out, mapping, queries, tour_keys, tasks, expected, progress)
     runner = _Runner(workers, progress, len(tasks), f"{spec.name}: runs")
     try:
         runner.run(tasks)
@@ -815,6 +829,54 @@ def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int |
         write_report(out)
     results["_ran"] = {"maps": map_seconds, "runs": run_seconds}
     return results
+
+
+def _external_tasks(spec: ExperimentSpec, out: Path, mapping: dict, queries: dict, tour_keys: dict, tasks: list,
+                    expected: dict, progress: bool) -> None:
+    """Exports (now, in this process: once per format and tour, cached), then a ``map_command`` task
+    per external method that has one and a run task per method and query tour (``external.py``)."""
+    from .external import export_dir, file_key, prepare_exports, run_external_map_task, run_external_task
+
+    mname = tour_name(spec.mapping["layout"], spec.mapping["lighting"], spec.mapping["path"])
+    export_keys = prepare_exports(out, list(spec.externals), mapping, mname, queries, progress)
+    for m in spec.externals:
+        md = m.to_dict()
+        map_key, map_id, map_out = None, None, None
+        if m.kind == "command" and m.map_command:
+            map_out = out / "maps" / m.name
+            map_key = _key("external-map", md, export_keys[(m.export, str(m.exposure), mname)])
+            map_id = f"map/{m.name}"
+            done = out / "maps" / f"{m.name}.done.json"
+            try:
+                fresh = json.loads(done.read_text()).get("key") == map_key
+            except (OSError, ValueError):
+                fresh = False
+            if not fresh:
+                tasks.append((map_id, run_external_map_task, {"method": md, "dir": str(map_out), "key": map_key,
+                                                              "mapping": str(export_dir(out, m, mname))}, []))
+            else:
+                map_id = None
+        for name, t in queries.items():
+            d = out / "runs" / m.name / name
+            arg = {"method": md, "tour": t["dir"], "tour_name": name, "dir": str(d), "code": None}
+            if m.kind == "command":
+                arg.update(mapping_export=str(export_dir(out, m, mname)), query_export=str(export_dir(out, m, name)),
+                           scene=str(out / "exports" / export_dir(out, m, name).parent.name / "scenes" / name),
+                           map_out=str(map_out) if map_out else None)
+                inputs = (export_keys[(m.export, str(m.exposure), mname)], export_keys[(m.export, str(m.exposure), name)],
+                          map_key)
+            else:
+                from .external import _fill_path
+
+                f = Path(m.trajectories) / _fill_path(m.file, {"tour": name, "name": m.name})
+                names = None
+                if m.names:
+                    names = file_key(Path(m.names) / "export.json" if Path(m.names).is_dir() else m.names)
+                inputs = (file_key(f), names)
+            arg["key"] = _key("external", md, inputs, tour_keys[name])
+            expected[(m.name, name)] = (d, arg["key"])
+            if not is_done(d, arg["key"]):
+                tasks.append((f"{m.name}/{name}", run_external_task, arg, [map_id] if map_id else []))
 
 
 def _seconds(out: Path, queries: dict, methods: list, variants: list, files: dict) -> dict:

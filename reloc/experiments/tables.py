@@ -95,9 +95,11 @@ def _estimates(path: Path, fps: float) -> dict[int, np.ndarray]:
     return {int(i): T for i, T in zip(frames, poses)}
 
 
-def evaluation_frames(method: str, mode: str, frames: list[int], rgb_every: int, stride: int) -> list[int]:
-    """The frames a row is evaluated on: all, except per-frame methods that see only some frames."""
-    if method == "appearance" and mode == "causal":
+def evaluation_frames(method: str, mode: str, frames: list[int], rgb_every: int, stride: int,
+                      sees_rgb_only: bool = False) -> list[int]:
+    """The frames a row is evaluated on: all, except per-frame methods that see only some frames
+    (``sees_rgb_only``: an external method run on an image export, which leaves out geometry-only frames)."""
+    if (method == "appearance" and mode == "causal") or sees_rgb_only:
         return [i for i in frames if i % rgb_every == 0]
     if method == "one_frame":
         return frames[::stride]
@@ -144,18 +146,25 @@ def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: li
         "one_frame_stride": spec.one_frame_stride,
         "tours": queries, "rows": [], "methods": {},
     }
-    modes_of = {m: [mode for (mm, mode, _, _) in ROWS if mm == m] for m in methods}
+    externals = {e.name: e for e in getattr(spec, "externals", ())}
+    modes_of = {m: ([externals[m].mode] if m in externals else [mode for (mm, mode, _, _) in ROWS if mm == m])
+                for m in methods}
     for v in variants:
         modes_of[ablation_name(v)] = ["causal", "closure"]
     for m, modes in modes_of.items():
-        entry = {"label": LABELS.get(m, m).format(feature=feature), "map_bytes": map_bytes.get(method_map.get(m, "boxes")),
-                 "primary": PRIMARY.get(m, "closure"), "modes": {}}
+        ext = externals.get(m)
+        if ext is not None:  # another relocalizer: its label, its mode, the size of what its map_command wrote
+            entry = {"label": ext.label, "map_bytes": _folder_bytes(out / "maps" / m) if ext.map_command else None,
+                     "primary": ext.mode, "external": ext.kind, "modes": {}}
+        else:
+            entry = {"label": LABELS.get(m, m).format(feature=feature), "map_bytes": map_bytes.get(method_map.get(m, "boxes")),
+                     "primary": PRIMARY.get(m, "closure"), "modes": {}}
         for mode in modes:
             per, pooled_est, pooled_gt = {}, {}, {}
             for k, (name, t) in enumerate(queries.items()):
                 tour, gt = gts[name]
                 idx = evaluation_frames(m, mode, [int(i) for i in tour.frame_indices], t["rgb_every"],
-                                        spec.one_frame_stride)
+                                        spec.one_frame_stride, sees_rgb_only=ext is not None and ext.kind == "command")
                 g = {i: gt[i] for i in idx}
                 rel = Path("runs") / m / name / f"{mode}.txt"
                 est = _estimates(out / rel, t["fps"]) if valid is None or (m, name) in valid else {}
@@ -174,11 +183,23 @@ def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: li
         if m in methods:
             res["rows"].append({"key": f"{m}.{mode}", "method": m, "mode": mode, "label": label.format(feature=feature),
                                 "dagger": dagger})
+    for m in methods:  # external methods after the built-in rows, in the spec's order
+        if m in externals:
+            e = externals[m]
+            res["rows"].append({"key": f"{m}.{e.mode}", "method": m, "mode": e.mode, "label": e.label, "dagger": False,
+                                "external": True})
     if "units" in spec.tables:
         res["units"] = _units(out, queries, spec.unchanged)
     if variants:
         res["ablation"] = _ablation(res, variants)
     return res
+
+
+def _folder_bytes(d: Path) -> int | None:
+    """Bytes of the files under ``d`` (an external method's map), None when it does not exist."""
+    if not d.is_dir():
+        return None
+    return sum(f.stat().st_size for f in d.rglob("*") if f.is_file())
 
 
 def map_report_path(map_file) -> Path:
@@ -301,6 +322,10 @@ def main_table(res: dict) -> tuple[str, list[dict]]:
               "one clip-to-map transform per clip at clip closure, no cross-clip back-end. Per-frame appearance "
               "is evaluated on the frames with RGB, the one-frame unit on every "
               f"{res['one_frame_stride']}th frame."]
+    ext = [m for m in res["methods"].values() if m.get("external")]
+    if ext:
+        lines[-1] += (" External methods: a command on exported tours is evaluated on the frames its export holds "
+                      "(those with RGB), trajectories on every frame; their map size is what map_command wrote.")
     maps = res.get("maps") or {}
     for k, label in (("boxes", f"Box map built with the {res.get('detector') or 'oracle'} detector"),
                      ("boxes_oracle", "Box map built from oracle detections")):
