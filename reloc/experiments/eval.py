@@ -54,8 +54,9 @@ def evaluate_poses(pose_file, convention: str, tour, names=None) -> dict:
     """Recall and errors of one pose file in ``convention`` (``formats.poses``) against ``tour``.
 
     ``names`` (named conventions): an export folder, a manifest JSON file, or its ``"frames"`` dict.
-    Tour frames without a pose are misses. The report has ``evaluate_run``'s shape, its one output
-    labelled by the file's name."""
+    Tour frames without a pose are misses; with a named convention, over the frames the export holds
+    (an image export leaves out geometry-only frames, as ``reloc experiment`` scores external methods).
+    The report has ``evaluate_run``'s shape, its one output labelled by the file's name."""
     from formats.poses import NAMED, check_convention, load_names, read_poses
 
     conv = check_convention(convention)
@@ -68,9 +69,15 @@ def evaluate_poses(pose_file, convention: str, tour, names=None) -> dict:
             names = load_names(names)
     gt = {int(i): T for i, T in zip(tour.frame_indices, tour.poses)}
     est = read_poses(path, conv, names=names if conv in NAMED else None, fps=tour.fps, frames=set(gt))
-    s = summarize(est, gt)
+    scored = gt
+    if conv in NAMED:  # an image tool saw only the frames its export holds (no geometry-only frames)
+        held = {int(i) for i in names.values()}
+        scored = {i: T for i, T in gt.items() if i in held}
+    s = summarize(est, scored)
     s.pop("frames", None)
-    rep: dict = {"run": str(path), "convention": conv, "gt": str(tour.root), "frames": len(gt)}
+    rep: dict = {"run": str(path), "convention": conv, "gt": str(tour.root), "frames": len(scored)}
+    if len(scored) != len(gt):
+        rep["evaluated_on"] = f"the {len(scored)} of {len(gt)} tour frames the export holds"
     label = path.name if path.name not in rep else f"{path.name} (poses)"
     rep[label] = s
     return rep
@@ -78,7 +85,8 @@ def evaluate_poses(pose_file, convention: str, tour, names=None) -> dict:
 
 def format_eval(rep: dict) -> str:
     conv = f" ({rep['convention']} poses)" if rep.get("convention") else ""
-    lines = [f"{rep['run']}{conv} against {rep['gt']} ({rep['frames']} frames)", "",
+    on = f"; evaluated on {rep['evaluated_on']}" if rep.get("evaluated_on") else ""
+    lines = [f"{rep['run']}{conv} against {rep['gt']} ({rep['frames']} frames{on})", "",
              "| output | 1 m/10 deg | 0.25 m/5 deg | median pos (m) | median rot (deg) | coverage |",
              "|---|---|---|---|---|---|"]
     for k, v in rep.items():
