@@ -386,6 +386,8 @@ class JobState:
 def spec_document(spec: JobSpec) -> dict:
     d = asdict(spec)
     d.pop("source", None)
+    if d.get("replicacad") is None:  # a spec without it reads as before: jobs started earlier still resume
+        d.pop("replicacad", None)
     return d
 
 
