@@ -236,3 +236,14 @@ def test_dry_run_prints_plan_and_estimate_writes_nothing(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "1 tours, 30 chunk-frames" in text and "estimate with 1 worker(s)" in text and "calibration" in text
     assert not out.exists()
+
+
+def test_spec_document_of_a_plain_spec_is_unchanged_by_the_replicacad_key():
+    """A job started before specs could name a ReplicaCAD root resumes: the state document of a spec
+    without replicacad: holds no such key (job_state.json compares documents)."""
+    from synth.jobs import spec_document
+
+    plain = spec_document(jobs.load_spec(REPO_ROOT / "render_jobs" / "demo.yaml"))
+    assert "replicacad" not in plain
+    rc = spec_document(jobs.load_spec(REPO_ROOT / "render_jobs" / "replicacad_apt_6x3.yaml"))
+    assert rc["replicacad"] == {"root": None, "allow_unknown": False}
