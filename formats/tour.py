@@ -183,9 +183,13 @@ class Tour:
     Fewer frame files than poses is allowed: a partly rendered (or resumed) tour has them, and a
     missing frame is a ``FrameFileError`` naming its file when read. ``strict=False`` (what
     ``check_tour`` uses) accepts either, to report it.
+
+    ``sensor`` (a ``formats.sensors`` preset name, file or ``Sensor``): frames are read as that RGB-D
+    camera would measure them, seeded per (tour name, frame, sensor, ``sensor_seed``), so every
+    reader of the same frame gets the same noise; ``ideal`` (or None) reads the render as it is.
     """
 
-    def __init__(self, root, strict: bool = True):
+    def __init__(self, root, strict: bool = True, sensor=None, sensor_seed: int = 0):
         self.root = Path(root)
         if not self.root.is_dir():
             raise UserError(f"{self.root}: tour directory not found")
@@ -202,6 +206,13 @@ class Tour:
                                    f"(frame = round(t * fps), fps {self.fps:g} from {CAMERA_FILE})")
         self._row = {int(i): k for k, i in enumerate(self.frame_indices)}
         self.meta = _read_json(self.root / META_FILE, "tour metadata")
+        # a sensor model applied as frames are read (formats.sensors): one render, any camera
+        self.sensor, self.sensor_seed = None, int(sensor_seed)
+        if sensor is not None:
+            from .sensors import Sensor, load_sensor
+
+            s = sensor if isinstance(sensor, Sensor) else load_sensor(sensor)
+            self.sensor = None if s.is_ideal else s
         self._objects: dict | None = None
         if strict:
             why = self.count_problem()
@@ -275,8 +286,18 @@ class Tour:
               semantic: bool = True) -> Frame:
         """One frame (reads its EXR); channels not asked for, or absent from the file, are None."""
         k = self._position(index)
-        img = images_from_channels(read_split_channels(self.frame_path(index)), rgb, depth, instance, semantic)
-        return Frame(int(index), img.rgb, img.depth, img.instance, img.semantic, self.poses[k].copy(), self.K)
+        noisy = self.sensor is not None and (rgb or depth)
+        # a sensor's depth can depend on the frame's colour (dark surfaces): read it whenever depth is asked
+        img = images_from_channels(read_split_channels(self.frame_path(index)), rgb or (noisy and depth), depth,
+                                   instance, semantic)
+        frame_rgb, frame_depth = img.rgb, img.depth
+        if noisy:
+            from .sensors import apply_sensor, frame_seed
+
+            seed = frame_seed(self.name, int(index), self.sensor.name, self.sensor_seed)
+            frame_depth, frame_rgb = apply_sensor(self.sensor, img.depth, img.rgb, self.intrinsics, seed)
+        return Frame(int(index), frame_rgb if rgb else None, frame_depth, img.instance, img.semantic,
+                     self.poses[k].copy(), self.K)
 
     def __iter__(self) -> Iterator[Frame]:
         """Frames in poses.txt order, reading one EXR at a time."""

@@ -278,3 +278,46 @@ def test_user_file_and_round_trip_of_presets(tmp_path):
     for name in ("ideal", "structured_light", "tof"):
         assert load_sensor(name).name == name and load_sensor(name).source
     assert parse_sensor({"depth": {"sigma_a": 0.001}}, "x/y.yaml").name == "y"
+
+
+# ---- a tour read through a sensor (formats.tour.Tour(sensor=...)) ----------------------------------
+
+
+@pytest.fixture(scope="module")
+def small_tour(tmp_path_factory):
+    from synth.tour import TourSpec, render_tour
+
+    out = tmp_path_factory.mktemp("tour") / "apt_0__geometry__query"
+    render_tour(TourSpec(layout="apt_0", path="query", out=str(out), renderer="fast", width=64, height=48, frames=4),
+                progress=False)
+    return out
+
+
+def test_a_tour_read_through_a_sensor(small_tour):
+    from formats.tour import Tour
+
+    plain = Tour(small_tour).frame(2)
+    assert np.array_equal(Tour(small_tour, sensor="ideal").frame(2).depth, plain.depth)  # ideal: the render itself
+    a = Tour(small_tour, sensor="structured_light").frame(2)
+    b = Tour(small_tour, sensor="structured_light").frame(2, rgb=False, instance=False, semantic=False)
+    assert not np.array_equal(a.depth, plain.depth) and np.array_equal(a.depth, b.depth)  # same noise for every reader
+    assert np.array_equal(a.instance, plain.instance)  # labels are not measured by the camera
+    valid = (a.depth > 0) & (plain.depth > 0)
+    assert valid.mean() > 0.3 and np.median(np.abs(a.depth - plain.depth)[valid]) < 0.05
+    c = Tour(small_tour, sensor="structured_light", sensor_seed=1).frame(2)
+    assert not np.array_equal(a.depth, c.depth)  # another seed, other noise
+    d = Tour(small_tour, sensor="structured_light").frame(3)
+    assert not np.array_equal(a.depth[valid & (d.depth > 0)] - plain.depth[valid & (d.depth > 0)],
+                              d.depth[valid & (d.depth > 0)] - plain.depth[valid & (d.depth > 0)])
+
+
+def test_reloc_run_names_an_unknown_sensor(small_tour, tmp_path, capsys):
+    from reloc.cli import main as reloc_main
+
+    m = tmp_path / "map.json"
+    assert reloc_main(["map", "ground-truth", str(small_tour), "--out", str(m)]) == 0
+    assert reloc_main(["run", "--map", str(m), "--tour", str(small_tour), "--out", str(tmp_path / "run"),
+                       "--sensor", "kinect9", "--detector", "oracle", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "sensor" in err and "kinect9" in err, err
+    assert not (tmp_path / "run").exists()

@@ -287,7 +287,7 @@ def cmd_run(args) -> int:
     from ..frontend.detection import build_detector, detector_spec_from_args
 
     check_output_folder(args.out)
-    tour = Tour(args.tour)
+    tour = Tour(args.tour, sensor=args.sensor, sensor_seed=args.sensor_seed)
     bmap = BoxMap.load(args.map)
     cfg = load_config(args.config) if args.config else Config()
     if args.point_to_point:
@@ -325,6 +325,9 @@ def register_cli(subparsers) -> None:
     p.add_argument("--no-run-level", action="store_true", help="ablation: no run-level decision")
     p.add_argument("--fixed-clips", action="store_true", help="ablation: fixed 100-frame clips")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--sensor", help="read the tour as this RGB-D camera measures it: a formats/sensor_presets name "
+                                    "(ideal, structured_light, tof) or a YAML file (default: the render as it is)")
+    p.add_argument("--sensor-seed", type=int, default=0, help="seed of the sensor noise (per frame: formats.sensors.frame_seed)")
     p.add_argument("--quiet", action="store_true")
     add_detector_arguments(p)
     p.set_defaults(fn=cmd_run)
