@@ -98,6 +98,7 @@ from formats.atomic import replacing, write_json_atomic, write_text_atomic
 from formats.camera import matrix_to_quat
 from formats.errors import SceneFormatError, UserError, check_output_folder
 from formats.tour import CAMERA_FILE, META_FILE, POSES_FILE, Tour, ranges_text, tonemap
+from formats.yamlfile import read_json
 
 FORMATS = ("7scenes", "ace", "tum-rgbd", "colmap")
 ROLES = ("mapping", "query")
@@ -365,16 +366,7 @@ def _compare(path: Path, have: dict, want: dict, tour_path: str | None) -> None:
 def read_manifest(out_dir) -> dict:
     """OUT/export.json, checked (SceneFormatError naming the file and the field)."""
     path = Path(out_dir) / MANIFEST_FILE
-    if not path.is_file():
-        raise SceneFormatError(path, None, "not found (not a finished synth export)")
-    try:
-        doc = json.loads(path.read_text())
-    except json.JSONDecodeError as e:
-        raise SceneFormatError(path, f"line {e.lineno}", f"not valid JSON ({e.msg})") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise SceneFormatError(path, None, f"cannot read ({e})") from None
-    if not isinstance(doc, dict):
-        raise SceneFormatError(path, None, f"expected a JSON object, got {type(doc).__name__}")
+    doc = read_json(path, missing="not found (not a finished synth export)")
     if doc.get("format") != MANIFEST_FORMAT:
         raise SceneFormatError(path, "format", f"expected {MANIFEST_FORMAT!r}, got {doc.get('format')!r}")
     if doc.get("export_format") not in FORMATS:

@@ -68,7 +68,6 @@ white space (the fields are white-space separated, as in every source above).
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path, PurePosixPath
 
@@ -77,6 +76,7 @@ import numpy as np
 from .atomic import write_text_atomic
 from .camera import matrix_to_quat, quat_to_matrix
 from .errors import SceneFormatError, UserError
+from .yamlfile import read_json
 
 CONVENTIONS = ("tum", "ace", "colmap", "mapfree")
 NAMED = ("ace", "colmap", "mapfree")
@@ -111,15 +111,8 @@ def load_names(path) -> dict[str, int]:
     it) or from a JSON file ``{"frames": {name: index, ...}}`` (a manifest, or one written by hand)."""
     p = Path(path)
     f = p / MANIFEST if p.is_dir() else p
-    if not f.is_file():
-        raise SceneFormatError(f, None, "not found (an export folder holding export.json, or a JSON file "
-                               "{\"frames\": {file name: frame index}})")
-    try:
-        data = json.loads(f.read_text())
-    except json.JSONDecodeError as e:
-        raise SceneFormatError(f, f"line {e.lineno}", f"not valid JSON ({e.msg})") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise SceneFormatError(f, None, f"cannot read ({e})") from None
+    data = read_json(f, missing="not found (an export folder holding export.json, or a JSON file "
+                                "{\"frames\": {file name: frame index}})", expect_object=False)
     if not isinstance(data, dict) or "frames" not in data:
         raise SceneFormatError(f, "frames", "missing: expected an export manifest {\"frames\": {file name: frame "
                                "index}} (the names a pose file uses)")

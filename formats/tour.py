@@ -17,7 +17,6 @@ A tour directory, as the renderers write it::
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass
@@ -29,6 +28,7 @@ import numpy as np
 from . import frames as fr
 from .camera import Intrinsics, read_tum
 from .errors import SceneFormatError, UserError
+from .yamlfile import read_json
 
 CAMERA_FILE = "camera.json"
 POSES_FILE = "poses.txt"
@@ -84,17 +84,7 @@ class Frame:
 
 
 def _read_json(path: Path, what: str) -> dict:
-    if not path.is_file():
-        raise SceneFormatError(path, None, f"{what} not found")
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as e:
-        raise SceneFormatError(path, f"line {e.lineno}", f"not valid JSON ({e.msg})") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise SceneFormatError(path, None, f"cannot read ({e})") from None
-    if not isinstance(data, dict):
-        raise SceneFormatError(path, None, f"expected a JSON object, got {type(data).__name__}")
-    return data
+    return read_json(path, missing=f"{what} not found")
 
 
 def _number(d: dict, key: str, path: Path, positive: bool = False, integer: bool = False) -> float:

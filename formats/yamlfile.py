@@ -10,6 +10,24 @@ import yaml
 from .errors import SceneFormatError
 
 
+def read_json(path, missing: str = "file not found", expect_object: bool = True):
+    """The value in a JSON file the toolkit writes (tour metadata, export manifests); a missing,
+    unreadable or malformed file is a SceneFormatError naming the file (and the line), ``missing``
+    saying what was expected there. With ``expect_object`` anything but a JSON object is one too."""
+    path = Path(path)
+    if not path.is_file():
+        raise SceneFormatError(path, None, missing)
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as e:
+        raise SceneFormatError(path, f"line {e.lineno}", f"not valid JSON ({e.msg})") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise SceneFormatError(path, None, f"cannot read ({e})") from None
+    if expect_object and not isinstance(data, dict):
+        raise SceneFormatError(path, None, f"expected a JSON object, got {type(data).__name__}")
+    return data
+
+
 def read_yaml(path) -> object:
     """The document in a YAML (or JSON) file; a missing, unreadable or malformed file is a
     SceneFormatError naming the file (and the parser's line and column)."""

@@ -62,6 +62,7 @@ import logging
 import math
 import os
 import tempfile
+from pathlib import Path
 
 import bpy
 import numpy as np
@@ -158,6 +159,20 @@ _IMAGES: dict[tuple, tuple] = {}  # (id(PIL image), colour space) -> (PIL image,
 _BAD_IMAGES: set[int] = set()
 
 
+def _load_packed(suffix: str, write) -> bpy.types.Image:
+    """A Blender image packed into the .blend from a temporary file that ``write(path)`` fills
+    (Blender loads images from files only); the file is removed again."""
+    fd, path = tempfile.mkstemp(prefix="synth_gltf_", suffix=suffix)
+    os.close(fd)
+    try:
+        write(path)
+        img = bpy.data.images.load(path)
+        img.pack()
+    finally:
+        os.remove(path)
+    return img
+
+
 def _bpy_image(pil, colorspace: str, label: str, source: dict | None = None):
     """A packed Blender image (once per image and colour space), or None.
 
@@ -178,14 +193,7 @@ def _bpy_image(pil, colorspace: str, label: str, source: dict | None = None):
             from ..gltf import read_image_source
 
             blob = read_image_source(source)
-            fd, path = tempfile.mkstemp(prefix="synth_gltf_", suffix=source["suffix"])
-            with os.fdopen(fd, "wb") as f:
-                f.write(blob)
-            try:
-                img = bpy.data.images.load(path)
-                img.pack()
-            finally:
-                os.remove(path)
+            img = _load_packed(source["suffix"], lambda path: Path(path).write_bytes(blob))
             img.name = label
             img.colorspace_settings.name = colorspace
             _IMAGES[ck] = (None, img)
@@ -205,14 +213,7 @@ def _bpy_image(pil, colorspace: str, label: str, source: dict | None = None):
     try:
         mode = "RGBA" if (pil.mode in ("RGBA", "LA", "PA") or "transparency" in pil.info) else "RGB"
         im = pil.convert(mode)
-        fd, path = tempfile.mkstemp(prefix="synth_gltf_", suffix=".png")
-        os.close(fd)
-        try:
-            im.save(path, format="PNG", compress_level=1)
-            img = bpy.data.images.load(path)
-            img.pack()
-        finally:
-            os.remove(path)
+        img = _load_packed(".png", lambda path: im.save(path, format="PNG", compress_level=1))
         img.name = label
         img.colorspace_settings.name = colorspace
     except Exception as e:  # noqa: BLE001 - PIL raises many types for undecodable data
