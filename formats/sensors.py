@@ -1,11 +1,13 @@
 """Seeded RGB-D sensor models, applied when a frame is read (not when it is rendered).
 
 One render serves every sensor setting: ``apply_sensor`` turns a rendered frame (planar depth in
-metres, 0 = no hit; linear RGB) into what a given camera would have measured, deterministically
-for a seed. ``frame_seed`` derives that seed from (tour, frame, sensor, run seed) with SHA-256, so
-every method and every process sees the same noisy frame.
+metres, 0 = no hit; linear scene-referred RGB radiance as Cycles renders it) into what a given
+camera would have measured, deterministically for a seed. ``frame_seed`` derives that seed from
+(tour, frame, sensor, run seed) with SHA-256, so every method and every process sees the same noisy
+frame.
 
-Presets (``formats/sensor_presets/<name>.yaml``; every figure is cited in the file):
+Presets (``formats/sensor_presets/<name>.yaml``; every figure is cited in the file, and the ones
+that are choices say so):
 
 * ``ideal``: no effect at all; ``apply_sensor`` returns its inputs (today's output).
 * ``structured_light``: a Kinect-v1-class camera. Axial noise
@@ -14,12 +16,23 @@ Presets (``formats/sensor_presets/<name>.yaml``; every figure is cited in the fi
   lateral noise ~0.8 px (same paper); disparity quantisation with a 7.5 cm baseline, ~580 px focal
   length and 1/8 px disparity steps (Khoshelham & Elberink 2012, Sensors 12(2):1437-1454: random
   error grows quadratically with range, to ~4 cm at 5 m); range 0.5-4.5 m; dropouts at grazing
-  incidence and on dark surfaces.
+  incidence.
 * ``tof``: a Kinect-v2 / Azure-Kinect-class time-of-flight camera: small, roughly linear noise
   (1.5 mm + 0.15 % of range), range 0.5-4.5 m, mixed ("flying") pixels and dropouts at depth
   edges; multipath is ignored.
 
-The depth model, per valid pixel (input depth > 0 and finite), in this order:
+Both non-ideal presets share one generic small-pixel CMOS colour camera: full well 10,000 e-, read
+noise 3 e- (typical for the class, not verified), 2500 e-/ms at linear 1.0 (a choice: Cycles'
+radiance has no absolute scale; on the demo tours it gives a median 3.6 ms by day, 6.3 ms in the
+evening and 33.3 ms with gain on ~3/4 of the night frames), auto exposure and motion blur on.
+Their dark-surface depth dropout is OFF: the renders hold visible radiance, not IR reflectivity,
+and the luminance proxy (``dark_relative``, below) keeps only 8-13 % of a night frame's depth on
+the demo tours (two lamps: most of the room in deep shade), which an active sensor with its own
+light does not do. Doing it properly needs an albedo or IR channel in the renders.
+
+Depth model
+-----------
+Per valid pixel (input depth > 0 and finite), in this order:
 
 1. incidence angle ``theta`` between the surface normal and the viewing ray, with normals from the
    depth image itself (back-projected with the intrinsics; one-sided differences, the side with
@@ -34,15 +47,70 @@ The depth model, per valid pixel (input depth > 0 and finite), in this order:
 5. disparity quantisation (``baseline_m > 0``): ``d = f B / z``, ``d_q = round(d / step) step``,
    ``z_q = f B / d_q`` (``f`` = ``focal_px`` or the tour's fx);
 6. dropouts (depth set to 0): measured depth outside ``[min_range_m, max_range_m]``; ``theta``
-   above ``max_incidence_deg``; where the frame has RGB, linear Rec. 709 luminance below
-   ``dark_threshold`` (a proxy for low IR reflectivity: the renderer has no IR albedo, so the
-   visible-light luminance under the tour's lighting stands in for it) or above
-   ``bright_threshold`` (saturated / specular). Frames without RGB get no dark or bright dropout.
+   above ``max_incidence_deg``; and, where the frame has RGB, dark or bright surfaces relative to
+   the frame: ``r = lum / p97``, with ``lum`` the rendered (noise-free, unblurred) linear Rec. 709
+   luminance of the pixel and ``p97`` the 97th percentile of ``lum`` over the pixels with valid
+   input depth; depth drops where ``r < dark_relative`` or ``r > bright_relative``. This is a proxy
+   for low (high) IR reflectivity: the renderer has no IR albedo, and the active sensors bring
+   their own IR light, so the absolute visible light level must not matter (the same frame scaled
+   by 1e-4, a night frame, drops the same pixels), while local shadows, which the proxy cannot
+   tell from dark albedo, still count. Frames whose ``p97`` is ~0 (<= 1e-12) get no dark or bright
+   dropout, and neither do frames without RGB.
 
-The colour model, in linear space, per channel: ``s_noisy = s + sqrt(s / full_well_e) N1 +
-(read_noise_e / full_well_e) N2``, clipped at 0 (shot noise as a Gaussian with variance
-proportional to the signal, ``full_well_e`` electrons at linear 1.0, plus read noise). There is no
-upper clip, exposure policy or motion blur here (later steps).
+Parameters (``depth:`` section; the defaults are "no effect"):
+``sigma_a`` (m), ``sigma_b`` (1/m), ``sigma_z0`` (m), ``sigma_c`` (fraction of z), ``sigma_theta``
+(m^1.5), ``lateral_px`` (px), ``min_range_m`` (0), ``max_range_m`` (inf; null = inf),
+``max_incidence_deg`` (90 = off), ``dark_relative`` (0 = off), ``bright_relative`` (inf = off; null
+= inf), ``edge_jump_rel`` (0 = off), ``edge_flying``, ``edge_dropout`` (probabilities),
+``baseline_m`` (0 = no quantisation), ``focal_px`` (null = the tour's fx), ``disparity_step_px``
+(0.125).
+
+Depth is not motion-blurred: the depth images are the render's, at the frame's pose (a real
+structured-light / ToF camera integrates its IR exposure over a short time of its own; depth errors
+from motion are not modelled).
+
+Colour model
+------------
+A simple physically consistent camera, per channel, in this order (``color:`` section):
+
+1. auto exposure, metered on the frame's own rendered radiance (no exposure lag, a choice): the
+   exposure time ``t`` (ms) brings the frame's ``exposure_percentile`` luminance ``L_p`` to
+   ``exposure_target`` of the full well, ``t = exposure_target * full_well_e / (electrons_per_ms
+   * L_p)``, clamped to ``[exposure_min_ms, exposure_max_ms]``; only when ``t`` hits the maximum,
+   an analog gain ``g = min(max_gain, t_wanted / exposure_max_ms)`` (>= 1) makes up the rest;
+   beyond ``max_gain`` the raw frame stays darker (a frame whose ``L_p`` is 0 gets the maximum
+   exposure and gain). ``exposure(color_model, rgb)`` returns ``(t, g)``;
+2. motion blur (``motion_blur: true`` and ``apply_sensor(..., motion=Motion(...))``): the sensor
+   integrates the radiance over ``[-t/2, +t/2]`` around the frame's time. Sub-poses at times
+   ``tau`` are interpolated between the frame's pose and the neighbouring frame's pose (the
+   previous one for ``tau < 0``, the next one for ``tau > 0``; where one is missing, at a tour's
+   ends, the other one is extrapolated), linearly in translation and by slerp in rotation
+   (``R(s) = R_T exp(s log(R_T^T R_n))``, ``s = |tau| / dt``). For each pixel ``p`` with depth
+   ``z`` the flow ``f_tau(p)`` is where its 3-D point projects in the sub-pose camera minus ``p``
+   (pixels without depth use the rotation-only flow, i.e. depth -> infinity); the blurred image is
+   the mean over ``tau`` of the image sampled at ``p - f_tau(p)`` (bilinear, border replicated).
+   ``n`` samples at the midpoints of ``n`` equal sub-intervals, ``n = ceil(longest flow over the
+   exposure in px)``, at least 1 (1 = no blur), at most ``blur_samples_max``. Rolling shutter is
+   not modelled (a global shutter), nor defocus;
+3. electrons: ``e = electrons_per_ms * t * s`` for the (blurred) linear value ``s``; shot noise
+   (Poisson, as a Gaussian of variance ``e``) plus read noise (Gaussian, ``read_noise_e``), clipped
+   to ``[0, full_well_e]``;
+4. gain: the analog gain multiplies signal and noise alike after collection (read noise is added
+   before the gain; no post-gain noise, no ADC quantisation): the digital value ``g e`` clips at
+   ``full_well_e``, i.e. ``e`` at ``full_well_e / g``;
+5. back to scene-referred linear units: ``out = e / (electrons_per_ms * t)``, so the output means
+   what the input meant (downstream code auto-tonemaps it); the noise std in these units is
+   ``sqrt(e + read_noise_e^2) / (electrons_per_ms * t)`` whatever the gain, and saturated pixels
+   read ``full_well_e / (g * electrons_per_ms * t)``.
+
+Parameters (``color:`` section; ``electrons_per_ms: 0``, the default, turns the whole colour model
+off, blur included, and then no other colour key may be set):
+``electrons_per_ms`` (electrons a pixel collects per millisecond at linear scene value 1.0; 0),
+``full_well_e`` (pixel capacity, electrons; required when on), ``read_noise_e`` (electrons rms; 0),
+``exposure_percentile`` (97), ``exposure_target`` (fraction of the full well, 0.8),
+``exposure_min_ms`` (0.01), ``exposure_max_ms`` (33.3: one frame at 30 fps), ``max_gain`` (16),
+``motion_blur`` (false; true in both presets), ``blur_samples_max`` (16).
+No colour filter array / demosaicing, vignetting, white balance, dark current or quantisation.
 
 Independent random streams: depth and colour draw from separate ``SeedSequence([seed, k])``
 children, so reading a frame without RGB gives the same depth as reading it with RGB.
@@ -78,8 +146,8 @@ class DepthModel:
     min_range_m: float = 0.0
     max_range_m: float = math.inf
     max_incidence_deg: float = 90.0  # 90 = no grazing dropout
-    dark_threshold: float = 0.0  # linear luminance below which depth drops (0 = off)
-    bright_threshold: float = math.inf  # linear luminance above which depth drops (inf = off)
+    dark_relative: float = 0.0  # depth drops where lum / p97(lum over valid depth) is below this (0 = off)
+    bright_relative: float = math.inf  # ... or above this (inf = off)
     edge_jump_rel: float = 0.0  # a depth edge: neighbour differs by more than this fraction of z (0 = off)
     edge_flying: float = 0.0  # probability an edge pixel becomes a mixed pixel
     edge_dropout: float = 0.0  # probability an edge pixel is dropped
@@ -103,21 +171,44 @@ class DepthModel:
 
 @dataclass(frozen=True)
 class ColorModel:
-    """Colour noise in linear space: shot noise (``full_well_e`` electrons at 1.0; 0 = off) and read noise."""
+    """Colour camera: auto exposure, motion blur, shot / read noise in electrons, full-well clip
+    (see the module docstring). ``electrons_per_ms == 0`` (the default) turns it off."""
 
-    full_well_e: float = 0.0
-    read_noise_e: float = 0.0
+    electrons_per_ms: float = 0.0  # electrons per ms at linear scene value 1.0 (0 = colour model off)
+    full_well_e: float = 0.0  # pixel capacity (electrons); the digital value clips there
+    read_noise_e: float = 0.0  # electrons rms, added before the gain
+    exposure_percentile: float = 97.0  # the metered luminance percentile
+    exposure_target: float = 0.8  # ... brought to this fraction of the full well
+    exposure_min_ms: float = 0.01
+    exposure_max_ms: float = 33.3  # one frame at 30 fps
+    max_gain: float = 16.0  # analog gain, used only at the maximum exposure
+    motion_blur: bool = False  # blur over the exposure from neighbouring poses (needs a Motion)
+    blur_samples_max: int = 16
 
-    def sigma(self, s):
-        """Noise std of a linear value ``s`` (before the clip at 0)."""
-        if not self.full_well_e:
+    def sigma(self, s, exposure_ms: float):
+        """Noise std, in scene units, of a linear value ``s`` exposed for ``exposure_ms`` (before the clips)."""
+        if self.is_ideal:
             return np.zeros_like(np.asarray(s, dtype=np.float64))
-        s = np.maximum(np.asarray(s, dtype=np.float64), 0.0)
-        return np.sqrt(s / self.full_well_e + (self.read_noise_e / self.full_well_e) ** 2)
+        k = self.electrons_per_ms * exposure_ms
+        e = k * np.maximum(np.asarray(s, dtype=np.float64), 0.0)
+        return np.sqrt(e + self.read_noise_e**2) / k
 
     @property
     def is_ideal(self) -> bool:
-        return not self.full_well_e
+        return not self.electrons_per_ms
+
+
+@dataclass(frozen=True)
+class Motion:
+    """The camera's motion around one frame, for motion blur: the frame's pose, the previous and next
+    frames' poses (4x4 camera-to-world, OpenCV axes; None at a tour's ends) and the time (s) from
+    the previous frame to this one and from this one to the next."""
+
+    pose: np.ndarray
+    prev_pose: np.ndarray | None = None
+    next_pose: np.ndarray | None = None
+    dt_prev: float = 1.0 / 30.0
+    dt_next: float = 1.0 / 30.0
 
 
 @dataclass(frozen=True)
@@ -134,9 +225,13 @@ class Sensor:
 
 # ---------------------------------------------------------------- parsing
 
-_NULLABLE = {"focal_px": None, "max_range_m": math.inf, "bright_threshold": math.inf}
-_INF_OK = {"max_range_m", "bright_threshold"}
+_NULLABLE = {"focal_px": None, "max_range_m": math.inf, "bright_relative": math.inf}
+_INF_OK = {"max_range_m", "bright_relative"}
 _PROBABILITIES = {"edge_flying", "edge_dropout"}
+_BOOLS = {"motion_blur"}
+_INTEGERS = {"blur_samples_max"}
+_POSITIVE = {"focal_px", "disparity_step_px", "exposure_percentile", "exposure_target", "exposure_min_ms",
+             "exposure_max_ms", "blur_samples_max"}
 
 
 def _number(v, file: str, field: str) -> float:
@@ -164,6 +259,11 @@ def _section(doc, cls, file: str, key: str):
         if v is None and k in _NULLABLE:
             out[k] = _NULLABLE[k]
             continue
+        if k in _BOOLS:
+            if not isinstance(v, bool):
+                raise SceneFormatError(file, field, f"expected true or false, got {v!r}")
+            out[k] = v
+            continue
         x = _number(v, file, field)
         if math.isinf(x) and k not in _INF_OK:
             raise SceneFormatError(file, field, "must be finite")
@@ -171,14 +271,34 @@ def _section(doc, cls, file: str, key: str):
             raise SceneFormatError(file, field, f"a probability must be in [0, 1], got {x}")
         if k == "max_incidence_deg" and not 0 < x <= 90:
             raise SceneFormatError(file, field, f"must be in (0, 90] degrees, got {x}")
-        if k in ("focal_px", "disparity_step_px") and x == 0:
+        if k in _POSITIVE and x == 0:
             raise SceneFormatError(file, field, "must be positive")
+        if k in _INTEGERS:
+            if x != int(x):
+                raise SceneFormatError(file, field, f"expected a whole number, got {v!r}")
+            x = int(x)
+        if k == "exposure_percentile" and x > 100:
+            raise SceneFormatError(file, field, f"a percentile must be in (0, 100], got {x}")
+        if k == "exposure_target" and x > 1:
+            raise SceneFormatError(file, field, f"a fraction of the full well must be in (0, 1], got {x}")
+        if k == "max_gain" and x < 1:
+            raise SceneFormatError(file, field, f"must be at least 1 (no gain), got {x}")
         out[k] = x
     m = cls(**out)
     if isinstance(m, DepthModel) and m.min_range_m > m.max_range_m:
         raise SceneFormatError(file, f"{key}.min_range_m", f"{m.min_range_m} exceeds max_range_m {m.max_range_m}")
-    if isinstance(m, ColorModel) and m.read_noise_e and not m.full_well_e:
-        raise SceneFormatError(file, f"{key}.read_noise_e", "needs color.full_well_e (electrons at linear 1.0)")
+    if isinstance(m, ColorModel):
+        others = sorted(str(k) for k in doc if k != "electrons_per_ms")
+        if m.is_ideal and others:
+            raise SceneFormatError(file, f"{key}.electrons_per_ms",
+                                   f"missing or 0 (colour model off) while {', '.join(others)} "
+                                   "set; give the electrons a pixel collects per ms at linear 1.0")
+        if not m.is_ideal and not m.full_well_e:
+            raise SceneFormatError(file, f"{key}.full_well_e", "must be positive when the colour model is on "
+                                   "(electrons_per_ms > 0)")
+        if m.exposure_min_ms > m.exposure_max_ms:
+            raise SceneFormatError(file, f"{key}.exposure_min_ms",
+                                   f"{m.exposure_min_ms} exceeds exposure_max_ms {m.exposure_max_ms}")
     return m
 
 
@@ -342,28 +462,170 @@ def _apply_depth(m: DepthModel, depth: np.ndarray, rgb, intr: Intrinsics, ss: np
     drop |= (z < m.min_range_m) | (z > m.max_range_m) | ~(z > 0)
     if m.max_incidence_deg < 90:
         drop |= th > math.radians(m.max_incidence_deg)
-    if rgb is not None and (m.dark_threshold > 0 or math.isfinite(m.bright_threshold)):
-        lum = np.asarray(rgb, dtype=np.float64)[..., :3] @ LUMA
-        drop |= (lum < m.dark_threshold) | (lum > m.bright_threshold)
+    if rgb is not None and (m.dark_relative > 0 or math.isfinite(m.bright_relative)) and valid.any():
+        lum = _luminance(rgb)
+        p97 = float(np.percentile(lum[valid], 97))
+        if p97 > 1e-12:  # a black frame (or black where there is depth): no reference, no dropout
+            r = lum / p97
+            drop |= (r < m.dark_relative) | (r > m.bright_relative)
     return np.where(drop, 0.0, z).astype(np.float32)
 
 
-def _apply_color(m: ColorModel, rgb: np.ndarray, ss: np.random.SeedSequence) -> np.ndarray:
+def _luminance(rgb) -> np.ndarray:
+    """Linear Rec. 709 luminance, non-finite values read as 0."""
+    lum = np.asarray(rgb, dtype=np.float64)[..., :3] @ LUMA
+    return np.where(np.isfinite(lum), lum, 0.0)
+
+
+def exposure(color_model: ColorModel, rgb: np.ndarray) -> tuple[float, float]:
+    """(exposure time in ms, analog gain) the colour model's auto exposure picks for the linear frame
+    ``rgb``; ``(0.0, 1.0)`` when the colour model is off. See the module docstring."""
+    m = color_model
+    if m.is_ideal:
+        return 0.0, 1.0
+    if not m.full_well_e > 0:
+        raise ValueError("ColorModel: full_well_e must be positive when electrons_per_ms > 0")
+    lum = _luminance(rgb)
+    p = float(np.percentile(lum, m.exposure_percentile)) if lum.size else 0.0
+    if not p > 0:
+        return float(m.exposure_max_ms), float(m.max_gain)
+    want = m.exposure_target * m.full_well_e / (m.electrons_per_ms * p)
+    t = min(max(want, m.exposure_min_ms), m.exposure_max_ms)
+    gain = min(max(want / t, 1.0), m.max_gain) if want > m.exposure_max_ms else 1.0
+    return float(t), float(gain)
+
+
+def _rotvec_to_matrix(w: np.ndarray) -> np.ndarray:
+    """Rodrigues: the rotation matrix exp([w]x)."""
+    th = float(np.linalg.norm(w))
+    if th < 1e-12:
+        return np.eye(3)
+    k = w / th
+    Kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + math.sin(th) * Kx + (1.0 - math.cos(th)) * (Kx @ Kx)
+
+
+def _pose_interpolator(motion: Motion):
+    """A function tau (s from the frame's time) -> (R, t) taking points from the frame's camera to the
+    camera at tau (interpolated toward the neighbour on tau's side, extrapolated from the other one
+    when it is missing); None when the motion has no neighbour."""
+    T = np.asarray(motion.pose, dtype=np.float64)
+    R_T, t_T = T[:3, :3], T[:3, 3]
+    sides = {}
+    for key, nb, dt in (("prev", motion.prev_pose, motion.dt_prev), ("next", motion.next_pose, motion.dt_next)):
+        if nb is not None and dt is not None and dt > 0:
+            from scipy.spatial.transform import Rotation
+
+            N = np.asarray(nb, dtype=np.float64)
+            sides[key] = (Rotation.from_matrix(R_T.T @ N[:3, :3]).as_rotvec(), N[:3, 3] - t_T, float(dt))
+    if not sides:
+        return None
+
+    def at(tau: float):
+        if tau == 0:
+            return np.eye(3), np.zeros(3)
+        order = ("prev", "next") if tau < 0 else ("next", "prev")
+        key = order[0] if order[0] in sides else order[1]
+        w, d, dt = sides[key]
+        s = (-tau if key == "prev" else tau) / dt  # fraction of the way to that neighbour (< 0: away from it)
+        R_s = R_T @ _rotvec_to_matrix(s * w)  # slerp: R_T exp(s log(R_T^T R_N))
+        # X_s = R_s^T (T X - t_s), t_s = t_T + s d:  X_s = R_s^T R_T X - s R_s^T d
+        return R_s.T @ R_T, -s * (R_s.T @ d)
+
+    return at
+
+
+def _rays(depth, intr: Intrinsics):
+    """Per-pixel normalised ray coordinates x, y (broadcastable) and inverse depth (0 = at infinity)."""
+    z = np.asarray(depth, dtype=np.float64)
+    H, W = z.shape
+    x = ((np.arange(W, dtype=np.float64) - intr.cx) / intr.fx)[None, :]
+    y = ((np.arange(H, dtype=np.float64) - intr.cy) / intr.fy)[:, None]
+    finite = np.isfinite(z) & (z > 0)
+    iz = np.where(finite, 1.0 / np.where(finite, z, 1.0), 0.0)
+    return x, y, iz
+
+
+def _flow(rays, intr: Intrinsics, R: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    x, y, iz = rays
+    X = [R[i, 0] * x + R[i, 1] * y + R[i, 2] + t[i] * iz for i in range(3)]  # X' / z; t counts at finite depth only
+    front = X[2] > 1e-9
+    Z = np.where(front, X[2], 1.0)
+    du = np.where(front, intr.fx * (X[0] / Z - x), 0.0)
+    dv = np.where(front, intr.fy * (X[1] / Z - y), 0.0)
+    return np.broadcast_arrays(du, dv)
+
+
+def motion_flow(depth: np.ndarray, intr: Intrinsics, R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """(H, W, 2) flow (du, dv) in px: where each pixel's 3-D point (planar ``depth``, 0 / non-finite =
+    at infinity) projects in a camera related to the frame's by ``X' = R X + t``, minus the pixel;
+    0 where the point would be behind that camera."""
+    return np.stack(_flow(_rays(depth, intr), intr, np.asarray(R, float), np.asarray(t, float)), axis=-1)
+
+
+def motion_blur(rgb: np.ndarray, depth: np.ndarray | None, intr: Intrinsics, motion: Motion | None,
+                exposure_ms: float, samples_max: int = 16) -> np.ndarray:
+    """The frame ``rgb`` integrated over an exposure of ``exposure_ms`` centred on the frame's time,
+    the camera moving as ``motion`` says (see the module docstring); the input itself when there is
+    no motion, no neighbour, or less than ~1 px of blur. Depth: planar metres, 0 = no hit
+    (rotation-only flow there); None = everything at infinity."""
+    if motion is None or not exposure_ms > 0:
+        return rgb
+    at = _pose_interpolator(motion)
+    if at is None:
+        return rgb
+    H, W = np.asarray(rgb).shape[:2]
+    rays = _rays(np.zeros((H, W)) if depth is None else depth, intr)
+    half = exposure_ms / 2000.0  # s
+    (u0, v0), (u1, v1) = (_flow(rays, intr, *at(tau)) for tau in (-half, half))
+    longest = float(np.sqrt((u1 - u0) ** 2 + (v1 - v0) ** 2).max())
+    n = int(min(max(math.ceil(longest), 1), max(int(samples_max), 1)))
+    if n == 1:
+        return rgb
+    import cv2
+
+    src = np.ascontiguousarray(np.asarray(rgb, dtype=np.float32))
+    uu = np.arange(W, dtype=np.float64)[None, :]
+    vv = np.arange(H, dtype=np.float64)[:, None]
+    acc = np.zeros(src.shape, dtype=np.float64)
+    for k in range(n):
+        du, dv = _flow(rays, intr, *at(-half + (k + 0.5) * (2 * half) / n))
+        mx = (uu - du).astype(np.float32)
+        my = (vv - dv).astype(np.float32)
+        acc += cv2.remap(src, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(src.shape)
+    return (acc / n).astype(src.dtype)
+
+
+def _apply_color(m: ColorModel, rgb: np.ndarray, depth, intr: Intrinsics, motion: Motion | None,
+                 ss: np.random.SeedSequence) -> np.ndarray:
     rng = np.random.default_rng(ss)
-    s = np.asarray(rgb)
-    sig = m.sigma(s)
-    out = np.maximum(s.astype(np.float64) + sig * rng.standard_normal(s.shape), 0.0)
-    return out.astype(s.dtype if np.issubdtype(s.dtype, np.floating) else np.float32)
+    s_in = np.asarray(rgb)
+    t, gain = exposure(m, s_in)
+    s = s_in
+    if m.motion_blur and motion is not None:
+        s = motion_blur(s_in, depth, intr, motion, t, m.blur_samples_max)
+    k = m.electrons_per_ms * t  # electrons per unit of linear value
+    e = np.nan_to_num(np.asarray(s, dtype=np.float64) * k, nan=0.0, posinf=m.full_well_e, neginf=0.0)
+    e = np.maximum(e, 0.0)
+    e = e + np.sqrt(e + m.read_noise_e**2) * rng.standard_normal(e.shape)  # shot (Gaussian) + read noise
+    e = np.clip(e, 0.0, m.full_well_e)
+    e = np.minimum(e * gain, m.full_well_e) / gain  # the digital value g e clips at the full well
+    out = e / k
+    return out.astype(s_in.dtype if np.issubdtype(s_in.dtype, np.floating) else np.float32)
 
 
-def apply_sensor(sensor: Sensor, depth: np.ndarray, rgb: np.ndarray | None, intr: Intrinsics, seed: int) -> tuple[np.ndarray, np.ndarray | None]:
+def apply_sensor(sensor: Sensor, depth: np.ndarray, rgb: np.ndarray | None, intr: Intrinsics, seed: int,
+                 motion: Motion | None = None) -> tuple[np.ndarray, np.ndarray | None]:
     """Noisy (depth, rgb) for one frame; deterministic for a seed; the input arrays are not modified.
 
-    ``depth``: (H, W) planar metres, 0 = no hit; ``rgb``: (H, W, 3) linear or None (no dark or
-    bright dropout then). An ideal sensor (or an ideal half) returns its inputs as they are (the
-    same arrays); otherwise new float32 depth / float rgb arrays. ``seed``: see ``frame_seed``.
+    ``depth``: (H, W) planar metres, 0 = no hit; ``rgb``: (H, W, 3) linear scene-referred radiance
+    or None (no dark or bright dropout then). An ideal sensor (or an ideal half) returns its inputs
+    as they are (the same arrays); otherwise new float32 depth / float rgb arrays (the rgb still
+    scene-referred linear). ``seed``: see ``frame_seed``. ``motion``: the camera's motion around
+    the frame (``Motion``), for motion blur of the colour image; None = no blur.
     """
     ss_depth, ss_color = np.random.SeedSequence([int(seed) & (2**64 - 1), 0]), np.random.SeedSequence([int(seed) & (2**64 - 1), 1])
     out_depth = depth if depth is None or sensor.depth.is_ideal else _apply_depth(sensor.depth, depth, rgb, intr, ss_depth)
-    out_rgb = rgb if rgb is None or sensor.color.is_ideal else _apply_color(sensor.color, rgb, ss_color)
+    out_rgb = (rgb if rgb is None or sensor.color.is_ideal
+               else _apply_color(sensor.color, rgb, depth, intr, motion, ss_color))
     return out_depth, out_rgb

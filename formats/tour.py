@@ -282,10 +282,22 @@ class Tour:
                                    instance, semantic)
         frame_rgb, frame_depth = img.rgb, img.depth
         if noisy:
-            from .sensors import apply_sensor, frame_seed
+            from dataclasses import replace
+
+            from .sensors import ColorModel, Motion, apply_sensor, frame_seed
 
             seed = frame_seed(self.name, int(index), self.sensor.name, self.sensor_seed)
-            frame_depth, frame_rgb = apply_sensor(self.sensor, img.depth, img.rgb, self.intrinsics, seed)
+            # the camera's motion around the frame (motion blur): the neighbouring poses.txt positions,
+            # dt = index difference / fps; a neighbour not strictly earlier / later in time is left out
+            fi, n = self.frame_indices, len(self.frame_indices)
+            dt_prev = (int(fi[k]) - int(fi[k - 1])) / self.fps if k > 0 else 0.0
+            dt_next = (int(fi[k + 1]) - int(fi[k])) / self.fps if k + 1 < n else 0.0
+            motion = Motion(self.poses[k], self.poses[k - 1] if dt_prev > 0 else None,
+                            self.poses[k + 1] if dt_next > 0 else None,
+                            dt_prev if dt_prev > 0 else 1.0 / self.fps, dt_next if dt_next > 0 else 1.0 / self.fps)
+            # colour not asked for: skip the colour model (depth draws from its own stream: the same depth)
+            sensor = self.sensor if rgb else replace(self.sensor, color=ColorModel())
+            frame_depth, frame_rgb = apply_sensor(sensor, img.depth, img.rgb, self.intrinsics, seed, motion=motion)
         return Frame(int(index), frame_rgb if rgb else None, frame_depth, img.instance, img.semantic,
                      self.poses[k].copy(), self.K)
 
