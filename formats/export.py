@@ -75,9 +75,15 @@ clip), rounded to 8 bits. "auto" (the default, camera-like) scales each frame on
 "fixed" uses one factor for the whole tour, the median of the per-frame auto factors; a number
 is that factor. export.json records every factor used.
 
+Sensor: ``sensor`` (a ``formats.sensors`` preset name, file or ``Sensor``) exports the frames as that
+RGB-D camera measures them (``Tour(..., sensor=, sensor_seed=)``: the same noisy frames every other
+reader of the tour gets with that seed); export.json records its name, seed and parameters, and a
+folder exported with another sensor or seed is refused like another exposure. ``ideal`` (the
+default) exports the render as it is.
+
 Idempotent and resumable: a frame whose files all exist is kept; a killed export resumes where
 it stopped; an export whose export.json matches the request and whose files are all there
-writes nothing. A folder holding another export (another tour, format, role or exposure) is an
+writes nothing. A folder holding another export (another tour, format, role, exposure or sensor) is an
 error naming its export.json (or ``.synth-export.json``, the request written before the first
 frame) and the field that differs.
 """
@@ -339,8 +345,24 @@ def _pose_doc(fmt: str) -> dict:
     }[fmt]
 
 
-def _request(fmt: str, role: str, exposure, key: str) -> dict:
-    return {"export_format": fmt, "role": role, "tour_key": key, "exposure": exposure}
+def _request(fmt: str, role: str, exposure, key: str, sensor: dict | None = None) -> dict:
+    return {"export_format": fmt, "role": role, "tour_key": key, "exposure": exposure, "sensor": sensor}
+
+
+def sensor_record(sensor, seed: int) -> dict | None:
+    """What export.json says of the sensor the frames were read through (None: the ideal sensor):
+    name, seed and every parameter (so that an edited sensor file is another export)."""
+    if sensor is None:
+        return None
+    import dataclasses
+
+    from .sensors import load_sensor
+
+    s = load_sensor(sensor)
+    if s.is_ideal:
+        return None
+    params = {"depth": dataclasses.asdict(s.depth), "color": dataclasses.asdict(s.color)}
+    return {"name": s.name, "seed": int(seed), "params": json.loads(json.dumps(params, default=str))}
 
 
 def _request_of(doc: dict) -> dict:
@@ -348,19 +370,28 @@ def _request_of(doc: dict) -> dict:
     exp = doc.get("exposure")
     return {"export_format": doc.get("export_format"), "role": doc.get("role"),
             "tour_key": (doc.get("tour") or {}).get("key") if isinstance(doc.get("tour"), dict) else doc.get("tour_key"),
-            "exposure": exp.get("requested") if isinstance(exp, dict) else exp}
+            "exposure": exp.get("requested") if isinstance(exp, dict) else exp, "sensor": doc.get("sensor")}
 
 
 def _compare(path: Path, have: dict, want: dict, tour_path: str | None) -> None:
     for fld, label in (("export_format", "export_format"), ("role", "role"), ("tour_key", "tour.key"),
-                       ("exposure", "exposure.requested")):
+                       ("exposure", "exposure.requested"), ("sensor", "sensor")):
         a, b = have.get(fld), want.get(fld)
         same = (a == b) if not (isinstance(a, (int, float)) and isinstance(b, (int, float))) else float(a) == float(b)
         if not same:
-            what = {"export_format": "format", "role": "role", "tour_key": "tour", "exposure": "exposure"}[fld]
+            what = {"export_format": "format", "role": "role", "tour_key": "tour", "exposure": "exposure",
+                    "sensor": "sensor"}[fld]
             extra = f" (tour {tour_path})" if fld == "tour_key" and tour_path else ""
+            if fld == "sensor":
+                a, b = _sensor_text(a), _sensor_text(b)
             raise SceneFormatError(path, label, f"this folder holds another export: {what} {a!r}{extra}, asked for "
                                    f"{b!r}; export into another --out folder (or delete this one)")
+
+
+def _sensor_text(rec) -> str:
+    if not isinstance(rec, dict):
+        return "ideal"
+    return f"{rec.get('name')} (seed {rec.get('seed')})"
 
 
 def read_manifest(out_dir) -> dict:
@@ -402,8 +433,8 @@ def read_manifest(out_dir) -> dict:
 # export
 
 
-def _open_tour(tour_dir) -> tuple[Tour, list[_Frame]]:
-    tour = Tour(tour_dir)
+def _open_tour(tour_dir, sensor=None, sensor_seed: int = 0) -> tuple[Tour, list[_Frame]]:
+    tour = Tour(tour_dir, sensor=sensor, sensor_seed=sensor_seed)
     present = set(tour.frame_files())
     missing = [int(i) for i in tour.frame_indices if int(i) not in present]
     if missing:
@@ -451,7 +482,7 @@ def _clean_strays(out: Path, dirs: list[str]) -> None:
 
 
 def export_tour(tour_dir, fmt: str, out_dir, role: str = "query", exposure: str | float = "auto",
-                progress: bool = False) -> dict:
+                progress: bool = False, sensor=None, sensor_seed: int = 0) -> dict:
     """Export one tour; role "mapping" (ACE: train/, 7scenes: the train split) or "query" (ACE: test/,
     7scenes: the test split).
 
@@ -459,18 +490,20 @@ def export_tour(tour_dir, fmt: str, out_dir, role: str = "query", exposure: str 
     that is not written: {"written": frames written now, "kept": frames already there}.
     Idempotent: exporting the same tour with the same settings into the same folder again does
     nothing (frames already written are kept; a killed export resumes), while a folder holding a
-    DIFFERENT export (another tour, format, role or exposure) is an error naming OUT/export.json
-    and the field that differs. Bad input raises a UserError before anything is written.
+    DIFFERENT export (another tour, format, role, exposure or sensor) is an error naming OUT/export.json
+    and the field that differs. Bad input raises a UserError before anything is written. ``sensor``,
+    ``sensor_seed``: read the frames through that RGB-D camera model (``formats.sensors``).
     """
     fmt = _check_choice(fmt, FORMATS, "--format", "export format")
     role = _check_choice(role, ROLES, "--role", "role")
     exp_req = parse_exposure(exposure)
-    tour, frames = _open_tour(tour_dir)
+    sensor_doc = sensor_record(sensor, sensor_seed)
+    tour, frames = _open_tour(tour_dir, sensor, sensor_seed)
     out = Path(out_dir)
     check_output_folder(out)
     tour_path = str(tour.root.resolve())
     key = tour_key(tour.root)
-    want = _request(fmt, role, exp_req, key)
+    want = _request(fmt, role, exp_req, key, sensor_doc)
     manifest = _folder_state(out, want, tour_path)
 
     for f in frames:
@@ -539,6 +572,7 @@ def export_tour(tour_dir, fmt: str, out_dir, role: str = "query", exposure: str 
 
     _write_whole_files(out, tour, fmt, role, exported)
     manifest = _manifest(tour, tour_path, key, fmt, role, exp_req, fixed_factor, factors, exported, skipped)
+    manifest["sensor"] = sensor_doc
     write_json_atomic(out / MANIFEST_FILE, manifest)
     return {**manifest, "run": {"written": written, "kept": kept}}
 
@@ -690,5 +724,7 @@ def summary_line(manifest: dict, out_dir) -> str:
                else f"{sk} geometry-only frames without colour")
     done = (f"{run.get('written', n)} written, {run.get('kept', 0)} already there" if run.get("kept")
             else f"{run.get('written', n)} written")
+    sensor = manifest.get("sensor")
+    sensor_text = f"; sensor {_sensor_text(sensor)}" if sensor else ""
     return (f"exported {n} frames of {manifest['tour']['name']} as {manifest['export_format']} ({manifest['role']}; "
-            f"{done}); {sk_text}; exposure {exp_text}; out {out_dir}")
+            f"{done}); {sk_text}; exposure {exp_text}{sensor_text}; out {out_dir}")

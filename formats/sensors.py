@@ -120,6 +120,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import re
 from dataclasses import dataclass, fields
 from pathlib import Path
 
@@ -217,10 +218,20 @@ class Sensor:
     depth: DepthModel
     color: ColorModel
     source: str  # where the figures come from
+    resolution: tuple[int, int] | None = None  # (width, height) the model is for; None = any tour's
+    file: str = ""  # the YAML file it was read from (named by errors)
 
     @property
     def is_ideal(self) -> bool:
         return self.depth.is_ideal and self.color.is_ideal
+
+    def check_resolution(self, width: int, height: int, tour: str) -> None:
+        """A sensor made for one resolution reads only tours of that resolution (SceneFormatError
+        naming the sensor's file and ``resolution`` otherwise)."""
+        if self.resolution is not None and tuple(self.resolution) != (int(width), int(height)):
+            w, h = self.resolution
+            raise SceneFormatError(self.file or self.name, "resolution",
+                                   f"sensor {self.name!r} is {w}x{h}, but tour {tour} is {width}x{height}")
 
 
 # ---------------------------------------------------------------- parsing
@@ -307,18 +318,25 @@ def parse_sensor(doc, source: str) -> Sensor:
     document came from, named by every error together with the offending key."""
     if not isinstance(doc, dict):
         raise SceneFormatError(source, None, f"expected a mapping with name, source, depth, color; got {type(doc).__name__}")
-    allowed = {"name", "source", "depth", "color"}
+    allowed = {"name", "source", "depth", "color", "resolution"}
     for k in doc:
         if k not in allowed:
             raise SceneFormatError(source, str(k), f"unknown key; known: {', '.join(sorted(allowed))}")
     name = doc.get("name", Path(str(source)).stem)
-    if not isinstance(name, str) or not name:
-        raise SceneFormatError(source, "name", f"expected a non-empty string, got {name!r}")
+    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9_-]+", name):
+        raise SceneFormatError(source, "name", f"expected a name of letters, digits, _ and - (it names folders and "
+                                               f"check keys), got {name!r}")
     cite = doc.get("source", str(source))
     if not isinstance(cite, str):
         raise SceneFormatError(source, "source", f"expected text, got {cite!r}")
+    res = doc.get("resolution")
+    if res is not None:
+        if (not isinstance(res, list) or len(res) != 2
+                or any(isinstance(v, bool) or not isinstance(v, int) or v <= 0 for v in res)):
+            raise SceneFormatError(source, "resolution", f"expected [width, height] in pixels, got {res!r}")
+        res = (int(res[0]), int(res[1]))
     return Sensor(name, _section(doc.get("depth"), DepthModel, source, "depth"),
-                  _section(doc.get("color"), ColorModel, source, "color"), cite.strip())
+                  _section(doc.get("color"), ColorModel, source, "color"), cite.strip(), res, str(source))
 
 
 def list_sensors() -> list[str]:

@@ -202,6 +202,7 @@ class Tour:
             from .sensors import Sensor, load_sensor
 
             s = sensor if isinstance(sensor, Sensor) else load_sensor(sensor)
+            s.check_resolution(self.intrinsics.width, self.intrinsics.height, str(self.root))
             self.sensor = None if s.is_ideal else s
         self._objects: dict | None = None
         if strict:

@@ -681,7 +681,8 @@ def cmd_export(args) -> int:
     from formats import export
 
     m = export.export_tour(args.dir, args.format, args.out, role=args.role, exposure=args.exposure,
-                           progress=not args.quiet and sys.stderr.isatty())
+                           progress=not args.quiet and sys.stderr.isatty(), sensor=args.sensor,
+                           sensor_seed=args.sensor_seed)
     print(export.summary_line(m, args.out))
     return 0
 
@@ -711,5 +712,8 @@ def register_cli(subparsers) -> None:
     a.add_argument("--role", default="query", help="mapping (ACE train/, 7-Scenes train split) | query (default)")
     a.add_argument("--exposure", default="auto", help="auto (per frame, default) | fixed (one factor per tour: "
                                                       "the median auto factor) | FACTOR (linear RGB scale)")
+    a.add_argument("--sensor", help="export the frames as this RGB-D camera measures them: a formats/sensor_presets "
+                                    "name (ideal, structured_light, tof) or a sensor YAML file (default: ideal)")
+    a.add_argument("--sensor-seed", type=int, default=0, help="seed of the sensor noise (formats.sensors.frame_seed)")
     a.add_argument("--quiet", action="store_true", help="no progress bar")
     a.set_defaults(fn=cmd_export)

@@ -24,7 +24,7 @@ from formats import camera as cam
 from formats.errors import SceneFormatError, UserError
 from formats.frames import write_frame
 from synth.cli import main as synth_main
-from formats.export import FORMATS, export_tour, read_manifest
+from formats.export import FORMATS, export_tour, read_manifest, summary_line
 
 W, H = 48, 36
 INTR = cam.Intrinsics.from_fov(W, H, 70.0)
@@ -358,6 +358,7 @@ MANIFEST_NAME = "export.json"
     ({"exposure": "fixed"}, "exposure"),
     ({"exposure": 2.0}, "exposure"),
     ({"tour": "other"}, "tour.key"),
+    ({"sensor": "tof"}, "sensor"),
 ])
 def test_different_export_into_same_folder_fails(tour, tmp_path, change, field):
     root, _ = tour
@@ -369,10 +370,41 @@ def test_different_export_into_same_folder_fails(tour, tmp_path, change, field):
         make_tour(other, shift=0.5, seed=1)
     args = {"fmt": "7scenes", "role": "query", "exposure": "auto", **change}
     with pytest.raises(SceneFormatError) as e:
-        export_tour(other if change.get("tour") else root, args["fmt"], out, role=args["role"], exposure=args["exposure"])
+        export_tour(other if change.get("tour") else root, args["fmt"], out, role=args["role"], exposure=args["exposure"],
+                    sensor=args.get("sensor"))
     assert str(out / "export.json") in str(e.value) and field in str(e.value)
     assert "\n" not in str(e.value)
     assert mtimes(out) == before
+
+
+def test_export_through_a_sensor_holds_what_every_reader_of_that_sensor_gets(tour, tmp_path):
+    """An export read through a sensor holds the frames Tour(sensor=, sensor_seed=) gives every other
+    method (the experiment's external methods see the same noisy frames), and says so in export.json."""
+    from formats.export import depth16
+    from formats.tour import Tour
+
+    root, truth = tour
+    # the fixture's depth is random per pixel (all edges and grazing): a sensor with axial noise alone
+    sensor = tmp_path / "noisy.yaml"
+    sensor.write_text("name: axial\ndepth: {sigma_a: 0.01}\ncolor: {electrons_per_ms: 50.0, full_well_e: 1000.0}\n")
+    clean, noisy, other_seed = tmp_path / "clean", tmp_path / "noisy", tmp_path / "seed4"
+    export_tour(root, "ace", clean)
+    m = export_tour(root, "ace", noisy, sensor=sensor, sensor_seed=3)
+    export_tour(root, "ace", other_seed, sensor=sensor, sensor_seed=4)
+    assert m["sensor"]["name"] == "axial" and m["sensor"]["seed"] == 3
+    assert m["sensor"]["params"]["depth"]["sigma_a"] == 0.01
+    assert read_manifest(clean).get("sensor") is None
+    reader = Tour(root, sensor=sensor, sensor_seed=3)
+    for name, i in read_manifest(noisy)["frames"].items():
+        dname = name.replace("rgb/", "depth/").replace(".color.png", ".depth.png")
+        want = depth16(reader.frame(i).depth, 1000.0)
+        np.testing.assert_array_equal(read_png(noisy / dname), want)
+        assert not np.array_equal(read_png(noisy / dname), read_png(clean / dname))
+        assert not np.array_equal(read_png(noisy / dname), read_png(other_seed / dname))
+    for name in read_manifest(noisy)["frames"]:  # colour too: the sensor's noise, not the render's
+        if name.startswith("test/rgb/"):
+            assert not np.array_equal(read_png(noisy / name), read_png(clean / name))
+    assert "sensor axial (seed 3)" in summary_line(m, noisy)
 
 
 def test_killed_export_then_different_request_fails(tour, tmp_path):

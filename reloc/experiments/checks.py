@@ -16,7 +16,14 @@ Metric names (values are fractions, as in ``results.json``):
   rearranged, delta_R, kept (Table II, recall at 1 m/10 deg);
 * ``METHOD.KEY``: the same at the method's primary cutoff (videoreloc: closure, fpfh_icp: closure,
   appearance: causal, one_frame: causal);
-* ``METHOD.MODE.TOUR.KEY``: one query tour (``videoreloc.closure.apt_1__night__query.coverage``);
+* ``METHOD.MODE.TOUR.KEY``: one query tour (``videoreloc.closure.apt_1__night__query.coverage``; a
+  tour read through a sensor other than ideal is ``TOUR@SENSOR``);
+* sensors (an experiment with ``sensors:``): ``METHOD[.MODE].sensor.S`` (recall at 1 m/10 deg over
+  sensor S's query tours, a mean over tours, as Table II) and ``METHOD[.MODE].sensor.S.delta`` (that
+  minus the reference sensor's); ``METHOD[.MODE].sensor.S.KEY`` with KEY one of the pooled metrics
+  above; ``sensor.S.KEY`` for VideoReloc's odometry under S: drift_pct, drift_deg_per_m,
+  median_drift_pct, clips_per_100m, odometry_failures (clips that ended on a failed odometry gate),
+  odometry_failure_fraction (of all clip ends), no_usable_depth;
 * ``METHOD.map_bytes``;
 * ``map.KEY`` (the box map built with the experiment's detector) and ``map_oracle.KEY`` (built
   from oracle detections), against the mapping layout's ground truth: built, gt, matched, missing,
@@ -43,7 +50,7 @@ from formats.errors import SceneFormatError, UserError
 from .tables import FACTOR_KEYS, METRICS
 
 OPS = {">=": operator.ge, "<=": operator.le, ">": operator.gt, "<": operator.lt, "==": operator.eq, "!=": operator.ne}
-_EXPR = re.compile(r"^\s*([A-Za-z0-9_.\-]+)\s*(>=|<=|==|!=|>|<)\s*([A-Za-z0-9_.\-+eE]+)\s*$")
+_EXPR = re.compile(r"^\s*([A-Za-z0-9_.@\-]+)\s*(>=|<=|==|!=|>|<)\s*([A-Za-z0-9_.@\-+eE]+)\s*$")
 
 
 @dataclass
@@ -90,7 +97,9 @@ def metric_table(results: dict) -> dict[str, float | None]:
     for m, entry in results.get("methods", {}).items():
         vals[f"{m}.map_bytes"] = entry.get("map_bytes")
         for mode, d in entry.get("modes", {}).items():
-            flat = {**{k: d["all"].get(k) for k in METRICS}, **{k: d["factors"].get(k) for k in FACTOR_KEYS}}
+            flat = {**{k: d["all"].get(k) for k in METRICS}, **{k: d["factors"].get(k) for k in FACTOR_KEYS},
+                    **{k: v for k, v in d["factors"].items() if k.startswith("sensor.")},
+                    **{f"sensor.{s}.{k}": summ.get(k) for s, summ in (d.get("sensors") or {}).items() for k in METRICS}}
             for k, v in flat.items():
                 vals[f"{m}.{mode}.{k}"] = v
                 if mode == entry.get("primary"):
@@ -98,6 +107,16 @@ def metric_table(results: dict) -> dict[str, float | None]:
             for tour, s in d.get("tours", {}).items():
                 for k in METRICS:
                     vals[f"{m}.{mode}.{tour}.{k}"] = s.get(k)
+    for s, f in (results.get("sensor_figures") or {}).items():
+        odo = f.get("odometry") or {}
+        for k in ("drift_pct", "drift_deg_per_m", "median_drift_pct"):
+            vals[f"sensor.{s}.{k}"] = odo.get(k)
+        vals[f"sensor.{s}.clips_per_100m"] = f.get("clips_per_100m")
+        ends = f.get("clip_ends") or {}
+        n = sum(ends.values())
+        vals[f"sensor.{s}.odometry_failures"] = ends.get("odometry failure")
+        vals[f"sensor.{s}.no_usable_depth"] = ends.get("no usable depth")
+        vals[f"sensor.{s}.odometry_failure_fraction"] = ends.get("odometry failure", 0) / n if n else None
     for key, name in (("boxes", "map"), ("boxes_oracle", "map_oracle")):
         q = (results.get("maps") or {}).get(key)
         if q is None:

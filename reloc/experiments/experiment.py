@@ -20,6 +20,11 @@ tour, the query path, the unchanged layout, the methods and the optional tables:
     config: {}                         # VideoReloc threshold overrides (reloc/config.py sections)
     appearance: {}                     # AppearanceConfig overrides
     fpfh_icp: {}                       # FpfhConfig overrides
+    sensors: [ideal]                   # the RGB-D cameras the tours are read through (formats.sensors):
+                                       # presets (ideal, structured_light, tof) or sensor YAML files
+                                       # (relative to this file); a design factor like lighting and layout
+    map_sensor: same                   # the mapping tour through the query's sensor (same) or one sensor
+    seed: 0                            # VideoReloc's RANSAC seed and the sensors' noise seed
     workers: 2
 
 Methods and the rows they give (``key`` = method.mode, used by ``reloc check``):
@@ -41,6 +46,17 @@ A detector that sees images (``learned``, ``onnx``) looks only at frames with RG
 ``one_frame_stride``-th for the one-frame unit, so the render job's query designs must render RGB
 there (``rgb_every`` dividing both), which the spec check says before anything runs; the map is
 built from the mapping tour's RGB frames.
+
+Sensors (``formats.sensors``): every query tour is read through every sensor of ``sensors``, seeded
+per (tour, frame, sensor, ``seed``), so every method sees the same noisy frames (external command
+methods through exports read with the same sensor). A query tour read through a sensor other than
+``ideal`` is named ``TOUR@SENSOR`` (its runs are ``runs/METHOD/TOUR@SENSOR``). The map is built from
+the mapping tour read through the query's own sensor (``map_sensor: same``: the same camera maps
+and queries, as on real data; maps of sensor S go to ``maps/S/``) or through one named sensor for
+every query (``map_sensor: ideal``: clean maps, noisy queries). Tables I and II's lighting and layout
+columns use the reference sensor's tours (``ideal`` when listed, else the first); Table II gains a
+column per sensor and its difference to the reference, and a sensor table (``tables/sensors.md``)
+gives VideoReloc's odometry drift and clip end reasons per sensor (``tables.sensor_table``).
 
 The clip-rigid controls reuse VideoReloc's clip partition and within-clip odometry
 (``clip_poses.npz`` of its run), as the paper's dagger rows do.
@@ -72,15 +88,17 @@ from formats.atomic import write_json_atomic, write_text_atomic
 from formats.camera import write_tum
 from formats.design import DESIGN_FILE, list_tours, read_design, tour_name
 from formats.errors import SceneFormatError, UserError, check_output_folder
+from formats.sensors import load_sensor
 from formats.tour import Tour
 from formats.yamlfile import read_yaml
 
 from . import tables
-from .tables import ABLATIONS, ablation_name
+from .tables import ABLATIONS, ablation_name, reading_name
 from .units import DEFAULT_LENGTHS
 
 SPEC_KEYS = {"name", "description", "render", "tours", "out", "mapping", "query", "unchanged", "map", "methods",
-             "tables", "one_frame_stride", "detector", "config", "appearance", "fpfh_icp", "workers", "seed"}
+             "tables", "one_frame_stride", "detector", "config", "appearance", "fpfh_icp", "workers", "seed",
+             "sensors", "map_sensor"}
 METHODS = ("videoreloc", "videoreloc_oracle", "fpfh_icp", "appearance", "one_frame")
 DETECTORS = ("learned", "oracle", "onnx")
 ORACLE = {"kind": "oracle", "model": None, "corruption": {}}  # a spec's detector: the rendered labels
@@ -110,6 +128,35 @@ class ExperimentSpec:
     seed: int = 0
     description: str = ""
     externals: tuple = ()  # external.ExternalMethod, named in methods too
+    # the sensors queries are read through: {"name", "spec" (preset name or absolute file), "params"}
+    sensors: tuple = ()
+    map_sensor: dict | None = None  # None: the query's own sensor (map_sensor: same)
+
+    def __post_init__(self):
+        if not self.sensors:
+            self.sensors = (_sensor_entry("ideal", None, "sensors[0]"),)
+
+    @property
+    def sensor_names(self) -> list[str]:
+        return [s["name"] for s in self.sensors]
+
+    @property
+    def reference_sensor(self) -> str:
+        """The sensor of Tables I and II's lighting and layout columns: ideal when listed, else the first."""
+        names = self.sensor_names
+        return "ideal" if "ideal" in names else names[0]
+
+    def sensor(self, name: str) -> dict:
+        for s in self.sensors:
+            if s["name"] == name:
+                return s
+        if self.map_sensor is not None and self.map_sensor["name"] == name:
+            return self.map_sensor
+        raise KeyError(name)
+
+    def map_sensor_of(self, name: str) -> str:
+        """The sensor the map used by queries read through sensor ``name`` is built with."""
+        return name if self.map_sensor is None else self.map_sensor["name"]
 
     @property
     def detector_label(self) -> str:
@@ -123,6 +170,51 @@ class ExperimentSpec:
 
 def _fail(src, field, msg):
     raise SceneFormatError(src, field, msg)
+
+
+def _sensor_entry(value, src, field) -> dict:
+    """One sensor of a spec's ``sensors``: a preset name or a YAML file relative to the spec. Loaded
+    here, so that an unknown preset or a bad parameter stops the experiment before anything runs."""
+    from formats.sensors import PRESET_DIR
+
+    if not isinstance(value, str) or not value:
+        _fail(src, field, f"expected a sensor preset name or a sensor YAML file, got {value!r}")
+    is_file = value.lower().endswith((".yaml", ".yml", ".json")) or "/" in value or "\\" in value
+    spec = str((Path(src).parent / value).resolve()) if is_file and src is not None else value
+    if is_file and not Path(spec).is_file():
+        _fail(src, field, f"sensor file {spec} not found")
+    try:
+        s = load_sensor(spec)
+    except SceneFormatError as e:
+        if not is_file and str(PRESET_DIR) in str(e):  # an unknown preset: name the spec's field
+            _fail(src, field, str(e).split(": ", 2)[-1])
+        raise
+    if s.name == "ideal" and not s.is_ideal:
+        _fail(src, field, f"{spec}: the name 'ideal' is the preset without effects; give this sensor another name")
+    params = {"depth": dataclasses.asdict(s.depth), "color": dataclasses.asdict(s.color)}
+    return {"name": s.name, "spec": spec, "params": json.loads(json.dumps(params, default=str))}
+
+
+def _sensors_of(doc: dict, src) -> tuple[tuple, dict | None]:
+    v = doc.get("sensors", ["ideal"])
+    if isinstance(v, str):
+        v = [v]
+    if not isinstance(v, list) or not v:
+        _fail(src, "sensors", f"expected a non-empty list of sensor presets or files, got {v!r}")
+    out = []
+    for i, x in enumerate(v):
+        e = _sensor_entry(x, src, f"sensors[{i}]")
+        if e["name"] in [o["name"] for o in out]:
+            _fail(src, f"sensors[{i}]", f"sensor {e['name']!r} is listed twice")
+        out.append(e)
+    m = doc.get("map_sensor", "same")
+    if m == "same":
+        return tuple(out), None
+    ms = _sensor_entry(m, src, "map_sensor")
+    same_name = [o for o in out if o["name"] == ms["name"]]
+    if same_name and same_name[0]["params"] != ms["params"]:
+        _fail(src, "map_sensor", f"{ms['name']!r} differs from the sensor of that name in sensors")
+    return tuple(out), ms
 
 
 def _mapping_of(v, src, field) -> dict:
@@ -222,12 +314,17 @@ def load_experiment(path) -> ExperimentSpec:
 
         _check_overrides(FpfhConfig, fp, src, "fpfh_icp")
     tours_root = Path(doc["tours"]) if doc.get("tours") else Path(job_out)
+    sensors, map_sensor = _sensors_of(doc, src)
+    seed = doc.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        _fail(src, "seed", f"expected a non-negative integer, got {seed!r}")
     return ExperimentSpec(
         name=str(doc["name"]), source=src, render=render, tours_root=tours_root, out=Path(doc["out"]),
         mapping=mapping, query=str(doc["query"]), unchanged=str(doc["unchanged"]), map=doc.get("map", "build"),
         methods=tuple(methods), tables=tuple(tables), one_frame_stride=int(doc.get("one_frame_stride", 15)),
         detector=det, config=cfg, appearance=app, fpfh_icp=fp, workers=int(doc.get("workers", 2)),
-        seed=int(doc.get("seed", 0)), description=str(doc.get("description", "")), externals=tuple(externals),
+        seed=seed, description=str(doc.get("description", "")), externals=tuple(externals),
+        sensors=sensors, map_sensor=map_sensor,
     )
 
 
@@ -323,7 +420,10 @@ def _check_render_rgb(render: Path, doc, query: str, mapping: dict, strides: dic
 def design_tours(spec: ExperimentSpec) -> tuple[dict, dict]:
     """(query tours {name: info}, mapping tour info) of the design in ``spec.tours_root``, read from
     its files (``formats.design``): the planned tours from design.json, each tour from its meta.json
-    (without design.json, the tours found there). Checks that they are rendered."""
+    (without design.json, the tours found there). Checks that they are rendered.
+
+    Every query tour is there once per sensor of the spec, named ``reading_name(tour, sensor)``,
+    with ``tour`` (the tour's name) and ``sensor`` in its info."""
     root = spec.tours_root
     found = list_tours(root)
     planned = read_design(root)
@@ -345,6 +445,8 @@ def design_tours(spec: ExperimentSpec) -> tuple[dict, dict]:
             missing.append(name + " (incomplete)")
             return None
         t = Tour(d)
+        for s in spec.sensors + ((spec.map_sensor,) if spec.map_sensor else ()):  # before anything runs
+            load_sensor(s["spec"]).check_resolution(t.intrinsics.width, t.intrinsics.height, str(d))
         return {"dir": str(d.resolve()), "layout": p["layout"], "lighting": p["lighting"], "path": p["path"],
                 "rearranged": p["layout"] != spec.unchanged, "frames": len(t), "fps": t.fps, "rgb_every": t.rgb_every}
 
@@ -362,7 +464,8 @@ def design_tours(spec: ExperimentSpec) -> tuple[dict, dict]:
     if missing:
         raise UserError(f"{root}: {len(missing)} tour(s) not rendered: {', '.join(missing[:4])}"
                         f"{' ...' if len(missing) > 4 else ''}; run: synth render {spec.render} --resume")
-    return out, mapping
+    read = {reading_name(n, s): {**t, "tour": n, "sensor": s} for s in spec.sensor_names for n, t in out.items()}
+    return read, {**mapping, "tour": mname}
 
 
 def _check_detector_inputs(spec: ExperimentSpec, queries: dict, mapping: dict) -> None:
@@ -376,7 +479,7 @@ def _check_detector_inputs(spec: ExperimentSpec, queries: dict, mapping: dict) -
 
     detector = _open_detector(det, None)
     stride = Config.from_dict(spec.config).observation.stride
-    for t in queries.values():
+    for t in {t["dir"]: t for t in queries.values()}.values():  # once per tour, whatever the sensors
         tour = Tour(t["dir"])
         check_rgb_schedule(tour, stride, detector, "observation.stride")
         if "one_frame" in spec.methods or "units" in spec.tables:
@@ -559,7 +662,7 @@ def run_map_task(task: dict) -> dict:
     t0 = time.perf_counter()
     out = Path(task["file"])
     out.with_name(out.name + ".done.json").unlink(missing_ok=True)
-    tour = Tour(task["tour"])
+    tour = Tour(task["tour"], sensor=task.get("sensor"), sensor_seed=task.get("sensor_seed", 0))
     if task["kind"] == "boxes":
         from ..map.build import build_map
         from ..map.document import dumps_map, map_from_tour
@@ -599,7 +702,7 @@ def run_tour_task(task: dict) -> dict:
     d = Path(task["dir"])
     d.mkdir(parents=True, exist_ok=True)
     (d / DONE).unlink(missing_ok=True)  # from here until done, this run's files are not a result
-    tour = Tour(task["tour"])
+    tour = Tour(task["tour"], sensor=task.get("sensor"), sensor_seed=task["seed"])
     method = task["method"]
     extra: dict = {}
     if method in ("videoreloc", "videoreloc_oracle") or method.startswith("ablation_"):
@@ -724,35 +827,33 @@ def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int |
     maps_dir = out / "maps"
     maps_dir.mkdir(exist_ok=True)
 
-    # 1. maps from the mapping tour
+    # 1. maps from the mapping tour, once per sensor a map is read through
     map_tasks = []
-    files = {"boxes": maps_dir / "videoreloc_map.json"}
-    if "videoreloc_oracle" in spec.methods:
-        files["boxes_oracle"] = maps_dir / "videoreloc_oracle_map.json"
-    if "fpfh_icp" in spec.methods:
-        files["fpfh"] = maps_dir / "fpfh_map.npz"
-    if "appearance" in spec.methods:
-        files["appearance"] = maps_dir / "appearance_map.npz"
+    map_sensors = list(dict.fromkeys(spec.map_sensor_of(s) for s in spec.sensor_names))
+    map_files = {ms: _map_files(spec, maps_dir, ms) for ms in map_sensors}
     options = {"boxes": {}, "boxes_oracle": {}, "fpfh": spec.fpfh_icp, "appearance": spec.appearance}
     detectors = {"boxes": spec.detector, "boxes_oracle": ORACLE}
     model_key = _file_key(spec.detector["model"]) if spec.detector.get("model") else None
     code = code_fingerprint()  # every key below holds it: a change of the code recomputes
-    for kind, f in files.items():
-        source = det = None
-        if kind.startswith("boxes"):
-            source = _ground_truth_key(mapping["dir"]) if spec.map == "ground-truth" else spec.map
-            det = None if spec.map == "ground-truth" else detectors[kind]
-        key = _key(kind, _file_key(Path(mapping["dir"]) / "poses.txt"), mapping, source, options[kind], code,
-                   det, model_key if det is spec.detector else None)
-        try:
-            done = json.loads(f.with_name(f.name + ".done.json").read_text()).get("key") == key and f.is_file()
-        except (OSError, ValueError):
-            done = False
-        if not done:
-            map_tasks.append((f"map/{kind}", run_map_task, {"kind": kind.removesuffix("_oracle"), "file": str(f),
-                                                             "tour": mapping["dir"], "source": spec.map,
-                                                             "detector": det, "options": options[kind], "key": key,
-                                                             "code": code}, []))
+    for ms, files in map_files.items():
+        for kind, f in files.items():
+            source = det = None
+            if kind.startswith("boxes"):
+                source = _ground_truth_key(mapping["dir"]) if spec.map == "ground-truth" else spec.map
+                det = None if spec.map == "ground-truth" else detectors[kind]
+            sensor_key = None if spec.map == "ground-truth" and kind.startswith("boxes") else _sensor_key(spec, ms)
+            key = _key(kind, _file_key(Path(mapping["dir"]) / "poses.txt"), mapping, source, options[kind], code,
+                       det, model_key if det is spec.detector else None, sensor_key)
+            try:
+                done = json.loads(f.with_name(f.name + ".done.json").read_text()).get("key") == key and f.is_file()
+            except (OSError, ValueError):
+                done = False
+            if not done:
+                f.parent.mkdir(parents=True, exist_ok=True)
+                map_tasks.append((f"map/{kind}" + ("" if ms == "ideal" else f"@{ms}"), run_map_task,
+                                  {"kind": kind.removesuffix("_oracle"), "file": str(f), "tour": mapping["dir"],
+                                   "source": spec.map, "detector": det, "options": options[kind], "key": key,
+                                   "code": code, "sensor": spec.sensor(ms)["spec"], "sensor_seed": spec.seed}, []))
     runner = _Runner(workers, progress, len(map_tasks), f"{spec.name}: maps")
     try:
         runner.run(map_tasks)
@@ -762,23 +863,26 @@ def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int |
         raise UserError("map building failed: " + "; ".join(f"{k}: {v}" for k, v in runner.failed.items()))
     map_seconds = dict(runner.seconds)
 
-    # 2. every method on every query tour
-    map_keys = {k: _file_key(f) for k, f in files.items()}
+    # 2. every method on every query tour (read through every sensor)
+    map_keys = {ms: {k: _file_key(f) for k, f in files.items()} for ms, files in map_files.items()}
     tour_keys = {n: _file_key(Path(t["dir"]) / "poses.txt") + _file_key(Path(t["dir"]) / "meta.json")
-                 + json.dumps(t, sort_keys=True) for n, t in queries.items()}
+                 + json.dumps(t, sort_keys=True) + json.dumps(_sensor_key(spec, t["sensor"]), sort_keys=True)
+                 for n, t in queries.items()}
     tasks = []
     expected: dict[tuple[str, str], tuple[Path, str]] = {}
-    common = {"map": str(files["boxes"]), "config": spec.config, "detector": spec.detector, "model": model_key,
-              "seed": spec.seed, "code": code}
     methods = list(spec.methods)
     variants = [v for v in ABLATIONS if v != (True, True, True)] if "ablation" in spec.tables else []
     for name, t in queries.items():
         vr_dir = out / "runs" / "videoreloc" / name
+        ms = spec.map_sensor_of(t["sensor"])
+        files = map_files[ms]
+        common = {"map": str(files["boxes"]), "config": spec.config, "detector": spec.detector, "model": model_key,
+                  "seed": spec.seed, "code": code, "sensor": spec.sensor(t["sensor"])["spec"]}
 
         def add(method, deps, uses="boxes", **kw) -> str:
             d = out / "runs" / method / name
             arg = {**common, "method": method, "tour": t["dir"], "tour_name": name, "dir": str(d), **kw}
-            arg["key"] = _key(arg, map_keys[uses], tour_keys[name])
+            arg["key"] = _key(arg, map_keys[ms][uses], tour_keys[name])
             expected[(method, name)] = (d, arg["key"])
             if not is_done(d, arg["key"]):
                 tasks.append((f"{method}/{name}", run_tour_task, arg, [x for x in deps if x in scheduled]))
@@ -804,6 +908,7 @@ def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int |
             add(ablation_name(v), [], variant=list(v))
     if spec.externals:
         _external_tasks(spec, out, mapping, queries, tour_keys, tasks, expected, progress)
+    files = map_files[spec.map_sensor_of(spec.reference_sensor)]
     runner = _Runner(workers, progress, len(tasks), f"{spec.name}: runs")
     try:
         runner.run(tasks)
@@ -814,7 +919,7 @@ def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int |
     # 3. evaluation, tables, plots, report
     # only results whose done marker holds the current key count; a failed or stale run has no poses
     valid = {mt for mt, (d, key) in expected.items() if is_done(d, key)}
-    results = tables.evaluate_experiment(spec, out, queries, files, methods, variants, valid)
+    results = tables.evaluate_experiment(spec, out, queries, files, methods, variants, valid, map_files=map_files)
     results["seconds"] = _seconds(out, queries, methods, variants, files)
     results["seconds"]["this_run_wall"] = round(time.time() - t_start, 1)
     results["failed"] = runner.failed
@@ -833,38 +938,55 @@ def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int |
 
 def _external_tasks(spec: ExperimentSpec, out: Path, mapping: dict, queries: dict, tour_keys: dict, tasks: list,
                     expected: dict, progress: bool) -> None:
-    """Exports (now, in this process: once per format and tour, cached), then a ``map_command`` task
-    per external method that has one and a run task per method and query tour (``external.py``)."""
+    """Exports (now, in this process: once per format, tour and sensor, cached), then a ``map_command``
+    task per external method that has one (and map sensor) and a run task per method and query tour
+    (``external.py``). A command reads exports of the tour read through the query's sensor; a folder
+    of trajectories holds one file per query reading (``{tour}`` is ``TOUR@SENSOR`` beside ideal)."""
     from .external import export_dir, file_key, prepare_exports, run_external_map_task, run_external_task
 
-    mname = tour_name(spec.mapping["layout"], spec.mapping["lighting"], spec.mapping["path"])
-    export_keys = prepare_exports(out, list(spec.externals), mapping, mname, queries, progress)
+    mtour = mapping["tour"]
+    mappings = {reading_name(mtour, ms): {**mapping, "sensor": ms}
+                for ms in dict.fromkeys(spec.map_sensor_of(s) for s in spec.sensor_names)}
+    sensors = {n: (spec.sensor(n)["spec"] if n != "ideal" else None) for n in
+               {t["sensor"] for t in list(queries.values()) + list(mappings.values())}}
+    export_keys = prepare_exports(out, list(spec.externals), mappings, queries, progress, sensors=sensors,
+                                  sensor_seed=spec.seed, mapping_of=lambda t: reading_name(mtour, spec.map_sensor_of(t["sensor"])))
     for m in spec.externals:
         md = m.to_dict()
-        map_key, map_id, map_out = None, None, None
-        if m.kind == "command" and m.map_command:
-            map_out = out / "maps" / m.name
-            map_key = _key("external-map", md, export_keys[(m.export, str(m.exposure), mname)])
-            map_id = f"map/{m.name}"
-            done = out / "maps" / f"{m.name}.done.json"
+        map_keys: dict = {}
+        map_ids: dict = {}
+        for mname in mappings:
+            if not (m.kind == "command" and m.map_command):
+                continue
+            ms = mappings[mname]["sensor"]
+            suffix = "" if ms == "ideal" else f"@{ms}"
+            map_out = out / "maps" / (m.name + suffix)
+            map_keys[mname] = _key("external-map", md, export_keys[(m.export, str(m.exposure), mname)])
+            map_ids[mname] = f"map/{m.name}{suffix}"
+            done = out / "maps" / f"{m.name}{suffix}.done.json"
             try:
-                fresh = json.loads(done.read_text()).get("key") == map_key
+                fresh = json.loads(done.read_text()).get("key") == map_keys[mname]
             except (OSError, ValueError):
                 fresh = False
             if not fresh:
-                tasks.append((map_id, run_external_map_task, {"method": md, "dir": str(map_out), "key": map_key,
-                                                              "mapping": str(export_dir(out, m, mname))}, []))
+                tasks.append((map_ids[mname], run_external_map_task, {"method": md, "dir": str(map_out),
+                                                                      "key": map_keys[mname],
+                                                                      "mapping": str(export_dir(out, m, mname))}, []))
             else:
-                map_id = None
+                map_ids[mname] = None
         for name, t in queries.items():
             d = out / "runs" / m.name / name
             arg = {"method": md, "tour": t["dir"], "tour_name": name, "dir": str(d), "code": None}
+            mname = reading_name(mtour, spec.map_sensor_of(t["sensor"]))
+            map_id = map_ids.get(mname)
             if m.kind == "command":
+                ms = mappings[mname]["sensor"]
+                map_out = out / "maps" / (m.name + ("" if ms == "ideal" else f"@{ms}")) if m.map_command else None
                 arg.update(mapping_export=str(export_dir(out, m, mname)), query_export=str(export_dir(out, m, name)),
                            scene=str(out / "exports" / export_dir(out, m, name).parent.name / "scenes" / name),
                            map_out=str(map_out) if map_out else None)
                 inputs = (export_keys[(m.export, str(m.exposure), mname)], export_keys[(m.export, str(m.exposure), name)],
-                          map_key)
+                          map_keys.get(mname))
             else:
                 from .external import _fill_path
 
@@ -877,6 +999,25 @@ def _external_tasks(spec: ExperimentSpec, out: Path, mapping: dict, queries: dic
             expected[(m.name, name)] = (d, arg["key"])
             if not is_done(d, arg["key"]):
                 tasks.append((f"{m.name}/{name}", run_external_task, arg, [map_id] if map_id else []))
+
+
+def _map_files(spec: ExperimentSpec, maps_dir: Path, sensor: str) -> dict[str, Path]:
+    """The map files of one map sensor: ``maps/`` for the ideal sensor, ``maps/SENSOR/`` for another."""
+    d = maps_dir if sensor == "ideal" else maps_dir / sensor
+    files = {"boxes": d / "videoreloc_map.json"}
+    if "videoreloc_oracle" in spec.methods:
+        files["boxes_oracle"] = d / "videoreloc_oracle_map.json"
+    if "fpfh_icp" in spec.methods:
+        files["fpfh"] = d / "fpfh_map.npz"
+    if "appearance" in spec.methods:
+        files["appearance"] = d / "appearance_map.npz"
+    return files
+
+
+def _sensor_key(spec: ExperimentSpec, name: str) -> dict | None:
+    """What a result depends on in the sensor it was read through (None: the ideal sensor)."""
+    s = spec.sensor(name)
+    return None if name == "ideal" else {"name": name, "params": s["params"], "seed": spec.seed}
 
 
 def _seconds(out: Path, queries: dict, methods: list, variants: list, files: dict) -> dict:

@@ -191,25 +191,33 @@ def export_dir(out: Path, m: ExternalMethod, tour_name: str) -> Path:
     return out / "exports" / f"{m.export}__{_short(m.exposure)}" / tour_name
 
 
-def prepare_exports(out: Path, methods: list[ExternalMethod], mapping: dict, mapping_name: str, queries: dict,
-                    progress: bool = True) -> dict:
-    """Export the mapping tour and every query tour once per (format, exposure) the command methods
-    read; link a ``scene`` folder per query tour. Returns {(format, exposure, tour): manifest key}."""
+def prepare_exports(out: Path, methods: list[ExternalMethod], mappings: dict, queries: dict, progress: bool = True,
+                    sensors: dict | None = None, sensor_seed: int = 0, mapping_of=None) -> dict:
+    """Export the mapping tour (once per map sensor: ``mappings`` {reading name: info}) and every query
+    tour reading once per (format, exposure) the command methods read, each read through its info's
+    ``sensor`` (``sensors``: sensor name -> preset name or file, None for ideal; ``sensor_seed``);
+    link a ``scene`` folder per query reading with the mapping export ``mapping_of(query info)``
+    names (default: the only mapping). Returns {(format, exposure, reading name): manifest key}."""
     from formats.export import export_tour
 
+    sensors = sensors or {}
+    if mapping_of is None:
+        only = next(iter(mappings))
+        mapping_of = lambda t: only  # noqa: E731
     keys: dict = {}
     wanted = sorted({(m.export, m.exposure) for m in methods if m.kind == "command"}, key=str)
     for fmt, exposure in wanted:
         probe = ExternalMethod(name="x", kind="command", poses="tum", export=fmt, exposure=exposure)
-        for name, t, role in [(mapping_name, mapping, "mapping")] + [(n, q, "query") for n, q in queries.items()]:
+        for name, t, role in [(n, mp, "mapping") for n, mp in mappings.items()] + [(n, q, "query") for n, q in queries.items()]:
             d = export_dir(out, probe, name)
-            manifest = export_tour(t["dir"], fmt, d, role=role, exposure=exposure, progress=progress)
+            manifest = export_tour(t["dir"], fmt, d, role=role, exposure=exposure, progress=progress,
+                                   sensor=sensors.get(t.get("sensor", "ideal")), sensor_seed=sensor_seed)
             keys[(fmt, str(exposure), name)] = _manifest_key(manifest)
         users = [m for m in methods if m.kind == "command" and (m.export, m.exposure) == (fmt, exposure)]
         if any("scene" in _fields_of(m.command, None, "command") + _fields_of(m.poses_file, None, "poses_file")
                for m in users):  # only where a command asks for it: not every format has one scene folder
-            for name in queries:
-                _link_scene(export_dir(out, probe, mapping_name), export_dir(out, probe, name),
+            for name, q in queries.items():
+                _link_scene(export_dir(out, probe, mapping_of(q)), export_dir(out, probe, name),
                             out / "exports" / f"{fmt}__{_short(exposure)}" / "scenes" / name)
     return keys
 

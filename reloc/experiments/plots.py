@@ -300,19 +300,25 @@ def _is_bound(row: dict) -> bool:
 
 
 def recall_bars(results: dict, out_png, dpi: float = DPI) -> Path:
-    """Grouped bars of recall at 1 m/10 deg per row: lightings (left), unchanged vs rearranged (right)."""
+    """Grouped bars of recall at 1 m/10 deg per row: lightings (left), unchanged vs rearranged (middle)
+    and, in an experiment with more than one sensor, per sensor (right)."""
     import matplotlib
 
     rows = list(results.get("rows") or [])
     groups_l = [g for g in LIGHTINGS if any(_factor(results, r, g) is not None for r in rows)]
     groups_r = [g for g in CHANGES if any(_factor(results, r, g) is not None for r in rows)]
+    sensors = list(results.get("sensors") or []) if len(results.get("sensors") or []) > 1 else []
+    panels = [(groups_l, groups_l, "lighting"), (groups_r, groups_r, "layout change")]
+    if sensors:
+        panels.append(([f"sensor.{s}" for s in sensors], sensors, "sensor"))
     nrow = max(1, len(rows))
     wl, wr = max(1, len(groups_l)), max(1, len(groups_r))
+    ws = [wl, wr] + ([len(sensors)] if sensors else [])
     legend_h = 0.25 * ((len(rows) + 1) // 2) + 0.2
     fig_h = 4.2 + legend_h
-    fig = Figure(figsize=(float(np.clip(2.5 + 0.32 * nrow * (wl + wr), 7.0, 16.0)), fig_h), dpi=dpi)
+    fig = Figure(figsize=(float(np.clip(2.5 + 0.32 * nrow * sum(ws), 7.0, 18.0)), fig_h), dpi=dpi)
     FigureCanvasAgg(fig)
-    gs = fig.add_gridspec(1, 2, width_ratios=[wl, wr], left=0.07, right=0.98, top=0.88,
+    gs = fig.add_gridspec(1, len(ws), width_ratios=ws, left=0.07, right=0.98, top=0.88,
                           bottom=(legend_h + 0.45) / fig_h, wspace=0.15)
     palette = matplotlib.colormaps["tab10"].colors
     bar_w = 0.8 / nrow
@@ -321,7 +327,7 @@ def recall_bars(results: dict, out_png, dpi: float = DPI) -> Path:
                else palette[j % len(palette)],
                "hatch": "//" if row.get("dagger") else (".." if _is_bound(row) else None),
                "edgecolor": "0.25" if row.get("dagger") or _is_bound(row) else "white"} for j, row in enumerate(rows)]
-    for k, (groups, title) in enumerate(((groups_l, "lighting"), (groups_r, "layout change"))):
+    for k, (groups, names, title) in enumerate(panels):
         ax = fig.add_subplot(gs[0, k])
         ax.set_ylim(0, 1.12)
         ticks = np.linspace(0, 1, 6)
@@ -347,7 +353,7 @@ def recall_bars(results: dict, out_png, dpi: float = DPI) -> Path:
                 ax.text(xb, yb + 0.01, f"{100 * yb:.0f}%", ha="center", va="bottom", fontsize=6 if small else 7,
                         rotation=90 if small else 0)
         ax.set_xticks(x)
-        ax.set_xticklabels(groups, fontsize=9)
+        ax.set_xticklabels(names, fontsize=9)
         ax.set_xlim(-0.5, len(groups) - 0.5)
     if rows:
         handles = [Patch(facecolor=st["color"], hatch=st["hatch"], edgecolor=st["edgecolor"], label=row_label(r))
@@ -440,6 +446,8 @@ def plot_experiment(results_dir) -> list[Path]:
         bits = [str(tinfo.get(k)) for k in ("layout", "lighting") if tinfo.get(k) is not None]
         if "rearranged" in tinfo:
             bits.append("rearranged" if tinfo.get("rearranged") else "unchanged")
+        if tinfo.get("sensor") not in (None, "ideal"):
+            bits.append(f"sensor {tinfo['sensor']}")
         title = f"{tname}" + (f"  ({', '.join(bits)}; {len(gt)} frames)" if bits else f"  ({len(gt)} frames)")
         written.append(tour_figure(bmap, gt, estimates, plots / tour_png_name(tname), title=title))
     written.append(recall_bars(results, plots / "recall_bars.png"))

@@ -25,12 +25,13 @@ from pathlib import Path
 from formats.atomic import write_text_atomic
 from formats.errors import SceneFormatError, UserError
 
-from .tables import PAPER_TABLES, table_title
+from .tables import EXTRA_TABLES, PAPER_TABLES, table_title
 
 __all__ = ["write_report", "build_markdown", "markdown_to_html", "table_to_html", "split_row", "TABLE_ORDER"]
 
 # (file stem under tables/, heading): the paper's tables in its order, numbered and titled as there
-TABLE_ORDER = tuple((key, table_title(key)) for key in PAPER_TABLES)
+TABLE_ORDER = tuple((key, table_title(key)) for key in PAPER_TABLES) + tuple(
+    (key, title) for key, (_, title) in EXTRA_TABLES.items())
 
 PROTOCOL = [
     "Recall at 1 m/10\u00b0 (and at 0.25 m/5\u00b0) counts **all** ground-truth frames of the query tours: "
@@ -281,9 +282,9 @@ def build_markdown(results_dir, results: dict) -> str:
         for tname, t in tours.items():
             t = t if isinstance(t, dict) else {}
             change = "" if "rearranged" not in t else ("rearranged" if t["rearranged"] else "unchanged")
-            rows.append([tname, t.get("layout", ""), t.get("lighting", ""), change, t.get("frames", ""),
-                         "" if t.get("fps") is None else f"{t['fps']:g}"])
-        md += [_md_table(["tour", "layout", "lighting", "layout change", "frames", "fps"], rows), ""]
+            rows.append([tname, t.get("layout", ""), t.get("lighting", ""), change, t.get("sensor", "ideal"),
+                         t.get("frames", ""), "" if t.get("fps") is None else f"{t['fps']:g}"])
+        md += [_md_table(["tour", "layout", "lighting", "layout change", "sensor", "frames", "fps"], rows), ""]
 
     if methods:
         md += ["## Methods", ""]

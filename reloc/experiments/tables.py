@@ -9,7 +9,15 @@ in the paper (``PAPER_TABLES``):
   unchanged; means over tours);
 * ``units``, Table III: the localization-unit experiment, when asked;
 * ``ablation``, Table IV: orientation-aware refinement, run-level decision, adaptive clips
-  (``ABLATIONS``), when asked.
+  (``ABLATIONS``), when asked;
+* ``sensors`` (not in the paper), when the spec reads the tours through more than one sensor: per
+  sensor, recall of every row and VideoReloc's within-clip odometry (drift per metre, clips, how
+  clips ended: ``sensor_table``).
+
+Sensors: a query tour read through sensor S (other than ``ideal``) is the query ``TOUR@S``
+(``reading_name``). Table I and Table II's lighting and layout columns pool the reference sensor's
+queries (``ideal`` when the spec lists it, else its first sensor); Table II adds ``sensor.S``
+(recall over S's queries, a mean over tours) and ``sensor.S.delta`` (that minus the reference's).
 
 The keys are the file names under ``tables/`` and the names an experiment spec's ``tables:`` uses.
 ``results.json`` (format ``videoreloc-experiment/1``) holds every figure, fractions in [0, 1]:
@@ -30,7 +38,7 @@ import numpy as np
 from formats.atomic import write_json_atomic, write_text_atomic
 from formats.camera import read_tum
 
-from .evaluation import summarize
+from .evaluation import END_REASONS, end_reason_kind, odometry_drift, summarize
 
 FORMAT = "videoreloc-experiment/1"
 LIGHTINGS = ("day", "evening", "night")
@@ -39,6 +47,9 @@ FACTOR_KEYS = ("day", "evening", "night", "delta_L", "unchanged", "rearranged", 
 
 # The paper's tables: key -> (number, caption). The captions leave out the paper's datasets (RIO10,
 # ReplicaCAD): these tables are computed on a rendered design, which the title line names instead.
+EXTRA_TABLES = {  # tables the paper does not have: key -> (None, title)
+    "sensors": (None, "Sensor factor: recall and VideoReloc's odometry per RGB-D sensor model"),
+}
 PAPER_TABLES = {
     "main": ("I", "Comparison of recall and pose errors across relocalization methods and evaluation variants"),
     "factors": ("II", "Recall at 1 m/10\u00b0 under illumination and furniture changes"),
@@ -68,6 +79,15 @@ LABELS = {"videoreloc": "VideoReloc", "videoreloc_oracle": "VideoReloc (oracle d
 # Table IV rows, in the paper's order: (orientation-aware, run-level, adaptive); False = point-to-point
 # refinement, no run-level decision, fixed 100-frame clips. The last is VideoReloc itself.
 ABLATIONS = ((False, False, False), (True, False, False), (True, True, False), (True, False, True), (True, True, True))
+
+
+SENSOR_SEP = "@"
+
+
+def reading_name(tour: str, sensor: str) -> str:
+    """The name of a query tour read through a sensor: the tour's name for ``ideal`` (the render as it
+    is), ``TOUR@SENSOR`` otherwise; runs, results and check keys use it."""
+    return tour if sensor == "ideal" else f"{tour}{SENSOR_SEP}{sensor}"
 
 
 def ablation_name(variant) -> str:
@@ -106,13 +126,18 @@ def evaluation_frames(method: str, mode: str, frames: list[int], rgb_every: int,
     return frames
 
 
-def factors(per_tour: dict, tours: dict, unchanged: str) -> dict:
-    """Table II's figures from per-tour recall at 1 m/10 deg (fractions; None when the design lacks it)."""
+def factors(per_tour: dict, tours: dict, unchanged: str, sensors: list | None = None, reference: str = "ideal") -> dict:
+    """Table II's figures from per-tour recall at 1 m/10 deg (fractions; None when the design lacks it).
+
+    ``tours``: every query (``reading_name`` -> info with ``sensor``); lighting and layout use the
+    ``reference`` sensor's; with more than one of ``sensors``, ``sensor.S`` and ``sensor.S.delta``."""
 
     def mean(names):
         v = [per_tour[n]["recall_1m_10deg"] for n in names if n in per_tour]
         return float(np.mean(v)) if v else None
 
+    all_tours = tours
+    tours = {n: t for n, t in tours.items() if t.get("sensor", "ideal") == reference}
     out: dict = {}
     for light in LIGHTINGS:
         out[light] = mean([n for n, t in tours.items() if t["lighting"] == light])
@@ -122,6 +147,14 @@ def factors(per_tour: dict, tours: dict, unchanged: str) -> dict:
     u, r = out["unchanged"], out["rearranged"]
     out["delta_R"] = None if u is None or r is None else r - u
     out["kept"] = None if u is None or r is None or u <= 0 else r / u
+    if sensors and len(sensors) > 1:
+        for s in sensors:
+            out[f"sensor.{s}"] = mean([n for n, t in all_tours.items() if t.get("sensor", "ideal") == s])
+        ref = out.get(f"sensor.{reference}")
+        for s in sensors:
+            v = out[f"sensor.{s}"]
+            if s != reference:
+                out[f"sensor.{s}.delta"] = None if v is None or ref is None else v - ref
     return out
 
 
@@ -130,22 +163,30 @@ def _clean(d: dict) -> dict:
 
 
 def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: list, variants: list,
-                        valid: set | None = None) -> dict:
+                        valid: set | None = None, map_files: dict | None = None) -> dict:
     """Every row on every tour; ``valid``: the (method, tour) runs that finished with the current
-    inputs (others, failed or stale, count as no poses)."""
+    inputs (others, failed or stale, count as no poses). ``files``: the reference sensor's maps;
+    ``map_files``: sensor -> its maps (the quality of each sensor's box map)."""
     from ..baselines.appearance import AppearanceConfig
 
     feature = str(spec.appearance.get("feature", AppearanceConfig().feature)).upper()
-    gts = {n: _gt(t["dir"]) for n, t in queries.items()}
+    by_dir: dict = {}
+    gts = {n: by_dir[t["dir"]] if t["dir"] in by_dir else by_dir.setdefault(t["dir"], _gt(t["dir"]))
+           for n, t in queries.items()}
     map_bytes = {k: f.stat().st_size for k, f in files.items() if f.is_file()}
     method_map = {"videoreloc": "boxes", "one_frame": "boxes", "videoreloc_oracle": "boxes_oracle", "fpfh_icp": "fpfh",
                   "appearance": "appearance"}
+    sensors = list(getattr(spec, "sensor_names", ["ideal"]))
+    reference = getattr(spec, "reference_sensor", "ideal")
     res: dict = {
         "format": FORMAT, "name": spec.name, "description": spec.description, "spec": str(spec.source),
         "map": str(files["boxes"]), "detector": spec.detector_label, "unchanged": spec.unchanged,
         "one_frame_stride": spec.one_frame_stride,
         "tours": queries, "rows": [], "methods": {},
+        "sensors": sensors, "reference_sensor": reference,
     }
+    if getattr(spec, "map_sensor", None) is not None:
+        res["map_sensor"] = spec.map_sensor["name"]
     externals = {e.name: e for e in getattr(spec, "externals", ())}
     modes_of = {m: ([externals[m].mode] if m in externals else [mode for (mm, mode, _, _) in ROWS if mm == m])
                 for m in methods}
@@ -161,6 +202,7 @@ def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: li
                      "primary": PRIMARY.get(m, "closure"), "modes": {}}
         for mode in modes:
             per, pooled_est, pooled_gt = {}, {}, {}
+            by_sensor: dict = {s: ({}, {}) for s in sensors}
             for k, (name, t) in enumerate(queries.items()):
                 tour, gt = gts[name]
                 idx = evaluation_frames(m, mode, [int(i) for i in tour.frame_indices], t["rgb_every"],
@@ -172,13 +214,19 @@ def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: li
                 s["file"] = str(rel)
                 per[name] = _clean(s)
                 base = k * 10_000_000
-                pooled_est.update({base + i: T for i, T in est.items() if i in g})
-                pooled_gt.update({base + i: T for i, T in g.items()})
+                s_est, s_gt = by_sensor.setdefault(t.get("sensor", "ideal"), ({}, {}))
+                s_est.update({base + i: T for i, T in est.items() if i in g})
+                s_gt.update({base + i: T for i, T in g.items()})
+            pooled_est, pooled_gt = by_sensor[reference]
             entry["modes"][mode] = {"tours": per, "all": _clean(summarize(pooled_est, pooled_gt)),
-                                    "factors": factors(per, queries, spec.unchanged)}
+                                    "factors": factors(per, queries, spec.unchanged, sensors, reference)}
+            if len(sensors) > 1:
+                entry["modes"][mode]["sensors"] = {s: _clean(summarize(*by_sensor[s])) for s in sensors}
         res["methods"][m] = entry
     res["maps"] = {k: q for k in ("boxes", "boxes_oracle") if k in files
                    and (q := map_quality(map_report_path(files[k]))) is not None}
+    if len(sensors) > 1:
+        res["sensor_figures"] = sensor_figures(out, queries, sensors, gts, map_files or {}, spec, valid)
     for m, mode, label, dagger in ROWS:
         if m in methods:
             res["rows"].append({"key": f"{m}.{mode}", "method": m, "mode": mode, "label": label.format(feature=feature),
@@ -189,10 +237,48 @@ def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: li
             res["rows"].append({"key": f"{m}.{e.mode}", "method": m, "mode": e.mode, "label": e.label, "dagger": False,
                                 "external": True})
     if "units" in spec.tables:
-        res["units"] = _units(out, queries, spec.unchanged)
+        res["units"] = _units(out, {n: t for n, t in queries.items() if t.get("sensor", "ideal") == reference},
+                              spec.unchanged)
     if variants:
         res["ablation"] = _ablation(res, variants)
     return res
+
+
+def sensor_figures(out: Path, queries: dict, sensors: list, gts: dict, map_files: dict, spec, valid) -> dict:
+    """Per sensor: VideoReloc's within-clip odometry against ground truth (``odometry_drift`` over its
+    clips in every query tour read through the sensor, from ``clip_poses.npz``) and how its clips
+    ended (``clips.json``, counted by ``end_reason_kind``), and the quality of the sensor's box map."""
+    from ..backend.run import load_clip_poses
+
+    method = next((m for m in ("videoreloc", "videoreloc_oracle") if m in spec.methods), None)
+    out_figs: dict = {}
+    for s in sensors:
+        names = [n for n, t in queries.items() if t.get("sensor", "ideal") == s]
+        clips_all: dict = {}
+        gt_all: dict = {}
+        ends = {k: 0 for k in END_REASONS}
+        n_runs = 0
+        for k, n in enumerate(names):
+            d = out / "runs" / str(method) / n
+            if method is None or (valid is not None and (method, n) not in valid) or not (d / "clips.json").is_file():
+                continue
+            n_runs += 1
+            base = k * 10_000_000
+            for c, V in load_clip_poses(d).items():
+                clips_all[base + c] = {base + i: T for i, T in V.items()}
+            gt_all.update({base + i: T for i, T in gts[n][1].items()})
+            for c in json.loads((d / "clips.json").read_text()):
+                ends[end_reason_kind(c.get("end_reason"))] += 1
+        odo = odometry_drift(clips_all, gt_all) if n_runs else {}
+        frames = sum(queries[n]["frames"] for n in names)
+        fig = {"method": method, "tours": len(names), "runs": n_runs, "frames": frames, "odometry": odo,
+               "clip_ends": ends, "clips_per_100m": (100.0 * sum(ends.values()) / odo["path_m"]
+                                                     if odo.get("path_m") else None)}
+        mf = map_files.get(spec.map_sensor_of(s)) if hasattr(spec, "map_sensor_of") else None
+        if mf and "boxes" in mf:
+            fig["map"] = map_quality(map_report_path(mf["boxes"]))
+        out_figs[s] = fig
+    return out_figs
 
 
 def _folder_bytes(d: Path) -> int | None:
@@ -301,12 +387,23 @@ def _label(row: dict) -> str:
     return row["label"] + ("†" if row["dagger"] else "")
 
 
+def _reference_tours(res: dict) -> dict:
+    ref = res.get("reference_sensor", "ideal")
+    return {n: t for n, t in res["tours"].items() if t.get("sensor", "ideal") == ref}
+
+
+def _sensor_note(res: dict) -> str:
+    """'; sensor: ideal' when the experiment reads its tours through more than one sensor."""
+    return f"; sensor: {res.get('reference_sensor', 'ideal')}" if len(res.get("sensors") or []) > 1 else ""
+
+
 def main_table(res: dict) -> tuple[str, list[dict]]:
-    n_tours = len(res["tours"])
-    frames = sum(t["frames"] for t in res["tours"].values())
+    tours = _reference_tours(res)
+    n_tours = len(tours)
+    frames = sum(t["frames"] for t in tours.values())
     det = res.get("detector")
     lines = [f"**{table_title('main')}** ({n_tours} query tours, {frames} frames"
-             f"{f'; detections: {det}' if det else ''})", "",
+             f"{f'; detections: {det}' if det else ''}{_sensor_note(res)})", "",
              "| Method | Map size | Pos. / rot. | 1 m/10° | 0.25 m/5° | Coverage | Frames evaluated |",
              "|---|---|---|---|---|---|---|"]
     rows = []
@@ -335,22 +432,68 @@ def main_table(res: dict) -> tuple[str, list[dict]]:
 
 
 def factors_table(res: dict) -> tuple[str, list[dict]]:
-    lights = [x for x in LIGHTINGS if any(t["lighting"] == x for t in res["tours"].values())]
+    lights = [x for x in LIGHTINGS if any(t["lighting"] == x for t in _reference_tours(res).values())]
+    sensors = list(res.get("sensors") or [])
+    ref = res.get("reference_sensor", "ideal")
+    others = [s for s in sensors if s != ref] if len(sensors) > 1 else []
 
     def line(cells) -> str:
         return "| " + " | ".join(cells) + " |"
 
     head = ["Method", *lights, "ΔL", "unchanged", "rearranged", "ΔR", "kept"]
-    lines = [f"**{table_title('factors')}**", "", line(head), "|---" * len(head) + "|"]
+    if others:
+        head += [ref, *(x for s in others for x in (s, f"Δ {s}"))]
+    lines = [f"**{table_title('factors')}**" + (f" (lighting and layout: sensor {ref})" if others else ""), "",
+             line(head), "|---" * len(head) + "|"]
     rows = []
     for r in res["rows"]:
         f = res["methods"][r["method"]]["modes"][r["mode"]]["factors"]
         kept = "-" if f["kept"] is None else f"{100 * f['kept']:.0f} %"
-        lines.append(line([_label(r), *(pct(f[x]) for x in lights), pct(f["delta_L"], True), pct(f["unchanged"]),
-                           pct(f["rearranged"]), pct(f["delta_R"], True), kept]))
+        cells = [_label(r), *(pct(f[x]) for x in lights), pct(f["delta_L"], True), pct(f["unchanged"]),
+                 pct(f["rearranged"]), pct(f["delta_R"], True), kept]
+        if others:
+            cells += [pct(f.get(f"sensor.{ref}"))]
+            cells += [c for s in others for c in (pct(f.get(f"sensor.{s}")), pct(f.get(f"sensor.{s}.delta"), True))]
+        lines.append(line(cells))
         rows.append({"key": r["key"], "label": _label(r), **f})
     lines += ["", "Recall (%); lighting columns average the layouts, unchanged/rearranged average the tours. "
               "ΔL = night - day and ΔR = rearranged - unchanged (points); kept = rearranged / unchanged."]
+    if others:
+        lines[-1] += (f" Sensor columns: recall over every query tour read through that sensor (a mean over tours); "
+                      f"Δ = that sensor - {ref} (points). The other columns use the {ref} sensor's tours.")
+    return "\n".join(lines), rows
+
+
+def sensor_table(res: dict) -> tuple[str, list[dict]]:
+    """Per sensor: every row's recall at 1 m/10 deg (its pooled frames), VideoReloc's within-clip
+    odometry drift and clip counts, and how its clips ended."""
+    figs = res.get("sensor_figures") or {}
+    sensors = list(res.get("sensors") or [])
+    rows_r = res["rows"]
+    head = ["Sensor", *(_label(r) for r in rows_r), "drift (% of path)", "drift (°/m)", "clips / 100 m",
+            *END_REASONS]
+    lines = [f"**{EXTRA_TABLES['sensors'][1]}**", "", "| " + " | ".join(head) + " |", "|---" * len(head) + "|"]
+    rows = []
+    for s in sensors:
+        f = figs.get(s) or {}
+        odo = f.get("odometry") or {}
+        ends = f.get("clip_ends") or {}
+        rec = {r["key"]: res["methods"][r["method"]]["modes"][r["mode"]].get("sensors", {}).get(s, {}).get("recall_1m_10deg")
+               for r in rows_r}
+        drift = "-" if odo.get("drift_pct") is None else f"{odo['drift_pct']:.2f}"
+        deg = "-" if odo.get("drift_deg_per_m") is None else f"{odo['drift_deg_per_m']:.2f}"
+        c100 = "-" if f.get("clips_per_100m") is None else f"{f['clips_per_100m']:.1f}"
+        lines.append("| " + " | ".join([s, *(pct(rec[r["key"]]) for r in rows_r), drift, deg, c100,
+                                         *(str(ends.get(k, 0)) for k in END_REASONS)]) + " |")
+        rows.append({"sensor": s, "recall_1m_10deg": rec, **{k: odo.get(k) for k in ("drift_pct", "drift_deg_per_m",
+                                                                                     "median_drift_pct", "path_m")},
+                     "clips_per_100m": f.get("clips_per_100m"), "clip_ends": ends})
+    method = next((f.get("method") for f in figs.values() if f.get("method")), "videoreloc")
+    lines += ["", f"Recall (%) at 1 m/10° over every frame of the query tours read through each sensor. Odometry: "
+              f"{method}'s clips (its within-clip RGB-D odometry) against ground truth, each clip aligned at its "
+              "first frame: endpoint error / ground-truth path length, summed over clips. Clip ends: closed (enough "
+              "evidence), max length, end of tour, odometry failure (a gate failed: the run breaks there), no usable "
+              "depth (too few valid depth pixels)."]
     return "\n".join(lines), rows
 
 
@@ -388,6 +531,8 @@ def make_tables(res: dict) -> dict[str, tuple[str, list]]:
         t["units"] = units_table(res)
     if res.get("ablation"):
         t["ablation"] = ablation_table(res)
+    if len(res.get("sensors") or []) > 1:
+        t["sensors"] = sensor_table(res)
     failed = res.get("failed") or {}
     if failed:  # a failed run has no poses: its tour counts as failures, which the reader must know
         warn = (f"**Incomplete: {len(failed)} run(s) failed** ({', '.join(sorted(failed)[:3])}"
@@ -400,7 +545,7 @@ def write_tables(res: dict, out: Path) -> None:
     d = Path(out) / "tables"
     made = make_tables(res)
     for name, (md, rows) in made.items():
-        number, caption = PAPER_TABLES[name]
+        number, caption = PAPER_TABLES.get(name) or EXTRA_TABLES[name]
         write_text_atomic(d / f"{name}.md", md + "\n")
         write_json_atomic(d / f"{name}.json", {"table": number, "title": caption, "rows": rows})
     for stale in d.glob("*.md"):  # a table no longer asked for
