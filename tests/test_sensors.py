@@ -676,3 +676,37 @@ def test_reloc_run_names_an_unknown_sensor(small_tour, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "sensor" in err and "kinect9" in err, err
     assert not (tmp_path / "run").exists()
+
+
+def test_read_speed_benchmark_reports_every_preset(small_tour, tmp_path, capsys):
+    """The benchmark's figures (not its times): valid-depth fractions against the frames read by
+    hand, exposure from the colour model, and a table line per preset."""
+    import shutil
+
+    from formats import frames as fr
+    from formats.bench_sensors import main as bench_main
+    from formats.tour import Tour
+
+    root = tmp_path / small_tour.name
+    shutil.copytree(small_tour, root)
+    plain = Tour(root)
+    for i in plain.frame_indices:  # grey RGB on a geometry-only tour
+        f = plain.frame(int(i))
+        fr.write_frame(plain.frame_path(int(i)), rgb=np.full(f.depth.shape + (3,), 0.3, np.float32), depth=f.depth,
+                       instance=f.instance, semantic=f.semantic)
+    from formats.bench_sensors import bench
+
+    r = bench(root, frames=4)
+    rows = {x["sensor"]: x for x in r["rows"]}
+    assert list(rows) == ["ideal", "structured_light", "tof"] and r["frames"] == 4
+    assert rows["ideal"]["ratio"] == 1.0 and rows["ideal"]["exposure_ms"] is None
+    for name, x in rows.items():
+        t = Tour(root, sensor=name)
+        assert x["valid_depth"] == pytest.approx(np.mean([np.mean(t.frame(int(i)).depth > 0) for i in t.frame_indices]))
+        assert x["ms_per_frame"] > 0 and x["depth_only_ms"] > 0
+    sl = load_sensor("structured_light").color  # grey 0.3: exposure = target * full well / (e/ms * 0.3)
+    assert rows["structured_light"]["exposure_ms"] == pytest.approx(sl.exposure_target * sl.full_well_e
+                                                                    / (sl.electrons_per_ms * 0.3), rel=1e-3)
+    assert bench_main([str(root), "--frames", "2", "--sensors", "tof"]) == 0
+    out = capsys.readouterr().out
+    assert "ideal" in out and "tof" in out and "structured_light" not in out
