@@ -147,6 +147,40 @@ def test_external_command_and_trajectories_through_tables_and_checks(design, cap
 
 
 @pytest.mark.blender
+def test_external_command_reads_exports_through_every_sensor(design, capsys):
+    """With sensors, the command's exports are the tours read through each sensor (the frames every
+    other method gets), its map_command runs once per map sensor, and its rows count per sensor."""
+    import numpy as np
+
+    from formats.export import depth16, read_manifest
+    from formats.tour import Tour
+
+    root = design
+    spec = _spec(root, [_noisy(root)], name="exp_sensors")
+    doc = yaml.safe_load(spec.read_text())
+    doc.update(sensors=["ideal", "tof"], seed=2)
+    spec.write_text(yaml.safe_dump(doc, sort_keys=False))
+    assert reloc_main(["experiment", str(spec), "--quiet", "--no-plots"]) == 0
+    assert "10 runs and 2 maps computed now" in capsys.readouterr().out  # 4 tours x 2 sensors; a map per sensor
+    exp = root / "exp_sensors"
+    res = json.loads((exp / "results.json").read_text())
+    noisy = res["methods"]["noisy"]["modes"]["causal"]
+    assert noisy["factors"]["sensor.tof"] == pytest.approx(_predicted())  # poses do not depend on the sensor
+    assert noisy["factors"]["sensor.tof.delta"] == pytest.approx(0.0)
+    assert (exp / "maps" / "noisy@tof" / "model.txt").read_text() == "trained"
+    ex = exp / "exports" / "7scenes__auto"
+    for name in ("apt_0__day__mapping@tof", "apt_1__night__query@tof"):
+        m = read_manifest(ex / name)
+        assert m["sensor"]["name"] == "tof" and m["sensor"]["seed"] == 2
+        tour = Tour(root / "tours" / name.split("@")[0], sensor="tof", sensor_seed=2)
+        f = next(iter(m["frames"].items()))
+        dpath = ex / name / f[0].replace(".color.png", ".depth.png")
+        got = np.asarray(__import__("cv2").imread(str(dpath), -1))
+        np.testing.assert_array_equal(got, depth16(tour.frame(f[1]).depth, 1000.0))
+    assert read_manifest(ex / "apt_1__night__query").get("sensor") is None
+
+
+@pytest.mark.blender
 @pytest.mark.slow
 def test_a_failing_command_is_a_failed_run_with_its_stderr(design, capsys):
     root = design
