@@ -38,7 +38,11 @@ Per valid pixel (input depth > 0 and finite), in this order:
    depth image itself (back-projected with the intrinsics; one-sided differences, the side with
    the smaller depth step, so a normal next to a depth edge is the surface's own);
 2. lateral noise: the pixel reads depth (and theta) from a neighbour displaced by
-   ``round(N(0, lateral_px))`` in u and v (a displaced read of a no-hit pixel gives no depth);
+   ``round(N(0, s))`` in u and v (a displaced read of a no-hit pixel gives no depth), with
+   ``s = lateral_px * fx / focal_px``: ``lateral_px`` is in the sensor's own pixels (its focal
+   length ``focal_px``; without one, in the tour's pixels), so the same angular noise reaches a
+   160x120 render as a 640x480 one (0.8 Kinect pixels are 0.2 pixels of a 160x120 render: most
+   reads stay on their own pixel);
 3. axial noise: ``z + sigma(z, theta) * N(0, 1)`` with
    ``sigma = sigma_a + sigma_b (z - sigma_z0)^2 + sigma_c z + sigma_theta / sqrt(z) * theta^2 / (pi/2 - theta)^2``;
 4. depth edges (a 4-neighbour whose depth differs by more than ``edge_jump_rel * z``): with
@@ -143,7 +147,7 @@ class DepthModel:
     sigma_z0: float = 0.0  # m
     sigma_c: float = 0.0  # linear axial noise, fraction of z
     sigma_theta: float = 0.0  # m^1.5: Nguyen et al.'s incidence term, / sqrt(z) * theta^2 / (pi/2 - theta)^2
-    lateral_px: float = 0.0  # std of the lateral (pixel) displacement
+    lateral_px: float = 0.0  # std of the lateral displacement, in the sensor's pixels (focal_px; else the tour's)
     min_range_m: float = 0.0
     max_range_m: float = math.inf
     max_incidence_deg: float = 90.0  # 90 = no grazing dropout
@@ -153,7 +157,7 @@ class DepthModel:
     edge_flying: float = 0.0  # probability an edge pixel becomes a mixed pixel
     edge_dropout: float = 0.0  # probability an edge pixel is dropped
     baseline_m: float = 0.0  # disparity quantisation baseline (0 = no quantisation)
-    focal_px: float | None = None  # focal length for quantisation; None = the tour's fx
+    focal_px: float | None = None  # the sensor's focal length (px): quantisation, lateral noise; None = the tour's fx
     disparity_step_px: float = 0.125
 
     def sigma(self, z, theta=0.0):
@@ -447,8 +451,9 @@ def _apply_depth(m: DepthModel, depth: np.ndarray, rgb, intr: Intrinsics, ss: np
 
     z, th, ok = z0, theta, valid
     if m.lateral_px > 0:
-        dy = np.rint(rng_lat.normal(0.0, m.lateral_px, (H, W))).astype(np.int64)
-        dx = np.rint(rng_lat.normal(0.0, m.lateral_px, (H, W))).astype(np.int64)
+        lat = m.lateral_px * (intr.fx / m.focal_px if m.focal_px else 1.0)  # in the tour's pixels
+        dy = np.rint(rng_lat.normal(0.0, lat, (H, W))).astype(np.int64)
+        dx = np.rint(rng_lat.normal(0.0, lat, (H, W))).astype(np.int64)
         rows = np.clip(np.arange(H)[:, None] + dy, 0, H - 1)
         cols = np.clip(np.arange(W)[None, :] + dx, 0, W - 1)
         z, th = z0[rows, cols], theta[rows, cols]

@@ -710,3 +710,25 @@ def test_read_speed_benchmark_reports_every_preset(small_tour, tmp_path, capsys)
     assert bench_main([str(root), "--frames", "2", "--sensors", "tof"]) == 0
     out = capsys.readouterr().out
     assert "ideal" in out and "tof" in out and "structured_light" not in out
+
+
+@pytest.mark.parametrize("width", [640, 160])
+def test_lateral_noise_is_in_the_sensors_pixels(width):
+    """0.8 px of a 580 px-focal sensor: on a depth ramp the displacement each pixel read is decoded
+    exactly; the fraction displaced in u matches P(|round(N(0, s))| >= 1) = 2 (1 - Phi(0.5 / s)) with
+    s = 0.8 fx / 580 (0.8 px at VGA, 0.2 px at 160x120)."""
+    from scipy.stats import norm
+
+    height = width * 3 // 4
+    intr = Intrinsics.from_fov(width, height, 57.0)
+    u = np.arange(width)[None, :]
+    v = np.arange(height)[:, None]
+    z = (1.0 + 0.01 * u + 0.0001 * v).astype(np.float64)  # dz = 0.01 du + 0.0001 dv: both decodable
+    sensor = only_depth(lateral_px=0.8, focal_px=580.0)
+    out, _ = apply_sensor(sensor, z.astype(np.float32), None, intr, seed=7)
+    inner = (slice(8, height - 8), slice(8, width - 8))  # away from the clipped borders
+    dz = out[inner].astype(np.float64) - z[inner]
+    du = np.rint(dz / 0.01)
+    s = 0.8 * intr.fx / 580.0
+    expected = 2 * (1 - norm.cdf(0.5 / s))
+    assert np.mean(du != 0) == pytest.approx(expected, rel=0.1)
