@@ -141,7 +141,7 @@ def sensor_design(tmp_path_factory):
     (root / "render.yaml").write_text(yaml.safe_dump(render))
     assert run_job(load_spec(root / "render.yaml"), progress=False)["failed"] == {}
     (root / "noisy.yaml").write_text("name: noisy\nsource: a test sensor\n"
-                                     "depth: {sigma_a: 0.004, sigma_b: 0.004, max_range_m: 6.0, lateral_px: 0.5}\n")
+                                     "depth: {sigma_a: 0.002, sigma_b: 0.0015, max_range_m: 6.0, lateral_px: 0.3}\n")
     exp = {"name": "sensors", "render": "render.yaml", "out": str(root / "exp"), "query": "query", "unchanged": "apt_0",
            "mapping": {"layout": "apt_0", "lighting": "geometry", "path": "mapping"}, "map": "ground-truth",
            "methods": ["videoreloc"], "workers": 1, "detector": "oracle", "sensors": ["ideal", "noisy.yaml"], "seed": 1}
@@ -190,9 +190,31 @@ def test_experiment_through_two_sensors(sensor_design, capsys):
     # a rerun computes nothing; an edited sensor file recomputes that sensor's runs only
     assert reloc_main(argv) == 0
     assert "0 runs and 0 maps computed now" in capsys.readouterr().out
-    (root / "noisy.yaml").write_text((root / "noisy.yaml").read_text().replace("sigma_a: 0.004", "sigma_a: 0.005"))
+    (root / "noisy.yaml").write_text((root / "noisy.yaml").read_text().replace("sigma_a: 0.002", "sigma_a: 0.003"))
     assert reloc_main(argv) == 0
     assert "2 runs and 0 maps computed now" in capsys.readouterr().out
+
+
+def test_built_maps_see_the_sensor(sensor_design, tmp_path, capsys):
+    """map: build with two sensors: each box map is built from the mapping tour read through its
+    sensor, the same as building it by hand from that reading (and the two differ)."""
+    from formats.tour import Tour
+    from reloc.map.build import build_map
+    from reloc.map.document import dumps_map
+
+    root = sensor_design
+    sensor = tmp_path / "coarse.yaml"  # coarse enough to move the boxes of the 30-frame mapping tour
+    sensor.write_text("name: coarse\ndepth: {sigma_a: 0.02, sigma_b: 0.01}\n")
+    doc = yaml.safe_load((root / "exp.yaml").read_text())
+    doc.update(render=str(root / "render.yaml"), out=str(tmp_path / "exp"), map="build", sensors=["ideal", str(sensor)])
+    (tmp_path / "exp.yaml").write_text(yaml.safe_dump(doc))
+    assert reloc_main(["experiment", str(tmp_path / "exp.yaml"), "--quiet", "--no-plots"]) == 0
+    capsys.readouterr()
+    maps = tmp_path / "exp" / "maps"
+    mtour = root / "tours" / "apt_0__geometry__mapping"
+    for f, s in ((maps / "videoreloc_map.json", None), (maps / "coarse" / "videoreloc_map.json", sensor)):
+        assert f.read_text() == dumps_map(build_map(Tour(mtour, sensor=s, sensor_seed=1), progress=False)[0])
+    assert (maps / "videoreloc_map.json").read_text() != (maps / "coarse" / "videoreloc_map.json").read_text()
 
 
 def test_a_sensor_for_another_resolution_is_refused(sensor_design, tmp_path, capsys):

@@ -672,7 +672,7 @@ def run_map_task(task: dict) -> dict:
         else:
             det = task["detector"]
             detector = None if det["kind"] == "oracle" else _open_detector(det, None, tour.class_names())
-            doc, report = build_map(tour.root, detector=detector, progress=False)
+            doc, report = build_map(tour, detector=detector, progress=False)  # the Tour: read through its sensor
             if not doc["boxes"]:
                 raise UserError(report["warnings"][0] if report["warnings"] else f"{tour.root}: no boxes built")
             from ..map.scoring import errors_against_ground_truth

@@ -83,7 +83,8 @@ def build_map(tour_dir, detector=None, stride: int | None = None, voxel: float |
               settings: MappingSettings | None = None, max_frames: int | None = None) -> tuple[dict, dict]:
     """Build a box map from a mapping tour: ``(videoreloc-boxes/1 document, report)``.
 
-    ``detector``: anything with ``detect(FrameData) -> list[Detection]`` (default: the oracle of
+    ``tour_dir``: the tour's folder, or a ``formats.tour.Tour`` (one read through a sensor model:
+    the map then sees what that camera measures). ``detector``: anything with ``detect(FrameData) -> list[Detection]`` (default: the oracle of
     the tour's classes). ``stride``/``voxel`` (default 5 frames / 0.05 m, see
     :class:`MappingSettings`) override ``settings``. ``max_frames``: stop after that many visited
     frames. ``progress``: a tqdm bar on stderr. Frames without depth or without detections are
@@ -97,7 +98,7 @@ def build_map(tour_dir, detector=None, stride: int | None = None, voxel: float |
 
     t_start = time.perf_counter()
     s = _settings(settings, stride, voxel)
-    tour = Tour(tour_dir)  # UserError when missing or malformed
+    tour = tour_dir if isinstance(tour_dir, Tour) else Tour(tour_dir)  # UserError when missing or malformed
     classes = tour.class_names()
     if detector is None:
         if not classes:
