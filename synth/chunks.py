@@ -4,7 +4,8 @@ Both sides live here. The parent (``synth tour render`` and the job runner, loca
 chunk's job as JSON and starts a worker: ``python -m synth.blender.worker JOB.json`` for the Blender
 passes (``geometry``, ``rgb``), ``python -m synth.chunk_worker JOB.json`` for the rest (``fast``,
 ``copy``). The worker skips frames already on disk and reports on stdout, one JSON object a line:
-``start``, ``ready`` (device), ``frame`` (index, seconds), ``error``; everything else it prints
+``start``, ``ready`` (device), ``frame`` (index, seconds, cpu: the worker's CPU seconds over all its
+threads), ``error``; everything else it prints
 goes to the chunk's log.
 """
 
@@ -50,14 +51,19 @@ def chunk_job(p, kind: str, frames: list[int], out_dir: Path | None = None) -> d
     return job
 
 
-def run_chunk_process(chunk_kind: str, job: dict, job_file: str, log_file: str, on_frame=None) -> tuple[int, str | None, dict]:
-    """Run one chunk in a fresh process; returns (exit status, error, info). Used by every runner."""
+def run_chunk_process(chunk_kind: str, job: dict, job_file: str, log_file: str, on_frame=None,
+                      env: dict | None = None) -> tuple[int, str | None, dict]:
+    """Run one chunk in a fresh process; returns (exit status, error, info). Used by every runner.
+
+    ``env``: the worker's environment (default: this process's); the Ray backend points
+    ``SYNTH_SCENES_DIR`` at the scene files it shipped with the chunk."""
     Path(job_file).write_text(json.dumps(job))
     worker = "synth.blender.worker" if chunk_kind in BLENDER_PASSES else "synth.chunk_worker"
     info: dict = {}
     err = None
     with open(log_file, "w") as log:
-        proc = subprocess.Popen([sys.executable, "-m", worker, job_file], stdout=subprocess.PIPE, stderr=log, text=True, bufsize=1)
+        proc = subprocess.Popen([sys.executable, "-m", worker, job_file], stdout=subprocess.PIPE, stderr=log, text=True, bufsize=1,
+                                env=env)
         for line in proc.stdout:
             if not line.startswith("{"):
                 log.write(line)

@@ -36,10 +36,11 @@ from pathlib import Path
 from formats import frames as fr
 from formats.atomic import write_json_atomic, write_text_atomic
 from formats.design import tour_name, write_design
-from formats.errors import SceneFormatError, UserError, check_output_folder
+from formats.errors import SceneFormatError, UserError, check_output_file, check_output_folder
 from formats.yamlfile import read_yaml
 
 from .chunks import chunk_job, run_chunk_process
+from .cluster_estimate import fmt_duration
 from .render_settings import DEVICES, quality
 from .tour import TourSpec, make_output_folder, prepare, tour_meta, write_static_files
 
@@ -207,8 +208,11 @@ class Chunk:
     job: dict  # what the worker gets
     out_dir: str
     needs: str | None = None  # id of the geometry chunk an rgb chunk waits for
+    store: object = field(default=None, repr=False, compare=False)  # synth.storage.Storage: the job folder is there
 
     def missing(self) -> list[int]:
+        if self.store is not None:  # out_dir is in the driver's staging folder; the frames are in the storage
+            return self.store.missing(self.out_dir, self.frames)
         d = Path(self.out_dir)
         return [i for i in self.frames if not (d / fr.frame_name(i)).exists()]
 
@@ -219,6 +223,17 @@ class Plan:
     out: Path
     tours: dict  # tour name -> synth.tour.Prepared
     chunks: list[Chunk] = field(default_factory=list)
+    store: object = None  # synth.storage.Storage bound to ``out`` (a staging folder), or None: out is the job folder
+
+    def use_storage(self, store) -> None:
+        """Put the job folder on ``store`` (``synth.storage``); ``out`` becomes the driver's staging folder."""
+        self.store = store.bind(self.out)
+        for c in self.chunks:
+            c.store = self.store
+
+    @property
+    def where(self) -> str:
+        return self.store.uri if self.store is not None else str(self.out)
 
     @property
     def frames_total(self) -> int:
@@ -346,10 +361,12 @@ def expand(spec: JobSpec, out: Path | None = None, check_clearance: bool = False
 class JobState:
     """``job_state.json``: chunk id -> {state, attempts, error, frames}; rewritten atomically."""
 
-    def __init__(self, path: Path, chunks: list[Chunk], spec_doc: dict):
+    def __init__(self, path: Path, chunks: list[Chunk], spec_doc: dict, store=None):
         self.path = path
+        self.store = store  # synth.storage.Storage: every save is copied up
         self.doc = {"spec": spec_doc, "chunks": {c.id: {"state": "pending", "attempts": 0, "error": None,
-                                                        "frames": [c.frames[0], c.frames[-1]]} for c in chunks}}
+                                                        "frames": [c.frames[0], c.frames[-1]], "devices": []}
+                                                 for c in chunks}}
 
     @staticmethod
     def load(path: Path) -> dict | None:
@@ -364,9 +381,12 @@ class JobState:
         for cid, st in (old or {}).get("chunks", {}).items():
             if cid in self.doc["chunks"]:
                 self.doc["chunks"][cid]["attempts"] = st.get("attempts", 0)
+                self.doc["chunks"][cid]["devices"] = sorted(set(st.get("devices") or []))
 
-    def set(self, cid: str, state: str, error: str | None = None, attempt: bool = False) -> None:
+    def set(self, cid: str, state: str, error: str | None = None, attempt: bool = False, device: str | None = None) -> None:
         c = self.doc["chunks"][cid]
+        if device:  # the device a worker reported rendering on (``ready`` event), over every attempt
+            c["devices"] = sorted(set(c.get("devices") or []) | {device})
         c["state"] = state
         c["error"] = error
         if attempt:
@@ -374,7 +394,19 @@ class JobState:
         self.save()
 
     def save(self) -> None:
-        write_text_atomic(self.path, json.dumps(self.doc, indent=1))
+        text = json.dumps(self.doc, indent=1)
+        write_text_atomic(self.path, text)
+        if self.store is not None:
+            self.store.write_text(self.path, text)
+
+    def devices(self, chunks: list[Chunk]) -> dict:
+        """Pass -> the devices its chunks reported (sorted), for the passes that rendered anything."""
+        out: dict[str, set] = {}
+        for c in chunks:
+            devs = self.doc["chunks"][c.id].get("devices") or []
+            if devs:
+                out.setdefault(c.kind, set()).update(devs)
+        return {k: sorted(v) for k, v in sorted(out.items())}
 
     def counts(self) -> dict:
         out: dict[str, int] = {}
@@ -440,23 +472,24 @@ class _Queue:
                 out.append(c)
         return out
 
-    def finished(self, c: Chunk, rc: int, err: str | None, log: str) -> bool:
-        """Record a chunk's end; True when it is done, False when it will be retried or failed."""
+    def finished(self, c: Chunk, rc: int, err: str | None, log: str, device: str | None = None) -> bool:
+        """Record a chunk's end (and the device it rendered on); True when it is done, False when it
+        will be retried or failed."""
         if rc == 0 and not c.missing():
             self.done.add(c.id)
-            self.state.set(c.id, "done")
+            self.state.set(c.id, "done", device=device)
             return True
         msg = f"{err or 'frames missing after the chunk ended'} (log: {log})"
         if self.state.doc["chunks"][c.id]["attempts"] <= self.spec.retries:
-            self.state.set(c.id, "pending", msg)
+            self.state.set(c.id, "pending", msg, device=device)
             self.pending.insert(0, c)
         else:
-            self._fail(c, msg)
+            self._fail(c, msg, device)
         return False
 
-    def _fail(self, c: Chunk, msg: str) -> None:
+    def _fail(self, c: Chunk, msg: str, device: str | None = None) -> None:
         self.failed.add(c.id)
-        self.state.set(c.id, "failed", msg)
+        self.state.set(c.id, "failed", msg, device=device)
         self.bar.fail()
 
 
@@ -491,62 +524,43 @@ def run_local(plan: Plan, state: JobState, todo: list[Chunk], workers: int, bar:
                 c, log = running.pop(fut)
                 rc, err, inf = fut.result()
                 info.update(inf)
-                q.finished(c, rc, err, log)
+                q.finished(c, rc, err, log, device=inf.get("device"))
     return info
 
 
-def run_ray(plan: Plan, state: JobState, todo: list[Chunk], address: str | None, bar: _Bar, work: Path) -> dict:
-    """Ray backend: each chunk is a Ray task (CPU or GPU request) that runs the chunk in a fresh process.
+def run_ray(plan: Plan, state: JobState, todo: list[Chunk], bar: _Bar, work: Path) -> dict:
+    """Ray backend, on the cluster ``run_job`` connected to (``synth.ray_backend.connect``): each chunk is
+    a Ray task (CPU or GPU request) that gets everything it reads in its arguments, renders in a
+    node-local scratch folder and sends its frames home, where they are written atomically into the
+    job folder; progress advances per frame (``synth.ray_backend``)."""
+    from . import ray_backend
 
-    Progress advances when a chunk ends (its frames are counted on disk)."""
-    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
-    try:
-        import ray
-    except ImportError:
-        raise UserError("the ray backend needs Ray: pip install 'videoreloc-synth[ray]'") from None
-    started = False
-    if not ray.is_initialized():
-        if address:
-            ray.init(address=address, log_to_driver=False)
-        else:  # a local instance on loopback only
-            ray.init(_node_ip_address="127.0.0.1", include_dashboard=False, log_to_driver=False)
-        started = True
-    task = ray.remote(num_cpus=1, num_gpus=1 if plan.spec.device == "gpu" else 0, max_retries=0)(run_chunk_process)
-    info: dict = {}
-    q = _Queue(plan, state, todo, bar)
-    try:
-        running = {}
-        while True:
-            for c in q.take_ready(len(q.pending)):
-                jf, log = _files(work, c)
-                running[task.remote(c.kind, c.job, jf, log)] = (c, log, len(c.frames) - len(c.missing()))
-            if not running:
-                break
-            ready, _ = ray.wait(list(running), num_returns=1)
-            for ref in ready:
-                c, log, had = running.pop(ref)
-                rc, err, inf = ray.get(ref)
-                info.update(inf)
-                bar.update(len(c.frames) - len(c.missing()) - had)
-                q.finished(c, rc, err, log)
-    finally:
-        if started:
-            ray.shutdown()
-    return info
+    return ray_backend.run(plan, state, todo, bar, work, _Queue, _files)
 
 
-def run_job(spec: JobSpec, out: Path | None = None, workers: int = 1, backend: str = "local", ray_address: str | None = None,
-            resume: bool = False, progress: bool = True, allow_clearance_breach: bool = False,
-            replicacad_root: str | None = None) -> dict:
+def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, backend: str = "local",
+            ray_address: str | None = None, resume: bool = False, progress: bool = True,
+            allow_clearance_breach: bool = False, replicacad_root: str | None = None,
+            ray_runtime_env: str = "auto") -> dict:
     """Render everything the spec asks for that is not on disk yet. Returns a summary.
 
     A spec with ``replicacad:`` first imports its scenes and plans its paths into ``OUT/replicacad``
-    (``synth.replicacad_job.prepare``; ``replicacad_root`` overrides the spec's dataset folder)."""
+    (``synth.replicacad_job.prepare``; ``replicacad_root`` overrides the spec's dataset folder).
+
+    ``backend="ray"``: the cluster at ``ray_address`` (default: a local instance on loopback, or the
+    connection this process already has) is connected to and checked (a CPU; a GPU for ``device:
+    gpu``) before anything is written; ``ray_runtime_env`` is ``synth.ray_backend.runtime_env``'s mode.
+
+    ``out`` (else the spec's ``out``) may be a storage URI (``synth.storage``): ``file://PATH`` is the
+    folder PATH for the local backend; with the Ray backend any fsspec URI (``file://``, ``memory://``,
+    ...) puts the job folder on that file system, written by the driver."""
     t0 = time.time()
     if workers <= 0:
         raise UserError(f"--workers must be positive, got {workers}")
     if backend not in ("local", "ray"):
         raise UserError(f"unknown backend '{backend}'; use local or ray")
+    from_cli = out is not None
+    out, store = _job_folder(spec, out, backend)
     if spec.replicacad is not None:
         from .replicacad_job import prepare as prepare_replicacad
 
@@ -554,21 +568,110 @@ def run_job(spec: JobSpec, out: Path | None = None, workers: int = 1, backend: s
         try:
             check_output_folder(target)
         except UserError as e:
-            _out_error(spec, out is not None, e)
+            _out_error(spec, from_cli, e)
         spec = prepare_replicacad(spec, target, replicacad_root,
                                   progress=(lambda m: print(m, file=sys.stderr)) if progress else (lambda m: None))
-    plan = expand(spec, out, check_clearance=not allow_clearance_breach)
+    staging = None
+    session = None
+    try:
+        if store is None:
+            plan = expand(spec, out, check_clearance=not allow_clearance_breach)
+            state_path = plan.out / STATE_FILE
+            old = JobState.load(state_path)
+            shown = str(state_path)
+        else:  # the job's small files are staged here and copied up; its frames go straight to the storage
+            import tempfile
+
+            staging = Path(tempfile.mkdtemp(prefix="synth_stage_")).resolve()  # chunk jobs hold resolved paths
+            plan = expand(spec, staging / "job", check_clearance=not allow_clearance_breach)
+            plan.use_storage(store)
+            old = _load_stored_state(store)
+            shown = store.url(STATE_FILE)
+        if old is not None and not resume:
+            raise UserError(f"{plan.where} already holds a job (its {STATE_FILE}); add --resume to finish it, or use another --out")
+        if old is not None and old.get("spec") != spec_document(spec):
+            raise UserError(f"{shown}: {spec_difference(old.get('spec'), spec_document(spec))}: the job in this folder was "
+                            "started from a different spec; use another --out")
+        if backend == "ray":  # an unreachable cluster, or one without the GPUs asked for, is refused before any write
+            from . import ray_backend
+            from .storage import local_path
+
+            session = ray_backend.connect(ray_address, ray_runtime_env, spec.device,  # out: kept out of the upload
+                                          plan.out if store is None else local_path(store.uri), spec.renderer)
+        return _run_plan(plan, old, backend, workers, progress, t0, from_cli=from_cli)
+    finally:
+        if session is not None:
+            session.close()
+        if staging is not None:
+            import shutil
+
+            shutil.rmtree(staging, ignore_errors=True)
+
+
+def _job_folder(spec: JobSpec, out, backend: str):
+    """(local folder or None, ``synth.storage.Storage`` or None) of ``--out`` (else the spec's ``out``).
+    An unknown scheme, or a non-local one with the local backend, is a one-line UserError."""
+    from . import storage
+
+    target = str(out) if out is not None else spec.out
+    if not storage.is_uri(target):
+        return (Path(out) if out is not None else None), None
+    option = "--out" if out is not None else f"{spec.source or '<spec>'}: out:"
+    store = storage.Storage(target, option)
+    if backend == "local":
+        path = storage.local_path(target)
+        if path is None:
+            raise UserError(f"{option} {target}: a job folder on {storage.scheme(target)}:// storage needs --backend ray "
+                            "(its driver writes the frames that come home); the local backend writes to a folder "
+                            "(a path or file://)")
+        return path, None
+    if spec.replicacad is not None:
+        raise UserError(f"{option} {target}: a spec with a replicacad: section renders into a local folder (a path), "
+                        "not a storage URI")
+    store.check_writable()
+    return None, store
+
+
+def _load_stored_state(store) -> dict | None:
+    try:
+        text = store.read_text(STATE_FILE)
+    except FileNotFoundError:
+        return None
+    try:
+        doc = json.loads(text)
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise UserError(f"{store.url(STATE_FILE)}: unreadable job state ({e}); delete it to start the job afresh") from None
+    return doc if isinstance(doc, dict) else {}
+
+
+def spec_difference(old, new, where: str = "") -> str:
+    """The first field in which two spec documents differ, and both values: ``quality: 'paper' there,
+    'preview' in this spec`` (``designs[0].layouts[1]: ...``)."""
+    def short(v) -> str:
+        r = repr(v)
+        return r if len(r) <= 80 else r[:77] + "..."
+
+    if isinstance(old, dict) and isinstance(new, dict):
+        for k in list(new) + [k for k in old if k not in new]:
+            if old.get(k) != new.get(k):
+                return spec_difference(old.get(k), new.get(k), f"{where}.{k}" if where else str(k))
+    elif isinstance(old, list) and isinstance(new, list) and len(old) == len(new):
+        for i, (a, b) in enumerate(zip(old, new)):
+            if a != b:
+                return spec_difference(a, b, f"{where}[{i}]")
+    return f"{where or 'spec'}: {short(old)} there, {short(new)} in this spec"
+
+
+def _run_plan(plan: Plan, old: dict | None, backend: str, workers: int, progress: bool, t0: float,
+              from_cli: bool) -> dict:
+    spec = plan.spec
     try:
         make_output_folder(plan.out)
     except UserError as e:
-        _out_error(spec, out is not None, e)
+        _out_error(spec, from_cli, e)
     state_path = plan.out / STATE_FILE
-    old = JobState.load(state_path)
-    if old is not None and not resume:
-        raise UserError(f"{plan.out} already holds a job (its {STATE_FILE}); add --resume to finish it, or use another --out")
-    if old is not None and old.get("spec") != spec_document(spec):
-        raise UserError(f"{state_path}: the job in this folder was started from a different spec; use another --out")
-    state = JobState(state_path, plan.chunks, spec_document(spec))
+    store = plan.store
+    state = JobState(state_path, plan.chunks, spec_document(spec), store)
     state.merge(old)
     for p in plan.tours.values():
         make_output_folder(p.out)
@@ -579,6 +682,8 @@ def run_job(spec: JobSpec, out: Path | None = None, workers: int = 1, backend: s
     write_design(plan.out, spec.name, spec.source, {
         name: {"layout": p.layout_name, "lighting": p.lighting_name, "path": p.path_name, "n_frames": len(p.frame_ids)}
         for name, p in plan.tours.items()})
+    if store is not None:  # the static files and the design, before any frame
+        store.push_tree(plan.out)
     todo = []
     for c in plan.chunks:
         if c.missing():
@@ -594,36 +699,48 @@ def run_job(spec: JobSpec, out: Path | None = None, workers: int = 1, backend: s
         if backend == "local":
             run_local(plan, state, todo, workers, bar, work)
         else:
-            run_ray(plan, state, todo, ray_address, bar, work)
+            run_ray(plan, state, todo, bar, work)
     finally:
         bar.close()
     counts = state.counts()
     wall = round(time.time() - t0, 2)
     rendered = sum(len(c.frames) for c in todo)
     for name, p in plan.tours.items():
-        meta = job_tour_meta(p, spec)
+        mine = [c for c in plan.chunks if c.tour == name or (p.geometry_dir and c.out_dir == str(p.geometry_dir))]
+        meta = job_tour_meta(p, spec, state.devices(mine))
+        if store is not None:  # the frames are in the storage, not in the staging folder
+            meta["complete"] = not store.missing(p.out / "frames", p.frame_ids)
         write_json_atomic(p.out / "meta.json", meta, indent=1)
-    summary = {"job": spec.name, "out": str(plan.out), "tours": len(plan.tours), "chunks": counts,
+        if store is not None:
+            store.write_bytes(p.out / "meta.json", (p.out / "meta.json").read_bytes())
+    summary = {"job": spec.name, "out": plan.where, "tours": len(plan.tours), "chunks": counts,
                "frames_total": plan.frames_total, "frames_rendered_now": rendered, "wall_time_s": wall,
                "frames_per_s": round(rendered / wall, 3) if wall > 0 else None, "backend": backend, "workers": workers,
                "failed": {cid: c["error"] for cid, c in state.doc["chunks"].items() if c["state"] == "failed"}}
     write_json_atomic(plan.out / "job_summary.json", summary, indent=1)
+    if store is not None:
+        store.write_bytes(plan.out / "job_summary.json", (plan.out / "job_summary.json").read_bytes())
     if not summary["failed"]:
         import shutil
 
         shutil.rmtree(work, ignore_errors=True)
+        if store is not None:
+            store.remove_tree(work)  # the logs the driver copied up
     return summary
 
 
-def job_tour_meta(p, spec: JobSpec) -> dict:
+def job_tour_meta(p, spec: JobSpec, render_devices: dict | None = None) -> dict:
     """meta.json of a job's tour (``synth.tour.tour_meta``). Deterministic (a resumed job writes the
-    same file); timing and progress of the job are in ``job_summary.json``."""
+    same file); timing and progress of the job are in ``job_summary.json``.
+
+    ``render_devices``: pass -> the devices its chunks reported rendering on (``CPU``, ``OPTIX``,
+    ``CUDA``...), kept per chunk in ``job_state.json`` so a resumed job writes the same."""
     return tour_meta(
         p, renderer=spec.renderer, seed=spec.seed, blender=_blender_version() if spec.renderer == "blender" else None,
         settings={"quality": spec.quality, "quality_settings": quality(spec.quality) if p.lighting_name else None,
                   "width": spec.width, "height": spec.height, "hfov_deg": spec.hfov_deg, "device": spec.device,
                   "chunk_size": spec.chunk_size, "previews": spec.previews, "rgb_every": p.extra.get("rgb_every")},
-        geometry_renderer=spec.geometry, job=spec.name,
+        geometry_renderer=spec.geometry, job=spec.name, render_devices=render_devices or {},
     )
 
 
@@ -640,15 +757,23 @@ def _blender_version() -> str | None:
 # dry run: the plan and an estimate from a short calibration render
 
 
-def calibrate(plan: Plan, frames: int = 1) -> dict:
-    """Seconds per frame of each chunk kind, measured on ``frames`` frames of the first tour."""
+def measure_calibration(plan: Plan, frames: int = 1) -> dict:
+    """A calibration document (``synth.cluster_estimate``): seconds per frame of each chunk kind of the
+    plan, measured here on ``frames`` frames (after one left out: it pays for loading the kernels) of
+    the first tour by one chunk process using every core, with the CPU seconds that process spent on
+    them (over all its threads: core-seconds, which another job on the machine does not inflate
+    the way it does wall time), the device each kind rendered on, the size
+    of a frame file, and this machine (CPU count and model, load average, date, toolkit version)."""
     import tempfile
 
     from formats.camera import write_tum
 
+    from .cluster_estimate import CALIBRATION_FORMAT, CALIBRATION_VERSION, is_gpu, measure_environment
+
     spec = plan.spec
-    p = next(iter(plan.tours.values()))
-    per = {}
+    name, p = next(iter(plan.tours.items()))
+    per, cpu, size, devices = {}, {}, {}, {}
+    load = [round(x, 2) for x in os.getloadavg()] if hasattr(os, "getloadavg") else None
     with tempfile.TemporaryDirectory(prefix="synth_calib_") as tmp:
         tmp = Path(tmp)
         idx = list(range(min(frames + 1, len(p.frame_ids))))
@@ -659,34 +784,57 @@ def calibrate(plan: Plan, frames: int = 1) -> dict:
         geo = "fast" if spec.geometry == "fast" else "geometry"
         kinds = [geo] + (["rgb"] if spec.renderer == "blender" and any(t.lighting_name for t in plan.tours.values()) else [])
         for kind in kinds:
-            job = {**base, "pass": kind, "out_dir": str(tmp / ("geom" if kind == geo else kind)),
+            out_dir = tmp / ("geom" if kind == geo else kind)
+            job = {**base, "pass": kind, "out_dir": str(out_dir),
                    "lighting": next((t.spec.lighting for t in plan.tours.values() if t.lighting_name), None)}
-            times = []
-            rc, err, _ = run_chunk_process(kind, job, str(tmp / f"{kind}.json"), str(tmp / f"{kind}.log"),
-                                           on_frame=lambda ev: times.append(ev["seconds"]))
+            events = []
+            rc, err, inf = run_chunk_process(kind, job, str(tmp / f"{kind}.json"), str(tmp / f"{kind}.log"),
+                                             on_frame=events.append)
             if rc != 0:
                 raise UserError(f"calibration render ({kind}) failed: {err}")
-            steady = times[1:] or times  # the first frame pays for kernel loading
-            per[kind] = sum(steady) / len(steady)
-    return per
+            steady = events[1:] or events  # the first frame pays for kernel loading
+            per[kind] = sum(ev["seconds"] for ev in steady) / len(steady)
+            if all("cpu" in ev for ev in steady):
+                cpu[kind] = sum(ev["cpu"] for ev in steady) / len(steady)
+            files = [out_dir / fr.frame_name(i) for i in idx if (out_dir / fr.frame_name(i)).exists()]
+            if files:
+                size[kind] = round(sum(f.stat().st_size for f in files) / len(files))
+            devices[kind] = inf.get("device") or "CPU"
+    if hasattr(os, "getloadavg"):
+        load = [round(max(a, b), 2) for a, b in zip(load, os.getloadavg())]
+    env = measure_environment()
+    return {"format": CALIBRATION_FORMAT, "version": CALIBRATION_VERSION, "seconds_per_frame": per,
+            "cpu_seconds_per_frame": cpu, "bytes_per_frame": size, "devices": devices,
+            "device": next((d for d in devices.values() if is_gpu(d)), "CPU"),
+            "frames_measured": len(idx) - 1 if len(idx) > 1 else len(idx), "tour": name,
+            "spec": {"name": spec.name, "source": spec.source, "renderer": spec.renderer, "geometry": spec.geometry,
+                     "quality": spec.quality, "width": spec.width, "height": spec.height, "device": spec.device},
+            "load_avg": load, **env}
+
+
+def calibrate(plan: Plan, frames: int = 1) -> dict:
+    """Seconds per frame of each chunk kind, measured on ``frames`` frames of the first tour."""
+    return measure_calibration(plan, frames)["seconds_per_frame"]
 
 
 def estimate(plan: Plan, per_frame: dict, workers: int) -> float:
     """Seconds on this machine. The calibration ran one process using every core, so running more
-    local workers hides per-chunk start-up (about 3-4 s each) rather than dividing the frame time."""
+    local workers hides per-chunk start-up (about 3-4 s each) rather than dividing the frame time.
+    (A Ray cluster: ``synth.cluster_estimate``.)"""
+    from .cluster_estimate import SETUP_S
+
     work = 0.0
     for c in plan.chunks:
         if c.kind in per_frame:
             work += per_frame[c.kind] * len(c.missing())
-    setup = {"geometry": 3.0, "rgb": 4.0, "fast": 1.0}
-    work += sum(setup.get(c.kind, 0.0) for c in plan.chunks if c.missing()) / max(1, min(workers, os.cpu_count() or 1))
+    work += sum(SETUP_S.get(c.kind, 0.0) for c in plan.chunks if c.missing()) / max(1, min(workers, os.cpu_count() or 1))
     return work
 
 
 def describe(plan: Plan) -> str:
     spec = plan.spec
     lines = [f"job {spec.name}: {len(plan.tours)} tours, {plan.frames_total} chunk-frames in {len(plan.chunks)} chunks "
-             f"({spec.renderer}, {spec.quality}, {spec.width}x{spec.height}, chunks of {spec.chunk_size}) -> {plan.out}"]
+             f"({spec.renderer}, {spec.quality}, {spec.width}x{spec.height}, chunks of {spec.chunk_size}) -> {plan.where}"]
     by_kind: dict[str, list] = {}
     for c in plan.chunks:
         by_kind.setdefault(c.kind, []).append(c)
@@ -698,38 +846,113 @@ def describe(plan: Plan) -> str:
     return "\n".join(lines)
 
 
-def fmt_duration(s: float) -> str:
-    if s < 120:
-        return f"{s:.0f} s"
-    if s < 7200:
-        return f"{s / 60:.1f} min"
-    if s < 2 * 86400:
-        return f"{s / 3600:.1f} h"
-    return f"{s / 86400:.1f} days"
+def _cluster_args(args) -> list:
+    """The cluster shapes of ``--nodes`` etc. (``synth.cluster_estimate.Cluster``), checked; [] without
+    ``--nodes``. Each bad value is a one-line UserError naming the option."""
+    from .cluster_estimate import Cluster, parse_count, parse_nodes
+
+    given = [o for o, v in (("--nodes", args.nodes), ("--cpus-per-node", args.cpus_per_node),
+                            ("--gpus-per-node", args.gpus_per_node), ("--chunks-per-node", args.chunks_per_node),
+                            ("--calibration", args.calibration), ("--save-calibration", args.save_calibration),
+                            ("--link-gbps", args.link_gbps)) if v is not None]
+    if given and not args.dry_run:
+        raise UserError(f"{given[0]}: only with --dry-run (it estimates, it renders nothing)")
+    if args.calibration is not None and args.save_calibration is not None:
+        raise UserError("--save-calibration: nothing is measured with --calibration FILE (it is read instead)")
+    if args.nodes is None:
+        extra = [o for o in given if o not in ("--calibration", "--save-calibration")]
+        if extra:
+            raise UserError(f"{extra[0]}: needs --nodes N (the cluster's size)")
+        return []
+    nodes = parse_nodes(args.nodes)
+    if args.cpus_per_node is None:
+        raise UserError("--nodes: needs --cpus-per-node C (the cores of each node)")
+    cpus = parse_count(args.cpus_per_node, "--cpus-per-node")
+    gpus = parse_count(args.gpus_per_node, "--gpus-per-node", allow_zero=True) if args.gpus_per_node is not None else 0
+    per = parse_count(args.chunks_per_node, "--chunks-per-node") if args.chunks_per_node is not None else 1
+    if gpus and args.chunks_per_node is not None:
+        raise UserError("--chunks-per-node: GPU nodes run one chunk per GPU; leave it out with --gpus-per-node")
+    if per > cpus:
+        raise UserError(f"--chunks-per-node: {per} chunks at a time on {cpus} cores leaves a chunk less than one core")
+    if args.link_gbps is not None:
+        try:
+            link = float(args.link_gbps)
+        except ValueError:
+            link = float("nan")
+        if not link > 0 or link == float("inf"):
+            raise UserError(f"--link-gbps: expected a positive number of Gbit/s, got {args.link_gbps!r}")
+    if gpus and args.calibration is None:
+        raise UserError("--gpus-per-node: no GPU calibration exists (this machine renders on its CPU, and no speed-up "
+                        "is assumed); measure one on a GPU node: synth render SPEC --dry-run --save-calibration "
+                        "gpu.json (the spec with device: gpu), then add --calibration gpu.json")
+    return [Cluster(n, cpus, gpus, per) for n in nodes]
+
+
+def _dry_run(args, spec: JobSpec, clusters: list) -> int:
+    """The plan, a calibration (measured here, or read from --calibration) and the estimates."""
+    import tempfile
+
+    from . import cluster_estimate as ce
+
+    cal = ce.load_calibration(args.calibration) if args.calibration else None
+    if cal is not None and clusters:
+        gpu = clusters[0].gpus_per_node > 0
+        if gpu and not ce.has_gpu_kinds(cal):
+            raise UserError(f"{args.calibration}: device: measured on {cal['device']}, not a GPU: no GPU calibration "
+                            "exists for --gpus-per-node (measure one on a GPU node with --save-calibration)")
+    if args.save_calibration:
+        check_output_file(args.save_calibration)
+    out, store = _job_folder(spec, args.out, args.backend)
+    with tempfile.TemporaryDirectory(prefix="synth_dry_run_") as tmp:  # a dry run leaves nothing behind
+        if spec.replicacad is not None:
+            from .replicacad_job import prepare as prepare_replicacad
+
+            spec = prepare_replicacad(spec, Path(tmp), args.replicacad_root, progress=lambda m: print(m, file=sys.stderr))
+        if store is None:
+            plan = expand(spec, out, check_clearance=not args.allow_clearance_breach)
+        else:  # what is still to render is read from the storage
+            plan = expand(spec, Path(tmp).resolve() / "job", check_clearance=not args.allow_clearance_breach)
+            plan.use_storage(store)
+        work = ce.plan_work(plan)
+        if cal is not None:
+            ce.check_fits(cal, spec, work, args.calibration)
+        print(describe(plan))
+        if cal is None:
+            cal = measure_calibration(plan)
+            where = "measured here"
+        else:
+            where = f"from {args.calibration}"
+    if args.save_calibration:
+        write_json_atomic(args.save_calibration, cal, indent=1)
+    per = cal["seconds_per_frame"]
+    print("  calibration (s/frame, one process on every core): " + ", ".join(f"{k} {v:.3f}" for k, v in per.items())
+          + f" [{where}: {cal['cpu_count']} CPUs, {cal['device']}]")
+    if args.save_calibration:
+        print(f"  calibration saved to {args.save_calibration}")
+    if where == "measured here":
+        eta = estimate(plan, per, args.workers)
+        print(f"  estimate with {args.workers} worker(s): {fmt_duration(eta)} on this machine "
+              f"({os.cpu_count()} CPUs); on a Ray cluster: --nodes N --cpus-per-node C")
+    if clusters:
+        link = float(args.link_gbps) if args.link_gbps is not None else ce.DEFAULT_LINK_GBPS
+        best = [ce.estimate_cluster(work, cal, c, "longest", link_gbps=link) for c in clusters]
+        driver = [ce.estimate_cluster(work, cal, c, "plan", link_gbps=link) for c in clusters]
+        print("  " + ce.describe_estimate(best, cal, where, plan_order=driver).replace("\n", "\n  "))
+        if clusters[0].gpus_per_node and spec.device == "cpu":
+            print("  note: the spec says device: cpu, so its chunks would not ask Ray for GPUs: set device: gpu (or auto) "
+                  "to render on them")
+    return 0
 
 
 def cmd_render(args) -> int:
+    cluster = _cluster_args(args)  # bad options are refused before anything is read or rendered
     spec = load_spec(args.spec)
     if args.replicacad_root and spec.replicacad is None:
         raise UserError(f"--replicacad-root: {args.spec} has no replicacad: section (its layouts are not ReplicaCAD scenes)")
     if args.dry_run:
-        import tempfile
-
-        with tempfile.TemporaryDirectory(prefix="synth_dry_run_") as tmp:  # a dry run leaves nothing behind
-            if spec.replicacad is not None:
-                from .replicacad_job import prepare as prepare_replicacad
-
-                spec = prepare_replicacad(spec, Path(tmp), args.replicacad_root, progress=lambda m: print(m, file=sys.stderr))
-            plan = expand(spec, Path(args.out) if args.out else None, check_clearance=not args.allow_clearance_breach)
-            print(describe(plan))
-            per = calibrate(plan)
-        eta = estimate(plan, per, args.workers)
-        print("  calibration (s/frame on this machine): " + ", ".join(f"{k} {v:.3f}" for k, v in per.items()))
-        print(f"  estimate with {args.workers} worker(s): {fmt_duration(eta)} on this machine "
-              f"({os.cpu_count()} CPUs); a Ray cluster of N such machines: about 1/N of that")
-        return 0
-    s = run_job(spec, Path(args.out) if args.out else None, workers=args.workers, backend=args.backend,
-                ray_address=args.ray_address, resume=args.resume, progress=not args.quiet,
+        return _dry_run(args, spec, cluster)
+    s = run_job(spec, args.out, workers=args.workers, backend=args.backend,
+                ray_address=args.ray_address, ray_runtime_env=args.ray_runtime_env, resume=args.resume, progress=not args.quiet,
                 allow_clearance_breach=args.allow_clearance_breach, replicacad_root=args.replicacad_root)
     print(f"{s['job']}: {s['tours']} tours, {s['frames_rendered_now']} frames rendered in {s['wall_time_s']:.1f} s "
           f"({s['frames_per_s']} frames/s), chunks {s['chunks']} -> {s['out']}")
@@ -741,12 +964,29 @@ def cmd_render(args) -> int:
 def register_cli(subparsers) -> None:
     a = subparsers.add_parser("render", help="render a job spec (render_jobs/*.yaml): every tour of its design")
     a.add_argument("spec", help="job spec YAML")
-    a.add_argument("--out", help="output folder (default: the spec's out)")
+    a.add_argument("--out", help="the job folder (default: the spec's out): a path, or with --backend ray a storage URI "
+                   "(file://, memory://, or another fsspec scheme: the driver writes the job there; docs/ray_cluster.md)")
     a.add_argument("--workers", type=int, default=1, help="chunks rendered at a time (local backend)")
     a.add_argument("--backend", choices=["local", "ray"], default="local")
-    a.add_argument("--ray-address", help="address of a running Ray cluster (default: start a local one on loopback)")
+    a.add_argument("--ray-address", help="address of a running Ray cluster, HOST:PORT (default: start a local one on loopback)")
+    a.add_argument("--ray-runtime-env", choices=["auto", "full", "code", "none"], default="auto",
+                   help="what the Ray nodes get from the driver: full (the toolkit's code and scenes/ as the working_dir, "
+                        "and its pip requirements pinned to the driver's versions), code (only the working_dir), none "
+                        "(installed on every node); auto: full with --ray-address, else none (docs/ray_cluster.md)")
     a.add_argument("--resume", action="store_true", help="finish a job that was stopped; renders only what is missing")
     a.add_argument("--dry-run", action="store_true", help="print the plan and an estimate from a short calibration render")
+    g = a.add_argument_group("planning at scale (with --dry-run; docs/ray_cluster.md)")
+    g.add_argument("--nodes", metavar="N[,N...]", help="estimate the wall time on a Ray cluster of N nodes (a list: one row each)")
+    g.add_argument("--cpus-per-node", metavar="C", help="cores of each node")
+    g.add_argument("--gpus-per-node", metavar="G", help="GPUs of each node: one chunk per GPU; needs --calibration "
+                   "measured on a GPU node")
+    g.add_argument("--chunks-per-node", metavar="K", help="CPU nodes: chunks at a time per node, i.e. the node's "
+                   "ray start --num-cpus (default 1, as the docs advise for Blender jobs)")
+    g.add_argument("--link-gbps", metavar="GBPS", help="the driver's network link, for the time frames take to come home "
+                   "(default 1)")
+    g.add_argument("--save-calibration", metavar="FILE", help="write the calibration measured here (JSON)")
+    g.add_argument("--calibration", metavar="FILE", help="use this calibration (--save-calibration's JSON, e.g. from a "
+                   "GPU node) instead of rendering one here")
     a.add_argument("--allow-clearance-breach", action="store_true",
                    help="render even where a path comes closer to an object than its declared clearance "
                         "(checked for layouts the path was not planned on)")

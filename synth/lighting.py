@@ -130,12 +130,18 @@ def parse_preset(doc, source: str) -> LightingPreset:
     )
 
 
-def load_lighting(name_or_file) -> LightingPreset:
+def lighting_file(name_or_file) -> Path:
+    """The file of a preset name (``day``) or the given file."""
     p = Path(name_or_file)
     if p.suffix not in (".yaml", ".yml") and not p.exists():
         p = lighting_dir() / f"{name_or_file}.yaml"
         if not p.exists():
             raise UnknownNameError(f"unknown lighting preset '{name_or_file}'; known: {', '.join(list_lighting()) or 'none'}")
+    return p
+
+
+def load_lighting(name_or_file) -> LightingPreset:
+    p = lighting_file(name_or_file)
     return parse_preset(read_yaml(p), str(p))
 
 

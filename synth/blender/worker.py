@@ -93,7 +93,7 @@ def run(job: dict) -> int:
     tmp_exr = os.path.join(tmpdir, "render.exr")
     sb.configure_output(scene, tmp_exr)
     for i in todo:
-        t0 = time.time()
+        t0, c0 = time.time(), time.process_time()
         sb.place_camera(cam, pose_of[i])
         bpy.ops.render.render(write_still=True)
         p = read_blender_exr(tmp_exr)
@@ -117,7 +117,7 @@ def run(job: dict) -> int:
                 cv2.imwrite(str(tmp_png), fr.srgb8(rgb)[..., ::-1])
                 os.replace(tmp_png, png)
             fr.write_frame(target, rgb=rgb, depth=g.depth, instance=g.instance, semantic=g.semantic)
-        emit(event="frame", frame=i, seconds=round(time.time() - t0, 4))
+        emit(event="frame", frame=i, seconds=round(time.time() - t0, 4), cpu=round(time.process_time() - c0, 4))
     return 0
 
 
