@@ -283,9 +283,7 @@ class Tour:
                                    instance, semantic)
         frame_rgb, frame_depth = img.rgb, img.depth
         if noisy:
-            from dataclasses import replace
-
-            from .sensors import ColorModel, Motion, apply_sensor, frame_seed
+            from .sensors import Motion, apply_sensor, frame_seed
 
             seed = frame_seed(self.name, int(index), self.sensor.name, self.sensor_seed)
             # the camera's motion around the frame (motion blur): the neighbouring poses.txt positions,
@@ -297,10 +295,20 @@ class Tour:
                             self.poses[k + 1] if dt_next > 0 else None,
                             dt_prev if dt_prev > 0 else 1.0 / self.fps, dt_next if dt_next > 0 else 1.0 / self.fps)
             # colour not asked for: skip the colour model (depth draws from its own stream: the same depth)
-            sensor = self.sensor if rgb else replace(self.sensor, color=ColorModel())
+            sensor = self.sensor if rgb else self._depth_sensor()
             frame_depth, frame_rgb = apply_sensor(sensor, img.depth, img.rgb, self.intrinsics, seed, motion=motion)
         return Frame(int(index), frame_rgb if rgb else None, frame_depth, img.instance, img.semantic,
                      self.poses[k].copy(), self.K)
+
+    def _depth_sensor(self):
+        """The tour's sensor without its colour model (depth-only reads), made once."""
+        if getattr(self, "_depth_only", None) is None:
+            from dataclasses import replace
+
+            from .sensors import ColorModel
+
+            self._depth_only = replace(self.sensor, color=ColorModel())
+        return self._depth_only
 
     def __iter__(self) -> Iterator[Frame]:
         """Frames in poses.txt order, reading one EXR at a time."""

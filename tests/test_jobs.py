@@ -12,7 +12,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
+
+from jobspecs import write_spec
 
 from formats.tour import Tour
 from synth import jobs
@@ -24,12 +25,6 @@ from synth.resources import REPO_ROOT
 SMOKE = REPO_ROOT / "render_jobs" / "smoke.yaml"
 
 
-def write_spec(tmp_path, **changes) -> Path:
-    doc = yaml.safe_load(SMOKE.read_text())
-    doc.update(changes)
-    p = tmp_path / "spec.yaml"
-    p.write_text(yaml.safe_dump(doc))
-    return p
 
 
 def test_shipped_specs_validate_and_expand():

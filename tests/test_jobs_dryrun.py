@@ -7,14 +7,13 @@ import json
 from pathlib import Path
 
 import pytest
-import yaml
+
+from jobspecs import write_spec
 
 from synth import cluster_estimate as ce
 from synth import jobs
 from synth.cli import main as synth_main
-from synth.resources import REPO_ROOT
 
-SMOKE = REPO_ROOT / "render_jobs" / "smoke.yaml"
 NO_SETUP: dict = {}
 
 
@@ -215,12 +214,6 @@ def test_the_paper_design_is_scheduled():
 # the command line
 
 
-def write_spec(tmp_path, **changes) -> Path:
-    doc = yaml.safe_load(SMOKE.read_text())
-    doc.update(changes)
-    p = tmp_path / "spec.yaml"
-    p.write_text(yaml.safe_dump(doc))
-    return p
 
 
 def fast_spec(tmp_path, frames=30) -> Path:

@@ -11,7 +11,8 @@ import time
 from pathlib import Path
 
 import pytest
-import yaml
+
+from jobspecs import write_spec
 
 from formats import frames as fr
 from synth import jobs, ray_backend
@@ -48,12 +49,6 @@ if _ROOT:
 '''
 
 
-def write_spec(tmp_path, name="spec.yaml", **changes) -> Path:
-    doc = yaml.safe_load(SMOKE.read_text())
-    doc.update(changes)
-    p = tmp_path / name
-    p.write_text(yaml.safe_dump(doc))
-    return p
 
 
 def _tree(root: Path) -> dict[str, bytes]:

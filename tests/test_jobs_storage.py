@@ -8,22 +8,16 @@ import os
 from pathlib import Path
 
 import pytest
-import yaml
+
+
+from jobspecs import write_spec
 
 from synth import jobs, ray_backend, storage
 from synth.cli import main as synth_main
-from synth.resources import REPO_ROOT
 
-SMOKE = REPO_ROOT / "render_jobs" / "smoke.yaml"
 SKIP = {"job_state.json", "job_summary.json"}  # the job's bookkeeping: times, backend, paths
 
 
-def write_spec(tmp_path, name="spec.yaml", **changes) -> Path:
-    doc = yaml.safe_load(SMOKE.read_text())
-    doc.update(changes)
-    p = tmp_path / name
-    p.write_text(yaml.safe_dump(doc))
-    return p
 
 
 def fast_spec(tmp_path, name="spec.yaml", frames=6, **changes) -> Path:
