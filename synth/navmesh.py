@@ -1,0 +1,669 @@
+"""habitat-sim navigation meshes (``.navmesh``): the walkable polygons, levels and floor footprints.
+
+No Blender here; numpy and scipy only.
+
+File layout (little-endian; habitat-sim ``PathFinder::saveNavMesh`` writing Recast/Detour data,
+verified byte for byte on ReplicaCAD's ``navmeshes/*.navmesh``)::
+
+    int32  magic 'MSET' (bytes b"TESM"), int32 version (2), int32 numTiles
+    dtNavMeshParams   float orig[3], tileWidth, tileHeight; int32 maxTiles, maxPolys      28 bytes
+    NavMeshSettings   13 float32: cellSize, cellHeight, agentHeight, agentRadius,
+                      agentMaxClimb, agentMaxSlope, regionMinSize, regionMergeSize,
+                      edgeMaxLen, edgeMaxError, vertsPerPoly, detailSampleDist,
+                      detailSampleMaxError; then 3 bools (filterLowHangingObstacles,
+                      filterLedgeSpans, filterWalkableLowHeightSpans) + 1 pad byte       56 bytes
+    numTiles x { uint32 tileRef, int32 dataSize, dataSize bytes of Detour tile data }
+
+Detour tile data (``dtCreateNavMeshData``, DT_NAVMESH_VERSION 7), every section 4-byte aligned::
+
+    dtMeshHeader   int32 magic 'DNAV', version, x, y, layer, userId, polyCount, vertCount,
+                   maxLinkCount, detailMeshCount, detailVertCount, detailTriCount, bvNodeCount,
+                   offMeshConCount, offMeshBase; float walkableHeight, walkableRadius,
+                   walkableClimb, bmin[3], bmax[3], bvQuantFactor                        100 bytes
+    verts          float32[3 * vertCount]                                  (habitat frame, Y up)
+    polys          dtPoly[polyCount], 32 bytes: uint32 firstLink, uint16 verts[6], uint16 neis[6],
+                   uint16 flags, uint8 vertCount, uint8 areaAndType (area: low 6 bits, type: high 2)
+    links          12 bytes x maxLinkCount; detail meshes 12 x detailMeshCount; detail verts
+                   12 x detailVertCount; detail tris 4 x detailTriCount; BV nodes 16 x bvNodeCount;
+                   off-mesh connections 36 x offMeshConCount
+
+so ``dataSize`` must equal the sum of those sections exactly; a file that does not (truncated, a
+Git LFS pointer, another Detour version) is a one-line ``SceneFormatError`` naming the file.
+
+What is returned: the ground polygons (``type`` 0; off-mesh connection polygons are skipped) with
+their vertices in OUR frame (``Y_UP_TO_Z_UP``: habitat ``(x, y, z)`` -> ``(x, -z, y)``), and the
+agent the navmesh was built for (radius, height, max climb). Polygon vertex heights are Recast's
+voxel heights: quantised to ``cellHeight`` (0.2 m in ReplicaCAD) above the tile's ``bmin`` and
+lying up to one cell above the true surface; plan positions are within ``edgeMaxError`` cells
+(1.3 x 0.05 m) of the walkable boundary.
+
+Levels, walkable grid and footprint
+    ``levels()`` groups polygons by their mean height (gaps over ``LEVEL_GAP`` split levels), so a
+    stage with stairs and raised areas gives the main floor, the steps and the upper areas as
+    separate levels, the largest first. ``Level.grid()`` rasterises a level on a grid of the
+    navmesh's own cell size (``Grid``: a bool mask with a known origin; cell (i, j) covers
+    ``origin + [i, i+1) x [j, j+1)`` cells, i along our x). The navmesh is the floor eroded by the
+    agent radius (Recast keeps the agent's centre ``agentRadius`` away from walls), so the *floor
+    footprint* is the walkable grid dilated by that radius (``footprint``; a square structuring
+    element, so that axis-aligned wall corners stay square) with holes smaller than the agent
+    filled.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage
+
+from .habitat_format import Y_UP_TO_Z_UP, fail, mapping, read_json
+
+__all__ = ["NavMesh", "NavSettings", "NavPolygon", "Level", "Grid", "read_navmesh", "navmesh_for_scene", "footprint_of",
+           "StandinSpec", "Standin", "standin_stage", "write_standin_glb",
+           "polygon_area"]
+
+MSET_MAGIC = 0x4D534554  # 'MSET'
+MSET_VERSION = 2
+DT_MAGIC = 0x444E4156  # 'DNAV'
+DT_VERSION = 7
+DT_VERTS_PER_POLYGON = 6
+DT_POLYTYPE_GROUND = 0
+HEADER = struct.Struct("<iii")
+PARAMS = struct.Struct("<5f2i")
+SETTINGS = struct.Struct("<13f3?x")
+TILE = struct.Struct("<Ii")
+MESH_HEADER = struct.Struct("<15i10f")
+POLY = struct.Struct("<I6H6HHBB")
+SETTINGS_NAMES = ("cell_size", "cell_height", "agent_height", "agent_radius", "agent_max_climb", "agent_max_slope",
+                  "region_min_size", "region_merge_size", "edge_max_len", "edge_max_error", "verts_per_poly",
+                  "detail_sample_dist", "detail_sample_max_error")
+LEVEL_GAP = 0.1  # m: polygons whose mean heights differ by more than this (after sorting) are different levels
+_C = Y_UP_TO_Z_UP
+
+
+@dataclass(frozen=True)
+class NavSettings:
+    """habitat-sim's NavMeshSettings as stored in the file (metres, degrees, cells)."""
+
+    cell_size: float
+    cell_height: float
+    agent_height: float
+    agent_radius: float
+    agent_max_climb: float
+    agent_max_slope: float
+    region_min_size: float
+    region_merge_size: float
+    edge_max_len: float
+    edge_max_error: float
+    verts_per_poly: float
+    detail_sample_dist: float
+    detail_sample_max_error: float
+    filter_low_hanging_obstacles: bool
+    filter_ledge_spans: bool
+    filter_walkable_low_height_spans: bool
+
+
+@dataclass
+class NavPolygon:
+    vertices: np.ndarray  # (k, 3), our frame (Z up), counter-clockwise seen from above
+    area_id: int  # Detour area (low 6 bits of areaAndType)
+    flags: int
+    tile: int
+
+    @property
+    def z(self) -> float:
+        return float(self.vertices[:, 2].mean())
+
+    @property
+    def area(self) -> float:
+        return polygon_area(self.vertices[:, :2])
+
+
+@dataclass
+class Grid:
+    """A bool raster in our XY plane: ``mask[i, j]`` covers x in ``origin[0] + [i, i+1) * cell``,
+    y in ``origin[1] + [j, j+1) * cell``."""
+
+    mask: np.ndarray
+    origin: np.ndarray  # (2,) world x, y of cell (0, 0)'s lower corner
+    cell: float
+
+    @property
+    def area(self) -> float:
+        return float(self.mask.sum()) * self.cell * self.cell
+
+    def centres(self) -> np.ndarray:
+        """(n, 2) world XY of the set cells' centres."""
+        ii, jj = np.nonzero(self.mask)
+        return self.origin + (np.stack([ii, jj], axis=1) + 0.5) * self.cell
+
+    def contains(self, xy) -> np.ndarray:
+        p = np.atleast_2d(np.asarray(xy, float))
+        ij = np.floor((p - self.origin) / self.cell).astype(np.int64)
+        W, H = self.mask.shape
+        ok = (ij[:, 0] >= 0) & (ij[:, 0] < W) & (ij[:, 1] >= 0) & (ij[:, 1] < H)
+        out = np.zeros(len(p), bool)
+        out[ok] = self.mask[ij[ok, 0], ij[ok, 1]]
+        return out
+
+    def bounds(self) -> tuple[float, float, float, float]:
+        """(xmin, ymin, xmax, ymax) of the set cells."""
+        ii, jj = np.nonzero(self.mask)
+        if len(ii) == 0:
+            return (0.0, 0.0, 0.0, 0.0)
+        o, c = self.origin, self.cell
+        return (float(o[0] + ii.min() * c), float(o[1] + jj.min() * c), float(o[0] + (ii.max() + 1) * c),
+                float(o[1] + (jj.max() + 1) * c))
+
+
+@dataclass
+class Level:
+    """Polygons at one height. ``z``: the area-weighted mean of their mean heights (our frame)."""
+
+    z: float
+    polygons: list[NavPolygon]
+    cell: float  # the navmesh's cell size
+
+    @property
+    def area(self) -> float:
+        return float(sum(p.area for p in self.polygons))
+
+    @property
+    def z_range(self) -> tuple[float, float]:
+        zs = np.concatenate([p.vertices[:, 2] for p in self.polygons])
+        return float(zs.min()), float(zs.max())
+
+    def grid(self, lo=None, shape=None, cell: float | None = None) -> Grid:
+        """The level's polygons rasterised (a cell is set when its centre lies in a polygon). By
+        default the grid spans the polygons plus a margin of one metre, snapped to the cell size."""
+        cell = float(cell or self.cell)
+        pts = np.concatenate([p.vertices[:, :2] for p in self.polygons])
+        if lo is None:
+            lo = np.floor((pts.min(axis=0) - 1.0) / cell) * cell
+        lo = np.asarray(lo, float)
+        if shape is None:
+            hi = pts.max(axis=0) + 1.0
+            shape = tuple(int(v) for v in np.ceil((hi - lo) / cell))
+        from .stage_structure import _rasterise
+
+        tris = []
+        for p in self.polygons:
+            v = p.vertices[:, :2]
+            for k in range(1, len(v) - 1):
+                tris.append([v[0], v[k], v[k + 1]])
+        tri = (np.asarray(tris, float).reshape(-1, 3, 2) - lo) / cell
+        return Grid(_rasterise(tri, tuple(shape)), lo, cell)
+
+
+@dataclass
+class NavMesh:
+    path: str
+    version: int
+    origin: np.ndarray  # dtNavMeshParams.orig, habitat frame
+    tile_width: float
+    tile_height: float
+    max_tiles: int
+    max_polys: int
+    settings: NavSettings
+    tiles: list[dict]  # per tile: ref, x, y, layer, poly/vert counts, walkable_height/radius/climb, bmin/bmax (habitat frame)
+    polygons: list[NavPolygon] = field(default_factory=list)
+
+    @property
+    def agent_radius(self) -> float:
+        return self.settings.agent_radius
+
+    @property
+    def agent_height(self) -> float:
+        return self.settings.agent_height
+
+    @property
+    def cell_size(self) -> float:
+        return self.settings.cell_size
+
+    def levels(self, gap: float = LEVEL_GAP) -> list[Level]:
+        """Polygons grouped by height (mean heights sorted; a jump over ``gap`` starts a new level),
+        largest area first (the main floor)."""
+        if not self.polygons:
+            return []
+        zs = np.array([p.z for p in self.polygons])
+        order = np.argsort(zs, kind="stable")
+        cuts = np.flatnonzero(np.diff(zs[order]) > gap) + 1
+        out = []
+        for g in np.split(order, cuts):
+            polys = [self.polygons[i] for i in g]
+            a = np.array([p.area for p in polys])
+            z = float((zs[g] * a).sum() / a.sum()) if a.sum() > 0 else float(zs[g].mean())
+            out.append(Level(z, polys, self.cell_size))
+        out.sort(key=lambda lv: (-round(lv.area, 6), lv.z))
+        return out
+
+    def main_level(self) -> Level:
+        lv = self.levels()
+        if not lv:
+            fail(self.path, None, "navmesh has no ground polygons")
+        return lv[0]
+
+    def walkable(self, level: Level | None = None, lo=None, shape=None) -> Grid:
+        return (level or self.main_level()).grid(lo, shape)
+
+    def footprint(self, level: Level | None = None, lo=None, shape=None, radius: float | None = None) -> Grid:
+        """The floor a level stands for: its walkable grid dilated by the agent radius (a square
+        element: axis-aligned corners stay square), holes smaller than the agent's disc filled."""
+        g = self.walkable(level, lo, shape)
+        return footprint_of(g, self.agent_radius if radius is None else radius)
+
+
+def footprint_of(g: Grid, radius: float) -> Grid:
+    k = int(round(radius / g.cell))
+    m = g.mask
+    if k > 0:
+        m = ndimage.binary_dilation(m, structure=np.ones((2 * k + 1, 2 * k + 1), bool))
+    lab, n = ndimage.label(~m)
+    if n:
+        sizes = np.bincount(lab.ravel(), minlength=n + 1)
+        border = np.unique(np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]]))
+        small = sizes * g.cell * g.cell < math.pi * radius * radius
+        small[0] = False
+        small[border] = False
+        m = m | small[lab]
+    return Grid(m, g.origin.copy(), g.cell)
+
+
+def polygon_area(xy: np.ndarray) -> float:
+    x, y = np.asarray(xy, float)[:, 0], np.asarray(xy, float)[:, 1]
+    return float(0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+
+
+def _align4(n: int) -> int:
+    return (n + 3) & ~3
+
+
+def read_navmesh(path) -> NavMesh:
+    """Parse a habitat-sim ``.navmesh`` (see the module docstring). Errors: ``SceneFormatError``
+    naming the file (missing, truncated, wrong magic or version, sizes that do not add up)."""
+    path = Path(path)
+    if not path.is_file():
+        fail(path, None, "navmesh file not found")
+    try:
+        b = path.read_bytes()
+    except OSError as e:
+        fail(path, None, f"cannot read: {e}")
+    if b.startswith(b"version https://git-lfs"):
+        fail(path, None, "is a Git LFS pointer, not the navmesh (run 'git lfs pull' in the dataset)")
+    need = HEADER.size + PARAMS.size + SETTINGS.size
+    if len(b) < need:
+        fail(path, None, f"truncated navmesh: {len(b)} bytes, the header alone is {need}")
+    magic, version, ntiles = HEADER.unpack_from(b, 0)
+    if magic != MSET_MAGIC:
+        fail(path, None, f"not a habitat-sim navmesh: magic {b[:4]!r}, expected b'TESM' ('MSET')")
+    if version != MSET_VERSION:
+        fail(path, None, f"navmesh version {version} is not supported (expected {MSET_VERSION})")
+    if ntiles < 0 or ntiles > 1 << 20:
+        fail(path, None, f"implausible tile count {ntiles}")
+    p = PARAMS.unpack_from(b, HEADER.size)
+    s = SETTINGS.unpack_from(b, HEADER.size + PARAMS.size)
+    settings = NavSettings(*[float(v) for v in s[:13]], *[bool(v) for v in s[13:]])
+    if not (settings.cell_size > 0 and settings.cell_height > 0 and settings.agent_radius >= 0 and settings.agent_height > 0):
+        fail(path, None, f"implausible navmesh settings {settings}")
+    nav = NavMesh(str(path), version, np.array(p[:3], float), float(p[3]), float(p[4]), int(p[5]), int(p[6]), settings, [])
+    o = need
+    for t in range(ntiles):
+        if o + TILE.size > len(b):
+            fail(path, None, f"truncated navmesh: tile {t} of {ntiles} starts at byte {o}, the file has {len(b)}")
+        ref, size = TILE.unpack_from(b, o)
+        o += TILE.size
+        if ref == 0 or size <= 0:
+            break  # habitat stops writing at an empty tile
+        if o + size > len(b):
+            fail(path, None, f"truncated navmesh: tile {t} needs {size} bytes at byte {o}, the file has {len(b)}")
+        _tile(nav, path, t, ref, memoryview(b)[o:o + size])
+        o += size
+    if o != len(b):
+        fail(path, None, f"{len(b) - o} trailing bytes after {len(nav.tiles)} tile(s)")
+    return nav
+
+
+def _tile(nav: NavMesh, path: Path, t: int, ref: int, d) -> None:
+    if len(d) < MESH_HEADER.size:
+        fail(path, None, f"tile {t}: {len(d)} bytes, less than the {MESH_HEADER.size}-byte Detour header")
+    h = MESH_HEADER.unpack_from(d, 0)
+    magic, version, tx, ty, layer, _user, pc, vc, mlc, dmc, dvc, dtc, bvc, omc, _omb = h[:15]
+    wh, wr, wc = h[15:18]
+    bmin, bmax = np.array(h[18:21]), np.array(h[21:24])
+    if magic != DT_MAGIC:
+        fail(path, None, f"tile {t}: Detour magic {bytes(d[:4])!r}, expected b'VAND' ('DNAV')")
+    if version != DT_VERSION:
+        fail(path, None, f"tile {t}: Detour version {version} is not supported (expected {DT_VERSION})")
+    counts = (pc, vc, mlc, dmc, dvc, dtc, bvc, omc)
+    if min(counts) < 0:
+        fail(path, None, f"tile {t}: negative counts {counts}")
+    sections = [12 * vc, POLY.size * pc, 12 * mlc, 12 * dmc, 12 * dvc, 4 * dtc, 16 * bvc, 36 * omc]
+    expect = MESH_HEADER.size + sum(_align4(x) for x in sections)
+    if expect != len(d):
+        fail(path, None, f"tile {t}: {len(d)} bytes of tile data, but its header's counts need {expect}")
+    off = MESH_HEADER.size
+    V = np.frombuffer(d, dtype="<f4", count=3 * vc, offset=off).astype(np.float64).reshape(-1, 3)
+    off += _align4(12 * vc)
+    if not np.isfinite(V).all():
+        fail(path, None, f"tile {t}: non-finite vertices")
+    Vz = V @ _C.T
+    npoly = 0
+    for k in range(pc):
+        f = POLY.unpack_from(d, off + k * POLY.size)
+        verts, flags, n, at = f[1:7], f[13], f[14], f[15]
+        if n < 3 or n > DT_VERTS_PER_POLYGON or max(verts[:n]) >= vc:
+            fail(path, None, f"tile {t}: polygon {k} has {n} vertices / indices {verts[:n]} (tile has {vc} vertices)")
+        if at >> 6 != DT_POLYTYPE_GROUND:
+            continue  # off-mesh connection
+        nav.polygons.append(NavPolygon(Vz[list(verts[:n])].copy(), at & 0x3F, flags, t))
+        npoly += 1
+    nav.tiles.append({"ref": ref, "x": tx, "y": ty, "layer": layer, "polygons": pc, "ground_polygons": npoly,
+                      "vertices": vc, "detail_meshes": dmc, "detail_vertices": dvc, "detail_triangles": dtc,
+                      "bv_nodes": bvc, "off_mesh_connections": omc, "walkable_height": wh, "walkable_radius": wr,
+                      "walkable_climb": wc, "bmin": bmin, "bmax": bmax, "verts_habitat": V})
+
+
+def navmesh_for_scene(root, scene_doc: dict, scene_path=None) -> Path | None:
+    """The navmesh file a scene instance names, resolved as habitat-sim does: the scene's
+    ``navmesh_instance`` handle is looked up in the scene dataset config's ``navmesh_instances``
+    (ReplicaCAD's apartments name "empty_stage_navmesh" while the config's key is "empty_stage": a
+    key that the handle starts with followed by "_navmesh" matches too); a handle that is a path
+    (relative to the root) to an existing file is taken as is. None when the scene names no navmesh.
+    Errors (``SceneFormatError``): a handle that matches nothing, a listed file that is missing."""
+    root = Path(root)
+    where = scene_path or "<scene instance>"
+    name = mapping(where, scene_doc, None).get("navmesh_instance")
+    if name in (None, ""):
+        return None
+    if not isinstance(name, str):
+        fail(where, "navmesh_instance", f"expected a string, got {name!r}")
+    configs = sorted(root.glob("*.scene_dataset_config.json"))
+    table = {}
+    for cfg in configs:
+        doc = mapping(cfg, read_json(cfg), None)
+        nm = doc.get("navmesh_instances", {})
+        table.update({k: (cfg, v) for k, v in mapping(cfg, nm, "navmesh_instances").items()})
+    cands = [name]
+    if name.endswith("_navmesh"):
+        cands.append(name[: -len("_navmesh")])
+    for c in cands:
+        if c in table:
+            cfg, rel = table[c]
+            if not isinstance(rel, str):
+                fail(cfg, f"navmesh_instances.{c}", f"expected a path, got {rel!r}")
+            f = (cfg.parent / rel)
+            if not f.is_file():
+                fail(cfg, f"navmesh_instances.{c}", f"navmesh file not found: {f}")
+            return f
+    direct = root / name
+    if direct.is_file():
+        return direct
+    fail(where, "navmesh_instance", f"no navmesh '{name}' in the scene dataset config's navmesh_instances "
+                                    f"({', '.join(str(c) for c in configs) or 'no *.scene_dataset_config.json in ' + str(root)})")
+
+
+# --------------------------------------------------------------------------------------------
+# a stand-in stage from a navmesh (for datasets whose stage GLB is missing: tools/replicacad_standin.py)
+
+STANDIN_WALL_CELLS = 2  # wall thickness in navmesh cells (0.1 m at ReplicaCAD's 0.05 m)
+STANDIN_SLAB = 0.1  # floor and ceiling slab thickness, m
+STANDIN_CEILING = 2.8  # m above the floor (see StandinSpec)
+STANDIN_STEP = 0.18  # m: ramps (stairs in the navmesh) become steps of at most this rise
+STANDIN_SLAB_STEP = 0.15  # m: thickness of a stair flight's slab above a walkable space
+STANDIN_STAIR_HEADROOM = 2.5  # m above the highest raised level: the ceiling over the stairs
+WINDOW_SILL, WINDOW_HEAD = 0.9, 2.1  # m above the floor
+WINDOW_WIDTH = 1.2  # m
+WINDOW_SPACING = 2.5  # m of exterior wall per window
+WINDOW_MIN_WALL = 1.6  # m: shorter exterior walls get none
+WINDOW_END_MARGIN = 0.3  # m of solid wall at either end of a wall with windows
+STANDIN_COLOURS = {"floor": (0.55, 0.45, 0.35, 1.0), "walls": (0.85, 0.84, 0.80, 1.0), "ceiling": (0.95, 0.95, 0.95, 1.0),
+                   "steps": (0.50, 0.42, 0.34, 1.0)}
+
+
+@dataclass
+class StandinSpec:
+    """Choices of the stand-in stage (all in metres, our frame; see ``standin_stage``).
+
+    ``floor_z``: the main floor's true height. The navmesh only brackets it (Recast heights lie up to
+    one ``cell_height`` above the surface); None: ``main level z - cell_height / 2``.
+    ``ceiling``: the ceiling height above the floor. ``windows``: cut window openings in exterior walls."""
+
+    floor_z: float | None = None
+    ceiling: float = STANDIN_CEILING
+    wall_cells: int = STANDIN_WALL_CELLS
+    windows: bool = True
+
+
+@dataclass
+class Standin:
+    """The stand-in's meshes (our frame, Z up) by part, and its figures."""
+
+    parts: dict  # name -> trimesh.Trimesh (floor, walls, ceiling, steps)
+    floor_z: float
+    ceiling_z: float
+    stair_ceiling_z: float | None
+    footprint: Grid  # the union of every level's footprint (the floor inside the walls)
+    main_footprint: Grid
+    walls: Grid  # wall cells
+    windows: list[dict]  # {"axis": "x"|"y", "at": wall line coordinate, "from", "to", "bottom", "top"}
+    levels: list[dict]  # per level: z (navmesh), z_true, kind, walkable/footprint area
+    report: dict = field(default_factory=dict)
+
+
+def _rects(mask: np.ndarray) -> list[tuple[int, int, int, int]]:
+    """A cover of the set cells of a 2-D bool array by disjoint rectangles [i0, i1) x [j0, j1):
+    runs along j in each column i, merged over consecutive columns with the same run."""
+    out = []
+    open_: dict[tuple[int, int], int] = {}
+    W = mask.shape[0]
+    for i in range(W + 1):
+        runs = set()
+        if i < W:
+            col = mask[i]
+            d = np.diff(np.concatenate(([0], col.astype(np.int8), [0])))
+            runs = set(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist()))
+        for r in list(open_):
+            if r not in runs:
+                out.append((open_.pop(r), i, r[0], r[1]))
+        for r in runs:
+            if r not in open_:
+                open_[r] = i
+    out.sort()
+    return out
+
+
+def _box(lo, hi):
+    import trimesh
+
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    b = trimesh.creation.box(extents=hi - lo)
+    b.apply_translation((lo + hi) / 2.0)
+    return b
+
+
+def _boxes(g: Grid, mask: np.ndarray, z0: float, z1: float) -> list:
+    o, c = g.origin, g.cell
+    return [_box((o[0] + i0 * c, o[1] + j0 * c, z0), (o[0] + i1 * c, o[1] + j1 * c, z1)) for i0, i1, j0, j1 in _rects(mask)]
+
+
+def standin_stage(nav: NavMesh, spec: StandinSpec | None = None) -> Standin:
+    """A stage that matches the navmesh: what an agent of the navmesh's radius could walk on is
+    floor, and walls stand where it could not (see the module docstring of
+    ``tools/replicacad_standin.py`` for the choices). Our frame; ``write_standin_glb`` writes it."""
+    import trimesh
+
+    spec = spec or StandinSpec()
+    levels = nav.levels()
+    if not levels:
+        fail(nav.path, None, "navmesh has no ground polygons: no stand-in stage can be built from it")
+    main = levels[0]
+    ch, cell = nav.settings.cell_height, nav.cell_size
+    floor_z = float(main.z - ch / 2.0) if spec.floor_z is None else float(spec.floor_z)
+    shift = floor_z - main.z  # navmesh height -> true height (the same offset on every level)
+    pts = np.concatenate([p.vertices[:, :2] for p in nav.polygons])
+    margin = 1.0
+    lo = np.floor((pts.min(axis=0) - margin) / cell) * cell
+    shape = tuple(int(v) for v in np.ceil((pts.max(axis=0) + margin - lo) / cell))
+    walk = [lv.grid(lo, shape) for lv in levels]
+    feet = [footprint_of(w, nav.agent_radius) for w in walk]
+    U = np.zeros(shape, bool)
+    for f in feet:
+        U |= f.mask
+    # each footprint cell belongs to the level whose walkable cells are nearest (the main level on ties)
+    dist = np.stack([ndimage.distance_transform_edt(~w.mask) if w.mask.any() else np.full(shape, np.inf) for w in walk])
+    for k, f in enumerate(feet):
+        dist[k][~f.mask] = np.inf
+    owner = np.argmin(dist, axis=0)
+    owner[~U] = -1
+    height = np.full(shape, floor_z)
+    over_h = np.full(shape, -np.inf)
+    coef = base = rise = None
+    info = []
+    xc = lo[0] + (np.arange(shape[0]) + 0.5) * cell
+    yc = lo[1] + (np.arange(shape[1]) + 0.5) * cell
+    X, Y = np.meshgrid(xc, yc, indexing="ij")
+    top = floor_z
+    for k, lv in enumerate(levels):
+        z0, z1 = lv.z_range
+        kind = "main" if k == 0 else ("ramp" if z1 - z0 > nav.settings.agent_max_climb + 1e-6 else "flat")
+        sel = owner == k
+        if k > 0 and sel.any():
+            if kind == "flat":
+                h = np.full(int(sel.sum()), lv.z + shift)
+            else:  # a ramp: the plane through its vertices, cut into steps
+                V = np.concatenate([p.vertices for p in lv.polygons])
+                A = np.c_[V[:, 0], V[:, 1], np.ones(len(V))]
+                coef = np.linalg.lstsq(A, V[:, 2], rcond=None)[0]
+                h = np.clip(coef[0] * X[sel] + coef[1] * Y[sel] + coef[2], z0, z1) + shift
+                base = z0 + shift
+                n = max(1, int(math.ceil((z1 - z0) / STANDIN_STEP)))
+                rise = (z1 - z0) / n
+                h = base + np.ceil((h - base) / rise - 1e-6) * rise
+            height[sel] = np.maximum(h, floor_z)
+            top = max(top, float(height[sel].max()))
+        if k > 0:
+            # walkable both here and on the main floor (a flight of stairs above a walkable space):
+            # a floating slab at this level's height, the space under it left free
+            ov = walk[k].mask & (owner == 0)
+            if ov.any():
+                if kind == "flat":
+                    hv = np.full(int(ov.sum()), lv.z + shift)
+                else:
+                    hv = np.clip(coef[0] * X[ov] + coef[1] * Y[ov] + coef[2], z0, z1) + shift
+                    hv = base + np.ceil((hv - base) / rise - 1e-6) * rise
+                over_h[ov] = np.maximum(over_h[ov], hv)
+                top = max(top, float(hv.max()))
+        info.append({"z_navmesh": round(lv.z, 3), "z_range_navmesh": [round(z0, 3), round(z1, 3)], "kind": kind,
+                     "polygons": len(lv.polygons), "navmesh_area_m2": round(lv.area, 3),
+                     "walkable_m2": round(walk[k].area, 3), "footprint_m2": round(feet[k].area, 3),
+                     "owned_m2": round(float(sel.sum()) * cell * cell, 3),
+                     "over_main_m2": round(float((walk[k].mask & (owner == 0)).sum()) * cell * cell, 3) if k else 0.0})
+    raised = U & (height > floor_z + 0.01)
+    floating = U & np.isfinite(over_h) & ~raised
+    # walls: a band of wall cells around the footprint (outside it; gaps between rooms too)
+    t = max(1, int(spec.wall_cells))
+    wall = ndimage.binary_dilation(U, structure=np.ones((2 * t + 1, 2 * t + 1), bool)) & ~U
+    lab, _ = ndimage.label(~U)
+    outer_labels = np.unique(np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]]))
+    outer = np.isin(lab, outer_labels[outer_labels > 0]) & ~wall
+    ceil_z = floor_z + float(spec.ceiling)
+    stair_z = None
+    stairwell = np.zeros(shape, bool)
+    if (raised.any() or floating.any()) and top + nav.agent_height > ceil_z - 1e-6:
+        stair_z = top + STANDIN_STAIR_HEADROOM
+        r = int(math.ceil(nav.agent_radius / cell))
+        stairwell = ndimage.binary_dilation(raised | floating, structure=np.ones((2 * r + 1, 2 * r + 1), bool)) & U
+    near_stair = ndimage.binary_dilation(stairwell, structure=np.ones((2 * t + 3, 2 * t + 3), bool)) & wall
+    shell = U | wall
+    g = Grid(U, lo, cell)
+    floor = _boxes(g, shell, floor_z - STANDIN_SLAB, floor_z)
+    steps = []
+    for hv in np.unique(height[raised]):
+        steps += _boxes(g, raised & np.isclose(height, hv), floor_z, float(hv))
+    for hv in np.unique(over_h[floating]):
+        steps += _boxes(g, floating & np.isclose(over_h, hv), float(hv) - STANDIN_SLAB_STEP, float(hv))
+    # windows: holes in straight exterior wall runs away from the stairs
+    windows = []
+    solid = wall.copy()
+    win_cells = np.zeros(shape, bool)
+    if spec.windows:
+        ext = wall & ndimage.binary_dilation(outer, structure=np.ones((3, 3), bool)) & ~near_stair
+        for i0, i1, j0, j1 in _rects(ext):
+            wi, wj = i1 - i0, j1 - j0
+            if min(wi, wj) > 2 * t:
+                continue
+            along = 0 if wi > wj else 1
+            n_cells = wi if along == 0 else wj
+            L = n_cells * cell
+            if L < WINDOW_MIN_WALL:
+                continue
+            n = max(1, int(L // WINDOW_SPACING))
+            width = min(WINDOW_WIDTH, L / n - 2 * WINDOW_END_MARGIN)
+            for q in range(n):
+                cen = (q + 0.5) * L / n
+                a = int(round((cen - width / 2) / cell))
+                b = int(round((cen + width / 2) / cell))
+                if along == 0:
+                    sl = (slice(i0 + a, i0 + b), slice(j0, j1))
+                    at = (lo[1] + j0 * cell, lo[1] + j1 * cell)
+                    span = (lo[0] + (i0 + a) * cell, lo[0] + (i0 + b) * cell)
+                else:
+                    sl = (slice(i0, i1), slice(j0 + a, j0 + b))
+                    at = (lo[0] + i0 * cell, lo[0] + i1 * cell)
+                    span = (lo[1] + (j0 + a) * cell, lo[1] + (j0 + b) * cell)
+                win_cells[sl] = True
+                windows.append({"axis": "xy"[along], "wall_line": [round(float(v), 3) for v in at],
+                                "from": round(float(span[0]), 3), "to": round(float(span[1]), 3),
+                                "bottom": WINDOW_SILL, "top": WINDOW_HEAD})
+        solid &= ~win_cells
+    wall_boxes = _boxes(g, solid & ~near_stair, floor_z, ceil_z)
+    if stair_z is not None:
+        wall_boxes += _boxes(g, near_stair, floor_z, stair_z)
+    wall_boxes += _boxes(g, win_cells, floor_z, floor_z + WINDOW_SILL)
+    wall_boxes += _boxes(g, win_cells, floor_z + WINDOW_HEAD, ceil_z)
+    ceiling = []
+    if stair_z is None:
+        ceiling = _boxes(g, shell, ceil_z, ceil_z + STANDIN_SLAB)
+    else:
+        ceiling = _boxes(g, shell & ~stairwell & ~near_stair, ceil_z, stair_z + STANDIN_SLAB)
+        ceiling += _boxes(g, stairwell | near_stair, stair_z, stair_z + STANDIN_SLAB)
+    parts = {}
+    for name, boxes in (("floor", floor), ("walls", wall_boxes), ("ceiling", ceiling), ("steps", steps)):
+        if boxes:
+            parts[name] = trimesh.util.concatenate(boxes)
+    main_fp = Grid(feet[0].mask.copy(), lo, cell)
+    report = {"navmesh": nav.path, "cell_m": cell, "floor_z": round(floor_z, 3), "ceiling_z": round(ceil_z, 3),
+              "stair_ceiling_z": None if stair_z is None else round(stair_z, 3),
+              "footprint_m2": round(g.area, 3), "main_footprint_m2": round(main_fp.area, 3),
+              "wall_cells_m2": round(float(wall.sum()) * cell * cell, 3), "windows": len(windows),
+              "raised_m2": round(float(raised.sum()) * cell * cell, 3),
+              "floating_m2": round(float(floating.sum()) * cell * cell, 3), "levels": info,
+              "boxes": {k: len(v) for k, v in (("floor", floor), ("walls", wall_boxes), ("ceiling", ceiling), ("steps", steps))}}
+    return Standin(parts, floor_z, ceil_z, stair_z, g, main_fp, Grid(wall, lo, cell), windows, info, report)
+
+
+def write_standin_glb(standin: Standin, path) -> Path:
+    """Write the stand-in's parts as a GLB in habitat's Y-up glTF frame (vertices ``C^T v``), one
+    node and one plain PBR material (base colour factor) per part."""
+    import trimesh
+    from trimesh.visual import TextureVisuals
+    from trimesh.visual.material import PBRMaterial
+
+    path = Path(path)
+    scene = trimesh.Scene()
+    T = np.eye(4)
+    T[:3, :3] = _C.T
+    for name, mesh in standin.parts.items():
+        m = mesh.copy()
+        m.apply_transform(T)
+        m.visual = TextureVisuals(material=PBRMaterial(name=f"standin_{name}", baseColorFactor=list(STANDIN_COLOURS[name]),
+                                                       metallicFactor=0.0, roughnessFactor=0.9))
+        scene.add_geometry(m, node_name=name, geom_name=name)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_bytes(trimesh.exchange.gltf.export_glb(scene))
+    tmp.replace(path)
+    return path
