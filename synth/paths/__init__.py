@@ -17,14 +17,22 @@ Clearance rule (``obstacles``)
     on the floor never passes over a table), and from the walls. ``"band"``: only objects whose
     box reaches into the camera's height band (the path's height range widened by ``BAND`` =
     0.3 m both ways) count; objects entirely below or above are at least ``BAND`` away vertically.
-    Walls are the edges of the rooms' free interiors (``Room.rect``), cut where an interior door
+    Walls are the edges of the rooms' free interiors (``Room.outline``: the room's polygon when it
+    has one, an L-shaped room or a part of an open plan, else its rect), cut where an interior door
     (one that connects two rooms) is, plus that door's jambs; the entrance door counts as wall.
-    A camera outside every room and door gap has clearance 0.
+    An edge two polygon rooms share (an open plan split into rooms) is open. A camera outside every
+    room (``Room.contains``) and door gap has clearance 0. Objects of class ``door`` (ReplicaCAD's
+    articulated door leaves, loaded open) are obstacles like any other: a leaf standing in a
+    doorway is where a camera would hit it. Planner and checker use the same functions for all of
+    this (``clearance.inside_free``, ``wall_segments``, ``room_index``), so a planned path checks
+    with the clearance the planner reported. ``synth path plan`` records a layout given as a file
+    by its absolute path (a ReplicaCAD import is named ``apt_0`` like the built-in layout), so
+    ``synth path check`` and replanning read that file.
 
 Planning (both kinds)
     An exact clearance field on a 2.5 cm grid (distance from each cell centre to the nearest wall
     segment and obstacle footprint, min over all layouts) gives the walkable cells
-    (>= clearance + ``MARGIN``). Waypoints are picked per room from local maxima of the clearance
+    (>= clearance + ``MARGIN``). Waypoints are picked per room (cells inside its polygon or rect) from local maxima of the clearance
     (seeded), ordered into a tour (nearest neighbour + 2-opt on geodesic costs), connected by
     shortest grid paths whose cost prefers staying ``PREFER`` metres from obstacles and floor
     that is free of low furniture in most layouts; dead ends turn in a small loop. The polyline

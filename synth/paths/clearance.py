@@ -2,8 +2,10 @@
 
 ``path_clearance`` measures (the clearance rule is in ``synth.paths``); ``clearance_report``,
 ``render_clearance_problem`` and ``replan_command`` serve ``synth path check`` and the refused
-renders (``synth.tour``, ``synth.jobs``). The planning grid (``synth.paths.space``) uses the wall
-segments, footprints and distances defined here.
+renders (``synth.tour``, ``synth.jobs``). The free space is defined here once (``inside_free``,
+``wall_segments``, ``wall_clearance``, ``room_index``: rooms by ``Room.outline`` / ``Room.contains``, so
+polygon rooms and rect rooms alike); the planning grid (``synth.paths.space``) uses exactly these
+functions and the footprints and distances defined here, so a planned path checks as planned.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from .model import BAND, CameraPath
 
 __all__ = [
     "path_clearance", "path_clearance_detail", "clearance_report", "declared_clearance", "render_clearance_problem",
-    "replan_command", "planned_on", "wall_segments", "Boxes", "NEAREST_WALL", "NEAREST_OUTSIDE", "CLEARANCE_TOL",
+    "replan_command", "planned_on", "wall_segments", "inside_free", "wall_clearance", "room_index", "Boxes", "NEAREST_WALL", "NEAREST_OUTSIDE", "CLEARANCE_TOL",
 ]
 
 
@@ -33,16 +35,76 @@ def _interior_doors(stage: Stage):
     return [op for op in stage.openings if op.kind == "door" and len(op.rooms) >= 2]
 
 
+def _cut(lo: float, hi: float, cuts) -> list[tuple[float, float]]:
+    """What is left of the interval [lo, hi] once the intervals ``cuts`` are taken out."""
+    pieces = [(lo, hi)]
+    for a, b in cuts:
+        nxt = []
+        for p, q in pieces:
+            if b <= p or a >= q:
+                nxt.append((p, q))
+                continue
+            if a > p:
+                nxt.append((p, a))
+            if b < q:
+                nxt.append((b, q))
+        pieces = nxt
+    return [(p, q) for p, q in pieces if q - p >= 1e-6]
+
+
+SHARED_EDGE_TOL = 0.01  # m: polygon edges of two rooms this close and parallel are one open boundary
+
+
+def _polygon_edge_pieces(stage: Stage, k: int, doors, outlines) -> list[tuple[tuple, tuple]]:
+    """Wall pieces of polygon room ``k``: its edges minus door gaps and minus the stretches it shares
+    with another polygon room (an open plan split into rooms has no wall between them)."""
+    q = outlines[k]
+    out = []
+    for i in range(len(q)):
+        a, b = q[i], q[(i + 1) % len(q)]
+        L = float(np.hypot(*(b - a)))
+        if L < 1e-9:
+            continue
+        u = (b - a) / L
+        cuts = []
+        for op, w, c, d in doors:
+            if abs(u[0] * d[1] - u[1] * d[0]) > 1e-3:  # wall not parallel to this edge
+                continue
+            rel = c - a
+            if abs(u[0] * rel[1] - u[1] * rel[0]) > w.thickness / 2 + 0.05:
+                continue
+            t = float(rel @ u)
+            cuts.append((t - op.width / 2, t + op.width / 2))
+        for j, o in outlines.items():
+            if j == k:
+                continue
+            for m in range(len(o)):
+                e, f = o[m] - a, o[(m + 1) % len(o)] - a
+                if max(abs(u[0] * e[1] - u[1] * e[0]), abs(u[0] * f[1] - u[1] * f[0])) > SHARED_EDGE_TOL:
+                    continue
+                te, tf = float(e @ u), float(f @ u)
+                cuts.append((min(te, tf), max(te, tf)))
+        for p, s in _cut(0.0, L, cuts):
+            out.append((tuple(a + u * p), tuple(a + u * s)))
+    return out
+
+
 def wall_segments(stage: Stage) -> np.ndarray:
-    """(K, 2, 2) wall segments: room rect edges minus interior door gaps, plus those doors' jambs."""
+    """(K, 2, 2) wall segments: the edges of every room's free interior (``Room.outline``: its polygon,
+    else its rect) minus interior door gaps, plus those doors' jambs. Edges two polygon rooms share
+    are open (no wall)."""
     doors = []
     for op in _interior_doors(stage):
         w = stage.wall(op.wall)
         c = op.center_xy(w)
         d = w.direction
         doors.append((op, w, c, d))
+    outlines = {k: r.outline() for k, r in enumerate(stage.rooms) if r.polygon is not None}
     segs = []
-    for r in stage.rooms:
+    for k, r in enumerate(stage.rooms):
+        if r.polygon is not None:
+            segs += _polygon_edge_pieces(stage, k, doors, outlines)
+            continue
         x0, y0, x1, y1 = r.rect
         edges = [(0, y0, x0, x1), (0, y1, x0, x1), (1, x0, y0, y1), (1, x1, y0, y1)]  # (along axis, fixed coord, lo, hi)
         for axis, fixed, lo, hi in edges:
@@ -53,21 +115,7 @@ def wall_segments(stage: Stage) -> np.ndarray:
                 if abs(c[1 - axis] - fixed) > w.thickness / 2 + 0.05:
                     continue
                 cuts.append((c[axis] - op.width / 2, c[axis] + op.width / 2))
-            pieces = [(lo, hi)]
-            for a, b in cuts:
-                nxt = []
-                for p, q in pieces:
-                    if b <= p or a >= q:
-                        nxt.append((p, q))
-                        continue
-                    if a > p:
-                        nxt.append((p, a))
-                    if b < q:
-                        nxt.append((b, q))
-                pieces = nxt
-            for p, q in pieces:
-                if q - p < 1e-6:
-                    continue
+            for p, q in _cut(lo, hi, cuts):
                 if axis == 0:
                     segs.append(((p, fixed), (q, fixed)))
                 else:
@@ -81,18 +129,40 @@ def wall_segments(stage: Stage) -> np.ndarray:
     return np.asarray(segs, dtype=float).reshape(-1, 2, 2)
 
 
-def _inside(stage: Stage, pts: np.ndarray) -> np.ndarray:
-    """Points inside a room's free interior or an interior door gap."""
+def inside_free(stage: Stage, pts: np.ndarray) -> np.ndarray:
+    """Points in the free space: inside a room's free interior (``Room.contains``: its polygon, else
+    its rect) or an interior door gap. The one inside test of planner and checker."""
     from matplotlib.path import Path as MplPath
     from ..placement import opening_box
 
+    pts = np.asarray(pts, float).reshape(-1, 2)
     inside = np.zeros(len(pts), bool)
     for r in stage.rooms:
-        inside |= (pts[:, 0] >= r.rect[0]) & (pts[:, 0] <= r.rect[2]) & (pts[:, 1] >= r.rect[1]) & (pts[:, 1] <= r.rect[3])
+        inside |= r.contains(pts)
     for op in _interior_doors(stage):
         gap = opening_box(stage, op, depth_extra=0.01)
         inside |= MplPath(gap.corners_2d()).contains_points(pts)
     return inside
+
+
+def wall_clearance(stage: Stage, pts: np.ndarray, segs: np.ndarray | None = None) -> np.ndarray:
+    """Distance of each point to the nearest wall (``wall_segments``), 0 outside the free space
+    (``inside_free``): the part of the clearance that comes from the shell, the same for planner
+    (``synth.paths.space``) and checker (``path_clearance``)."""
+    pts = np.asarray(pts, float).reshape(-1, 2)
+    d = _seg_dist(pts, wall_segments(stage) if segs is None else segs)
+    d[~inside_free(stage, pts)] = 0.0
+    return d
+
+
+def room_index(stage: Stage, pts: np.ndarray) -> np.ndarray:
+    """Index of the (first) room whose free interior holds each point (``Room.contains``), -1 for none."""
+    pts = np.asarray(pts, float).reshape(-1, 2)
+    out = np.full(len(pts), -1, int)
+    for k, r in enumerate(stage.rooms):
+        m = r.contains(pts)
+        out[m & (out < 0)] = k
+    return out
 
 
 def _seg_dist(pts: np.ndarray, segs: np.ndarray) -> np.ndarray:
@@ -170,7 +240,7 @@ def path_clearance(path: CameraPath, layout: Layout, obstacles: str = "all", ban
 
     Obstacles: with ``"band"`` the footprints of the objects whose box overlaps the frame's height
     band ``[z - band, z + band]``; with ``"all"`` every object except ceiling-mounted ones. Walls:
-    room rect edges except interior door gaps, plus door jambs. 0 outside every room / door gap.
+    ``wall_segments``. 0 outside the free space (``inside_free``: every room and door gap).
     """
     return path_clearance_detail(path, layout, obstacles, band)[0]
 
@@ -185,6 +255,7 @@ def path_clearance_detail(path: CameraPath, layout: Layout, obstacles: str = "al
     P = np.asarray(path.poses)[:, :3, 3]
     xy = P[:, :2]
     st = layout.stage
+    inside = inside_free(st, xy)
     d = _seg_dist(xy, wall_segments(st))
     boxes = _object_boxes(layout, obstacles)
     bx = Boxes.of(boxes)
@@ -196,7 +267,7 @@ def path_clearance_detail(path: CameraPath, layout: Layout, obstacles: str = "al
     ids = np.array([b.id for b in boxes], dtype=np.int64)
     nearest = np.where((db < d) & (k >= 0), ids[np.maximum(k, 0)] if len(ids) else NEAREST_WALL, NEAREST_WALL)
     d = np.minimum(d, db)
-    outside = ~_inside(st, xy)
+    outside = ~inside
     d[outside] = 0.0
     nearest[outside] = NEAREST_OUTSIDE
     return d, nearest
@@ -256,7 +327,8 @@ def clearance_report(path: CameraPath, layout: Layout, clearance: float | None =
         "path": path.name, "layout": layout.name, "clearance_m": float(clearance), "obstacles": obstacles,
         "frames": int(len(d)), "min_clearance_m": round(float(d[k]), 4) if k is not None else None,
         "min_frame": k, "nearest": what(int(nearest[k])) if k is not None else None,
-        "frames_below": int(below.sum()), "ranges": ranges, "ok": not ranges,
+        "frames_below": int(below.sum()), "frames_outside": int((nearest == NEAREST_OUTSIDE).sum()),
+        "ranges": ranges, "ok": not ranges,
     }
 
 

@@ -27,10 +27,28 @@ def _layout(name):
     return load_layout(name)
 
 
+def _layout_ref(arg: str) -> str:
+    """How a planned path's metadata names a layout given on the command line: a built-in name as
+    given, a file by its absolute path. A layout file keeps its own name inside (an imported
+    ReplicaCAD ``apt_0`` is called ``apt_0``), so recording that name would make ``synth path
+    check``, replanning and the render checks read the built-in layout of the same name instead."""
+    from ..scene import layouts_dir, resolve_layout_path
+
+    f = resolve_layout_path(arg)
+    if Path(arg).suffix == "" and not Path(arg).exists() and f == layouts_dir() / f"{arg}.yaml":
+        return arg
+    return str(f.resolve())
+
+
+def _record_layouts(path: CameraPath, args_layouts: list[str]) -> None:
+    path.meta["layouts"] = [_layout_ref(a) for a in args_layouts]
+
+
 def _cmd_plan_query(args) -> int:
     lays = [_layout(n) for n in args.layouts]
     path = plan_query_path(lays, frames=args.frames, seed=args.seed, fps=args.fps, speed=args.speed,
                            clearance=args.clearance, obstacles=args.obstacles, name=args.name or Path(args.out).stem)
+    _record_layouts(path, args.layouts)
     out = save_path(path, args.out)
     st = path.meta["stats"]
     print(f"wrote {out} (+ {out.with_suffix('.yaml').name}): {len(path)} frames, {st['length_m']:.1f} m, "
@@ -42,6 +60,7 @@ def _cmd_plan_mapping(args) -> int:
     lay = _layout(args.layout)
     path = plan_mapping_path(lay, frames=args.frames, seed=args.seed, fps=args.fps, speed=args.speed,
                              clearance=args.clearance, obstacles=args.obstacles, name=args.name or Path(args.out).stem)
+    _record_layouts(path, [args.layout])
     out = save_path(path, args.out)
     st = path.meta["stats"]
     print(f"wrote {out} (+ {out.with_suffix('.yaml').name}): {len(path)} frames, {st['length_m']:.1f} m, "
@@ -137,6 +156,11 @@ def _cmd_check(args) -> int:
               f"frame {r['min_frame']}, {_what(r['nearest'])})")
         for rg in r["ranges"]:
             print(f"  {_range_text(rg)}")
+        if r["frames_outside"] and not args.layout:
+            from ..scene import resolve_layout_path
+
+            print(f"  {r['frames_outside']} frames lie outside every room of {resolve_layout_path(arg)}: if the path was "
+                  f"planned on another layout named '{r['layout']}' (an imported one), give its file with --layout")
     bad = [arg for r, arg in zip(reps, names) if not r["ok"]]
     print(f"PROBLEMS FOUND: camera path '{path.name}' breaks its {c:g} m clearance in {len(bad)} of {len(reps)} "
           f"layout(s); replan it: {replan_command(path, bad)}")

@@ -38,7 +38,8 @@ def _sweep_runs(space: Space, k: int, axis: int, spacing: float, offset: float) 
     free length; a room where no nominal line finds any gets its single best row.
     """
     g = space.grid
-    r = space.stage.rooms[k].rect
+    q = space.stage.rooms[k].outline()  # the rect's corners, or the polygon: lines span its extent, runs stay inside it
+    r = (q[:, 0].min(), q[:, 1].min(), q[:, 0].max(), q[:, 1].max())
     table = _line_runs(space, k, axis)
     if not table:
         return []
@@ -113,7 +114,7 @@ def plan_mapping_path(layout: Layout, frames: int = 6000, seed: int = 0, fps: fl
     _require_rooms(space, "mapping path")
     step = speed / fps
     need = (frames - 1) * step
-    max_dim = max(max(r.rect[2] - r.rect[0], r.rect[3] - r.rect[1]) for r in space.stage.rooms)
+    max_dim = max(float((r.outline().max(axis=0) - r.outline().min(axis=0)).max()) for r in space.stage.rooms)
 
     def one_pass(sp, offset=0.0, k=0, start=None):
         return _mapping_pass(space, sp, offset, np.random.default_rng([seed, 11, k]), start=start)

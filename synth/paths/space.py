@@ -12,7 +12,7 @@ import numpy as np
 from formats.errors import UserError
 
 from ..scene import Layout
-from .clearance import Boxes, _inside, _object_boxes, _seg_dist, path_clearance, wall_segments
+from .clearance import Boxes, _object_boxes, _seg_dist, inside_free, path_clearance, room_index, wall_segments
 from .model import BAND, CURVE_MARGIN, DCAP, GRID, MARGIN, MAX_YAW_RATE, PREFER
 
 __all__ = ["Space"]
@@ -23,7 +23,8 @@ def _same_shell(layouts: list[Layout]) -> None:
     for lay in layouts[1:]:
         b = lay.stage
         same = (
-            [(r.name, tuple(np.round(r.rect, 6))) for r in a.rooms] == [(r.name, tuple(np.round(r.rect, 6))) for r in b.rooms]
+            [(r.name, tuple(np.round(r.outline(), 6).ravel())) for r in a.rooms]
+            == [(r.name, tuple(np.round(r.outline(), 6).ravel())) for r in b.rooms]
             and [(o.id, o.wall, round(o.offset, 6), round(o.width, 6)) for o in a.openings if o.kind == "door"]
             == [(o.id, o.wall, round(o.offset, 6), round(o.width, 6)) for o in b.openings if o.kind == "door"]
         )
@@ -45,8 +46,10 @@ class Space:
             raise UserError(f"layout '{layouts[0].name}' has no rooms to plan a path in")
         self.clearance, self.grid, self.obstacles = clearance, grid, obstacles
         self.zlo, self.zhi = zlo, zhi
-        xs = [r.rect[0] for r in st.rooms] + [r.rect[2] for r in st.rooms]
-        ys = [r.rect[1] for r in st.rooms] + [r.rect[3] for r in st.rooms]
+        xs = [r.rect[0] for r in st.rooms] + [r.rect[2] for r in st.rooms] + [float(r.outline()[:, 0].min()) for r in st.rooms] \
+            + [float(r.outline()[:, 0].max()) for r in st.rooms]
+        ys = [r.rect[1] for r in st.rooms] + [r.rect[3] for r in st.rooms] + [float(r.outline()[:, 1].min()) for r in st.rooms] \
+            + [float(r.outline()[:, 1].max()) for r in st.rooms]
         self.x0, self.y0 = min(xs) - 0.3, min(ys) - 0.3
         self.nx = int(math.ceil((max(xs) + 0.3 - self.x0) / grid))
         self.ny = int(math.ceil((max(ys) + 0.3 - self.y0) / grid))
@@ -54,7 +57,7 @@ class Space:
         pts = np.stack([gx.ravel(), gy.ravel()], axis=1)
         self.pts = pts
         self.segs = wall_segments(st)
-        inside = _inside(st, pts)
+        inside = inside_free(st, pts)  # the checker's free space (synth.paths.clearance), cell by cell
         dist = np.minimum(_seg_dist(pts, self.segs), DCAP)
         dist[~inside] = 0.0
         dist = dist.reshape(self.ny, self.nx)
@@ -77,11 +80,7 @@ class Space:
         self.occ = occ / len(layouts)
         self.walk = dist >= clearance + MARGIN
         # rooms per cell
-        room = np.full(self.ny * self.nx, -1, int)
-        for k, r in enumerate(st.rooms):
-            m = (pts[:, 0] >= r.rect[0]) & (pts[:, 0] <= r.rect[2]) & (pts[:, 1] >= r.rect[1]) & (pts[:, 1] <= r.rect[3])
-            room[m & (room < 0)] = k
-        self.room = room.reshape(self.ny, self.nx)
+        self.room = room_index(st, pts).reshape(self.ny, self.nx)
         # the connected walkable component that covers the most rooms (then the largest)
         lab, n = ndimage.label(self.walk, structure=np.ones((3, 3), bool))
         best, best_key = 0, None
@@ -127,16 +126,11 @@ class Space:
         d = _seg_dist(xy, self.segs)
         for bx in self.boxes:
             np.minimum(d, bx.dist(xy), out=d)
-        d[~_inside(self.stage, xy)] = 0.0
+        d[~inside_free(self.stage, xy)] = 0.0
         return d
 
     def room_of(self, xy: np.ndarray) -> np.ndarray:
-        xy = np.asarray(xy, float).reshape(-1, 2)
-        out = np.full(len(xy), -1, int)
-        for k, r in enumerate(self.stage.rooms):
-            m = (xy[:, 0] >= r.rect[0]) & (xy[:, 0] <= r.rect[2]) & (xy[:, 1] >= r.rect[1]) & (xy[:, 1] <= r.rect[3])
-            out[m & (out < 0)] = k
-        return out
+        return room_index(self.stage, xy)
 
     # -- graph search
     def graph(self):
@@ -225,10 +219,15 @@ def _start_cell(space: Space) -> int:
             w = st.wall(op.wall)
             c = op.center_xy(w)
             r = st.room(op.rooms[0])
-            mid = np.array([(r.rect[0] + r.rect[2]) / 2, (r.rect[1] + r.rect[3]) / 2])
             n = np.array([-w.direction[1], w.direction[0]])
-            if n @ (mid - c) < 0:
-                n = -n
+            if r.polygon is None:
+                mid = np.array([(r.rect[0] + r.rect[2]) / 2, (r.rect[1] + r.rect[3]) / 2])
+                if n @ (mid - c) < 0:
+                    n = -n
+            else:  # the side of the door the room's interior is on
+                ins = [float(r.contains(c + s * n * dd).sum()) for s in (1, -1) for dd in (0.5, 1.0)]
+                if ins[2] + ins[3] > ins[0] + ins[1]:
+                    n = -n
             return space.snap(c + n * 1.0)
     m = space.comp
     i, j = np.unravel_index(int(np.argmax(np.where(m, space.dist, -1))), m.shape)
