@@ -489,6 +489,72 @@ def _boxes(g: Grid, mask: np.ndarray, z0: float, z1: float) -> list:
     return [_box((o[0] + i0 * c, o[1] + j0 * c, z0), (o[0] + i1 * c, o[1] + j1 * c, z1)) for i0, i1, j0, j1 in _rects(mask)]
 
 
+PARTS = ("floor", "steps", "walls", "ceiling")
+
+
+def _solid_surface(g: Grid, solids) -> tuple[dict, dict]:
+    """The outer surface of a union of prisms (``(part, 2-D mask, z0, z1)``, later ones win where
+    they overlap) on ``g``'s cells: a closed surface with outward normals and no faces between
+    touching prisms (so that a mesh reader sees only visible faces). Faces are merged into
+    rectangles and belong to the part of the solid cell they bound."""
+    import trimesh
+
+    zs = np.unique(np.round(np.array([z for _, _, a, b in solids for z in (a, b)]), 6))
+    W, H = g.mask.shape
+    S = np.zeros((W + 2, H + 2, len(zs) + 1), np.int8)  # padded; layer k spans zs[k-1]..zs[k]
+    for name, m, z0, z1 in solids:
+        k0, k1 = int(np.searchsorted(zs, round(z0, 6))), int(np.searchsorted(zs, round(z1, 6)))
+        if k1 <= k0 or not m.any():
+            continue
+        lab = PARTS.index(name) + 1
+        sub = S[1:-1, 1:-1, k0 + 1:k1 + 1]
+        sub[m] = lab
+    xs = g.origin[0] + np.arange(W + 1) * g.cell
+    ys = g.origin[1] + np.arange(H + 1) * g.cell
+    verts: dict[str, list] = {p: [] for p in PARTS}
+    normals: dict[str, list] = {p: [] for p in PARTS}
+    coords = (xs, ys, zs)
+    for ax in range(3):
+        Sm = np.moveaxis(S, ax, 0)
+        A, B = Sm[:-1], Sm[1:]  # boundary b lies between cells b-1 and b (unpadded index)
+        for b in range(A.shape[0]):
+            a_, b_ = A[b], B[b]
+            for sgn, own, other in ((1.0, a_, b_), (-1.0, b_, a_)):
+                face = (own > 0) & (other == 0)
+                if not face.any():
+                    continue
+                for lab in np.unique(own[face]):
+                    m = (face & (own == lab))[1:-1, 1:-1]  # drop the padding of the two in-plane axes
+                    ua, va = [a for a in range(3) if a != ax]
+                    u, v = coords[ua], coords[va]
+                    part = PARTS[int(lab) - 1]
+                    nrm = np.zeros(3)
+                    nrm[ax] = sgn
+                    for r0, r1, s0, s1 in _rects(m):
+                        q = np.zeros((4, 3))
+                        q[:, ax] = coords[ax][b]
+                        q[:, ua] = [u[r0], u[r1], u[r1], u[r0]]
+                        q[:, va] = [v[s0], v[s0], v[s1], v[s1]]
+                        verts[part].append(q)
+                        normals[part].append(nrm)
+    parts, counts = {}, {}
+    for p in PARTS:
+        if not verts[p]:
+            continue
+        Q = np.asarray(verts[p])
+        N = np.asarray(normals[p])
+        tri = np.concatenate([Q[:, [0, 1, 2]], Q[:, [0, 2, 3]]])
+        nn = np.concatenate([N, N])
+        cr = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        flip = (cr * nn).sum(axis=1) < 0
+        tri[flip] = tri[flip][:, ::-1]
+        mesh = trimesh.Trimesh(tri.reshape(-1, 3), np.arange(3 * len(tri)).reshape(-1, 3), process=False)
+        mesh.merge_vertices()
+        parts[p] = mesh
+        counts[p] = len(Q)
+    return parts, counts
+
+
 def standin_stage(nav: NavMesh, spec: StandinSpec | None = None) -> Standin:
     """A stage that matches the navmesh: what an agent of the navmesh's radius could walk on is
     floor, and walls stand where it could not (see the module docstring of
@@ -579,12 +645,11 @@ def standin_stage(nav: NavMesh, spec: StandinSpec | None = None) -> Standin:
     near_stair = ndimage.binary_dilation(stairwell, structure=np.ones((2 * t + 3, 2 * t + 3), bool)) & wall
     shell = U | wall
     g = Grid(U, lo, cell)
-    floor = _boxes(g, shell, floor_z - STANDIN_SLAB, floor_z)
-    steps = []
+    solids = [("floor", shell, floor_z - STANDIN_SLAB, floor_z)]
     for hv in np.unique(height[raised]):
-        steps += _boxes(g, raised & np.isclose(height, hv), floor_z, float(hv))
+        solids.append(("steps", raised & np.isclose(height, hv), floor_z, float(hv)))
     for hv in np.unique(over_h[floating]):
-        steps += _boxes(g, floating & np.isclose(over_h, hv), float(hv) - STANDIN_SLAB_STEP, float(hv))
+        solids.append(("steps", floating & np.isclose(over_h, hv), float(hv) - STANDIN_SLAB_STEP, float(hv)))
     # windows: holes in straight exterior wall runs away from the stairs
     windows = []
     solid = wall.copy()
@@ -607,33 +672,34 @@ def standin_stage(nav: NavMesh, spec: StandinSpec | None = None) -> Standin:
                 a = int(round((cen - width / 2) / cell))
                 b = int(round((cen + width / 2) / cell))
                 if along == 0:
-                    sl = (slice(i0 + a, i0 + b), slice(j0, j1))
+                    sl = (slice(i0 + a, i0 + b), slice(max(j0 - t, 0), j1 + t))  # the band's whole thickness
                     at = (lo[1] + j0 * cell, lo[1] + j1 * cell)
                     span = (lo[0] + (i0 + a) * cell, lo[0] + (i0 + b) * cell)
                 else:
-                    sl = (slice(i0, i1), slice(j0 + a, j0 + b))
+                    sl = (slice(max(i0 - t, 0), i1 + t), slice(j0 + a, j0 + b))
                     at = (lo[0] + i0 * cell, lo[0] + i1 * cell)
                     span = (lo[1] + (j0 + a) * cell, lo[1] + (j0 + b) * cell)
-                win_cells[sl] = True
+                hole = wall[sl] & ~near_stair[sl]
+                win_cells[sl] |= hole
+                across = np.flatnonzero(hole.any(axis=along))  # cells across the wall band
+                if len(across):
+                    base_ = (j0 if along == 0 else i0) - (min(j0, t) if along == 0 else min(i0, t))
+                    at = (lo[1 - along] + (base_ + across[0]) * cell, lo[1 - along] + (base_ + across[-1] + 1) * cell)
                 windows.append({"axis": "xy"[along], "wall_line": [round(float(v), 3) for v in at],
                                 "from": round(float(span[0]), 3), "to": round(float(span[1]), 3),
                                 "bottom": WINDOW_SILL, "top": WINDOW_HEAD})
         solid &= ~win_cells
-    wall_boxes = _boxes(g, solid & ~near_stair, floor_z, ceil_z)
+    solids.append(("walls", solid & ~near_stair, floor_z, ceil_z))
     if stair_z is not None:
-        wall_boxes += _boxes(g, near_stair, floor_z, stair_z)
-    wall_boxes += _boxes(g, win_cells, floor_z, floor_z + WINDOW_SILL)
-    wall_boxes += _boxes(g, win_cells, floor_z + WINDOW_HEAD, ceil_z)
-    ceiling = []
+        solids.append(("walls", near_stair, floor_z, stair_z))
+    solids.append(("walls", win_cells, floor_z, floor_z + WINDOW_SILL))
+    solids.append(("walls", win_cells, floor_z + WINDOW_HEAD, ceil_z))
     if stair_z is None:
-        ceiling = _boxes(g, shell, ceil_z, ceil_z + STANDIN_SLAB)
+        solids.append(("ceiling", shell, ceil_z, ceil_z + STANDIN_SLAB))
     else:
-        ceiling = _boxes(g, shell & ~stairwell & ~near_stair, ceil_z, stair_z + STANDIN_SLAB)
-        ceiling += _boxes(g, stairwell | near_stair, stair_z, stair_z + STANDIN_SLAB)
-    parts = {}
-    for name, boxes in (("floor", floor), ("walls", wall_boxes), ("ceiling", ceiling), ("steps", steps)):
-        if boxes:
-            parts[name] = trimesh.util.concatenate(boxes)
+        solids.append(("ceiling", shell & ~stairwell & ~near_stair, ceil_z, stair_z + STANDIN_SLAB))
+        solids.append(("ceiling", stairwell | near_stair, stair_z, stair_z + STANDIN_SLAB))
+    parts, nfaces = _solid_surface(g, solids)
     main_fp = Grid(feet[0].mask.copy(), lo, cell)
     report = {"navmesh": nav.path, "cell_m": cell, "floor_z": round(floor_z, 3), "ceiling_z": round(ceil_z, 3),
               "stair_ceiling_z": None if stair_z is None else round(stair_z, 3),
@@ -641,7 +707,7 @@ def standin_stage(nav: NavMesh, spec: StandinSpec | None = None) -> Standin:
               "wall_cells_m2": round(float(wall.sum()) * cell * cell, 3), "windows": len(windows),
               "raised_m2": round(float(raised.sum()) * cell * cell, 3),
               "floating_m2": round(float(floating.sum()) * cell * cell, 3), "levels": info,
-              "boxes": {k: len(v) for k, v in (("floor", floor), ("walls", wall_boxes), ("ceiling", ceiling), ("steps", steps))}}
+              "quads": nfaces}
     return Standin(parts, floor_z, ceil_z, stair_z, g, main_fp, Grid(wall, lo, cell), windows, info, report)
 
 

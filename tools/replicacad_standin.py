@@ -179,15 +179,32 @@ def glb_bounds_habitat(path: Path) -> np.ndarray:
     return np.stack([v.min(0), v.max(0)])
 
 
-def build(src: Path, out: Path, spec: StandinSpec, force: bool = False) -> list[dict]:
-    src, out = src.resolve(), out.resolve()
+def build(src: Path, final: Path, spec: StandinSpec, force: bool = False) -> list[dict]:
+    """Copy ``src`` to ``final`` with stand-ins (built in a temporary sibling folder, then swapped in,
+    so that readers of ``final`` never see a half-built dataset)."""
+    src, final = src.resolve(), final.resolve()
     if not (src / "configs").is_dir():
         raise UserError(f"{src}: not a ReplicaCAD folder (no configs/)")
+    if final.exists() and not force:
+        raise UserError(f"{final}: exists (pass --force to replace it)")
+    out = final.with_name(final.name + ".building")
     if out.exists():
-        if not force:
-            raise UserError(f"{out}: exists (pass --force to replace it)")
         shutil.rmtree(out)
     shutil.copytree(src, out, symlinks=False)
+    rows = _fill(out, spec)
+    if final.exists():
+        old = final.with_name(final.name + ".old")
+        if old.exists():
+            shutil.rmtree(old)
+        final.rename(old)
+        out.rename(final)
+        shutil.rmtree(old)
+    else:
+        out.rename(final)
+    return rows
+
+
+def _fill(out: Path, spec: StandinSpec) -> list[dict]:
     rows = []
     scenes = stage_scenes(out)
     for cfg_p in sorted((out / "configs" / "stages").glob("*" + STAGE_SUFFIX)):
@@ -215,7 +232,7 @@ def build(src: Path, out: Path, spec: StandinSpec, force: bool = False) -> list[
                      "navmeshes": [str(f.relative_to(out)) for f in files], "floor_z": floor, "floor_from": why,
                      "ceiling_z": r["ceiling_z"], "stair_ceiling_z": r["stair_ceiling_z"],
                      "footprint_m2": r["footprint_m2"], "main_footprint_m2": r["main_footprint_m2"],
-                     "raised_m2": r["raised_m2"], "windows": r["windows"], "boxes": r["boxes"],
+                     "raised_m2": r["raised_m2"], "windows": r["windows"], "quads": r["quads"],
                      "levels": r["levels"], "window_list": s.windows, "seconds": round(time.time() - t0, 2)})
     for cfg_p in sorted((out / "configs" / "objects").rglob("*" + OBJECT_SUFFIX)):
         cfg = mapping(cfg_p, read_json(cfg_p), None)
