@@ -25,9 +25,32 @@ What each part carries
     :func:`pbr` turns a part's visual into plain values with the glTF defaults filled in (exact
     float factors read from the file's JSON: trimesh stores ``baseColorFactor`` as 8-bit).
 
-Not supported (ignored): vertex colours (COLOR_0), KHR_texture_transform, texture coordinate sets
-other than 0, samplers (wrapping is REPEAT, filtering linear), occlusion maps, point and line
-primitives, triangle fans, morph targets and skins (the rest pose is used).
+Texture transforms (``KHR_texture_transform`` on a slot's textureInfo: ``offset``, ``rotation``,
+``scale``): recorded per slot in ``metadata["gltf"]["texture_transforms"]`` and ``pbr(mesh)
+["texture_transforms"]`` (``{slot: {"offset": [ox, oy], "rotation": r, "scale": [sx, sy],
+"texCoord": k or None}}``); the UVs themselves stay untransformed (slots may differ). On glTF UVs
+(origin top-left) the transform is ``uv' = T(offset) R(rotation) S(scale) uv`` with
+``R = [[cos r, sin r], [-sin r, cos r]]``: counter-clockwise in UV space (u right, v DOWN), as the
+extension's text says and as its sample model (TextureTransformTest), Babylon.js and Blender's own
+glTF importer (``io_scene_gltf2``, ``texture_transform_gltf_to_blender``) implement it. The GLSL
+listing in the extension's README has the transpose of R: a known erratum (KhronosGroup/glTF issue
+#1563, "KHR_texture_transform has the wrong rotation matrix"). :func:`uv_transform_matrix` gives
+the transform in trimesh's (= Blender's) UV convention, :func:`texture_uv` a part's UVs for one
+slot with it applied, :func:`blender_mapping` the values of a Blender Mapping node doing the same,
+:func:`sample_base_color` the fast renderer's texture lookup. A bad value is a
+``SceneFormatError`` naming the field, e.g.
+``materials[0].pbrMetallicRoughness.baseColorTexture.extensions.KHR_texture_transform.scale``.
+
+Not supported (ignored): vertex colours (COLOR_0), texture coordinate sets other than 0 (a slot
+whose ``texCoord`` -- its own or the transform's override -- is not 0 is logged once per file and
+drawn with TEXCOORD_0), samplers (wrapping is REPEAT, filtering linear), occlusion maps, point and
+line primitives, triangle fans, morph targets and skins (the rest pose is used). A normal map under
+a rotated transform keeps the mesh's own UV tangents (as Blender's importer does).
+
+Git LFS pointers: a GLB, an external texture or an external buffer that is a Git LFS pointer file
+(a small text file starting ``version https://git-lfs.github.com/spec/v1``, what a clone of
+ReplicaCAD made without ``git lfs`` holds) is a ``SceneFormatError`` naming the file ("... is a
+Git LFS pointer, not the file itself (run git lfs pull)").
 
 Textures that cannot be decoded (KTX2 / KHR_texture_basisu images, or bytes PIL cannot open):
 a warning is logged once per file and the material falls back to its ``baseColorFactor`` (and to
@@ -71,7 +94,25 @@ _CACHE_MAX = 128
 _WARNED: set[str] = set()
 
 __all__ = ["load_glb_parts", "glb_geometry", "check_glb", "pbr", "is_emissive", "submesh", "read_image_source",
-           "clear_cache"]
+           "clear_cache", "is_lfs_pointer", "uv_transform_matrix", "texture_uv", "blender_mapping",
+           "sample_base_color", "srgb_to_linear", "TEXTURE_TRANSFORM", "LFS_HINT"]
+
+TEXTURE_TRANSFORM = "KHR_texture_transform"
+LFS_POINTER_PREFIX = b"version https://git-lfs.github.com/spec/v1"
+LFS_HINT = "is a Git LFS pointer, not the file itself (run git lfs pull)"
+
+
+def is_lfs_pointer(data_or_path) -> bool:
+    """The bytes (or the file's first bytes) are a Git LFS pointer: text starting with the spec line."""
+    if isinstance(data_or_path, (bytes, bytearray, memoryview)):
+        head = bytes(data_or_path[: len(LFS_POINTER_PREFIX)])
+    else:
+        try:
+            with open(data_or_path, "rb") as f:
+                head = f.read(len(LFS_POINTER_PREFIX))
+        except OSError:
+            return False
+    return head == LFS_POINTER_PREFIX
 
 
 # --------------------------------------------------------------------------------------------
@@ -89,8 +130,12 @@ def _read_container(path: Path) -> tuple[dict, bytes | None, int]:
     def bad(msg):
         raise SceneFormatError(path, None, f"cannot read GLB: {msg}")
 
-    if len(data) < 20 or data[:4] != _GLB_MAGIC:
+    if is_lfs_pointer(data):
+        bad(LFS_HINT)
+    if data[:4] != _GLB_MAGIC:
         bad("not a binary glTF file (no 'glTF' header)")
+    if len(data) < 20:
+        bad(f"truncated ({len(data)} bytes, not even a header and a chunk header)")
     version, length = struct.unpack_from("<II", data, 4)
     if version != 2:
         bad(f"glTF version {version} (only 2 is supported)")
@@ -133,9 +178,11 @@ def check_glb(path) -> dict:
     """Check a GLB before it is loaded; return its JSON document.
 
     Raises SceneFormatError naming the file for: a file that is not a readable GLB 2.0
-    (field None, "cannot read GLB: ..."), an external image or buffer whose file does not exist
-    (field ``images[i].uri`` / ``buffers[i].uri``, "texture not found: <file>" / "buffer not
-    found: <file>"), and a file without any triangle primitive ("GLB has no triangles")."""
+    (field None, "cannot read GLB: ...": not a GLB, truncated, a Git LFS pointer "... (run git lfs
+    pull)"), an external image or buffer whose file does not exist or is a Git LFS pointer (field
+    ``images[i].uri`` / ``buffers[i].uri``, "texture not found: <file>" / "buffer not found:
+    <file>" / "texture <file> is a Git LFS pointer ..."), a malformed ``KHR_texture_transform``
+    (its field), and a file without any triangle primitive ("GLB has no triangles")."""
     return _check(Path(path))[0]
 
 
@@ -146,11 +193,17 @@ def _check(path: Path) -> tuple[dict, bytes | None, int]:
             f = _external(path, img["uri"])
             if f is not None and not f.is_file():
                 raise SceneFormatError(path, f"images[{i}].uri", f"texture not found: {f}")
+            if f is not None and is_lfs_pointer(f):
+                raise SceneFormatError(path, f"images[{i}].uri", f"texture {f} {LFS_HINT}")
     for i, buf in enumerate(_list(doc, "buffers", path)):
         if isinstance(buf, dict) and isinstance(buf.get("uri"), str):
             f = _external(path, buf["uri"])
             if f is not None and not f.is_file():
                 raise SceneFormatError(path, f"buffers[{i}].uri", f"buffer not found: {f}")
+            if f is not None and is_lfs_pointer(f):
+                raise SceneFormatError(path, f"buffers[{i}].uri", f"buffer {f} {LFS_HINT}")
+    for i in range(len(_list(doc, "materials", path))):
+        _texture_transforms(path, doc, i)  # a malformed transform is named now, not at render time
     if not any(isinstance(p, dict) and p.get("mode", 4) in _TRIANGLE_MODES
                for m in _list(doc, "meshes", path) if isinstance(m, dict) for p in m.get("primitives", [])):
         raise SceneFormatError(path, None, "GLB has no triangles")
@@ -301,6 +354,64 @@ def _exact_material(doc: dict, index: int) -> dict:
     return out
 
 
+def _slot_infos(mat) -> dict:
+    """``{slot: textureInfo}`` of a glTF material's texture slots that are JSON objects."""
+    out = {}
+    if not isinstance(mat, dict):
+        return out
+    for slot, (group, key) in _SLOTS.items():
+        holder = mat.get(group) if group else mat
+        info = holder.get(key) if isinstance(holder, dict) else None
+        if isinstance(info, dict):
+            out[slot] = info
+    return out
+
+
+def _texture_transforms(path: Path, doc: dict, index: int) -> dict:
+    """``{slot: {"offset", "rotation", "scale", "texCoord"}}``: the ``KHR_texture_transform`` of each
+    texture slot of glTF material ``index`` that has one, glTF defaults filled in (``texCoord`` None
+    when the extension does not override the slot's). SceneFormatError naming the field for bad values."""
+    from .habitat_format import fail, mapping, number, numbers
+
+    try:
+        mat = doc["materials"][index]
+    except (KeyError, IndexError, TypeError):
+        return {}
+    out = {}
+    for slot, info in _slot_infos(mat).items():
+        ext = info.get("extensions")
+        if not isinstance(ext, dict) or TEXTURE_TRANSFORM not in ext:
+            continue
+        group, key = _SLOTS[slot]
+        field = f"materials[{index}].{group + '.' if group else ''}{key}.extensions.{TEXTURE_TRANSFORM}"
+        t = mapping(path, ext[TEXTURE_TRANSFORM], field)
+        offset = numbers(path, t["offset"], field + ".offset", 2) if "offset" in t else np.zeros(2)
+        rotation = number(path, t["rotation"], field + ".rotation") if "rotation" in t else 0.0
+        scale = numbers(path, t["scale"], field + ".scale", 2) if "scale" in t else np.ones(2)
+        tc = t.get("texCoord")
+        if tc is not None and (isinstance(tc, bool) or not isinstance(tc, int) or tc < 0):
+            fail(path, field + ".texCoord", f"expected an integer >= 0, got {tc!r}")
+        out[slot] = {"offset": [float(x) for x in offset], "rotation": float(rotation),
+                     "scale": [float(x) for x in scale], "texCoord": tc}
+    return out
+
+
+def _other_texcoord_sets(doc: dict, index: int, transforms: dict) -> dict:
+    """``{slot: set}`` of the slots of material ``index`` that sample a texture coordinate set other
+    than 0 (the transform's ``texCoord`` overrides the slot's own)."""
+    try:
+        mat = doc["materials"][index]
+    except (KeyError, IndexError, TypeError):
+        return {}
+    out = {}
+    for slot, info in _slot_infos(mat).items():
+        tc = (transforms.get(slot) or {}).get("texCoord")
+        tc = info.get("texCoord", 0) if tc is None else tc
+        if tc not in (0, None):
+            out[slot] = tc
+    return out
+
+
 def _load(path: Path) -> list[trimesh.Trimesh]:
     doc, binary, bin_at = _check(path)
     bad = _undecodable_textures(path, doc, binary)
@@ -349,6 +460,14 @@ def _load(path: Path) -> list[trimesh.Trimesh]:
             mat_index[id(m)] = p["material"]
             exact[id(m)] = _exact_material(doc, p["material"])
             exact[id(m)]["sources"] = _image_sources(path, doc, bin_at, p["material"])
+            tt = _texture_transforms(path, doc, p["material"])
+            exact[id(m)]["texture_transforms"] = tt
+            sets = _other_texcoord_sets(doc, p["material"], tt)
+            if sets and f"{path}#texCoord" not in _WARNED:
+                _WARNED.add(f"{path}#texCoord")
+                log.warning("%s: materials[%d] samples texture coordinate set(s) other than 0 (%s); only "
+                            "TEXCOORD_0 is read, so those textures are drawn with it", path, p["material"],
+                            ", ".join(f"{k}: {v}" for k, v in sets.items()))
         else:
             mat_index[id(m)] = -2 - len(mat_index)
     default_mat = None
@@ -462,6 +581,7 @@ def submesh(mesh: trimesh.Trimesh, faces) -> trimesh.Trimesh:
 
 def clear_cache() -> None:
     _CACHE.clear()
+    _IMAGE_ARRAYS.clear()
 
 
 # --------------------------------------------------------------------------------------------
@@ -487,8 +607,10 @@ def pbr(mesh: trimesh.Trimesh) -> dict:
     ``emissive_texture`` (PIL or None, sRGB), ``normal_texture`` (PIL or None), ``sources``
     (``{"baseColorTexture" | "metallicRoughnessTexture" | "emissiveTexture" | "normalTexture":
     where the texture's encoded PNG/JPEG/WebP bytes lie in the file}``, for slots that have a
-    decodable texture; read them with :func:`read_image_source`), ``alpha_mode`` ("OPAQUE",
-    "MASK" or "BLEND"), ``alpha_cutoff``, ``has_uv``."""
+    decodable texture; read them with :func:`read_image_source`), ``texture_transforms`` (``{slot:
+    {"offset", "rotation", "scale", "texCoord"}}``: the ``KHR_texture_transform`` of the slots that
+    have a texture and one; see the module docstring), ``alpha_mode`` ("OPAQUE", "MASK" or "BLEND"),
+    ``alpha_cutoff``, ``has_uv``."""
     meta = mesh.metadata.get("gltf", {})
     vis = mesh.visual
     m = getattr(vis, "material", None)
@@ -508,6 +630,8 @@ def pbr(mesh: trimesh.Trimesh) -> dict:
         "emissive_texture": m.emissiveTexture,
         "normal_texture": m.normalTexture,
         "sources": {k: v for k, v in meta.get("sources", {}).items() if getattr(m, k, None) is not None},
+        "texture_transforms": {k: dict(v) for k, v in meta.get("texture_transforms", {}).items()
+                               if getattr(m, k, None) is not None},
         "alpha_mode": mode if mode in ("OPAQUE", "MASK", "BLEND") else "OPAQUE",
         "alpha_cutoff": 0.5 if m.alphaCutoff is None else float(m.alphaCutoff),
         "has_uv": getattr(vis, "uv", None) is not None,
@@ -517,3 +641,125 @@ def pbr(mesh: trimesh.Trimesh) -> dict:
 def is_emissive(mesh: trimesh.Trimesh) -> bool:
     """The part's glTF material emits light (an emissive factor above zero)."""
     return max(pbr(mesh)["emissive"]) > 0.0
+
+
+# --------------------------------------------------------------------------------------------
+# texture transforms (KHR_texture_transform) and the texture lookup of the fast renderer
+
+_FLIP_V = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 1.0], [0.0, 0.0, 1.0]])  # glTF UV <-> trimesh UV: (u, 1 - v)
+
+
+def uv_transform_matrix(transform: dict | None, convention: str = "trimesh") -> np.ndarray:
+    """3x3 homogeneous matrix of a texture transform (``pbr(mesh)["texture_transforms"][slot]``;
+    None: identity) acting on column vectors ``(u, v, 1)``.
+
+    ``convention="gltf"``: glTF UVs (origin top-left, v down), ``T(offset) R(rotation) S(scale)``
+    with ``R = [[cos, sin], [-sin, cos]]`` (see the module docstring for the erratum of the
+    extension's GLSL listing). ``"trimesh"`` (the default): the same transform on trimesh's / Blender's
+    UVs (origin bottom-left, ``(u, 1 - v_gltf)``), i.e. ``F M F`` with ``F: (u, v) -> (u, 1 - v)``."""
+    if transform is None:
+        return np.eye(3)
+    ox, oy = (float(x) for x in transform.get("offset", (0.0, 0.0)))
+    sx, sy = (float(x) for x in transform.get("scale", (1.0, 1.0)))
+    r = float(transform.get("rotation", 0.0))
+    c, s = np.cos(r), np.sin(r)
+    T = np.array([[1.0, 0.0, ox], [0.0, 1.0, oy], [0.0, 0.0, 1.0]])
+    R = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+    S = np.diag([sx, sy, 1.0])
+    M = T @ R @ S
+    if convention == "gltf":
+        return M
+    if convention != "trimesh":
+        raise ValueError(f"convention must be 'gltf' or 'trimesh', got {convention!r}")
+    return _FLIP_V @ M @ _FLIP_V
+
+
+def texture_uv(mesh: trimesh.Trimesh, slot: str = "baseColorTexture") -> np.ndarray | None:
+    """The part's UVs (trimesh convention) with the texture transform of ``slot`` applied: the
+    coordinates at which that slot's image is sampled (an affine map, so transforming the vertices'
+    UVs and interpolating is exact). None when the part has no UVs."""
+    uv = getattr(mesh.visual, "uv", None)
+    if uv is None:
+        return None
+    uv = np.asarray(uv, dtype=np.float64)
+    t = mesh.metadata.get("gltf", {}).get("texture_transforms", {}).get(slot)
+    if t is None:
+        return uv.copy()
+    M = uv_transform_matrix(t)
+    return uv @ M[:2, :2].T + M[:2, 2]
+
+
+def blender_mapping(transform: dict) -> dict:
+    """Inputs of a Blender Mapping node (``vector_type`` "POINT": ``out = Location + Rz(Rotation)
+    (Scale * in)``, Rz counter-clockwise) placed between the UV map and an Image Texture node, that
+    apply a texture transform on Blender's UVs: ``{"location": (x, y, 0), "rotation": (0, 0, r),
+    "scale": (sx, sy, 1)}``. The same values as Blender's own glTF importer
+    (``texture_transform_gltf_to_blender``); equal to :func:`uv_transform_matrix` (tested)."""
+    ox, oy = (float(x) for x in transform.get("offset", (0.0, 0.0)))
+    sx, sy = (float(x) for x in transform.get("scale", (1.0, 1.0)))
+    r = float(transform.get("rotation", 0.0))
+    return {"location": (ox + sy * np.sin(r), 1.0 - oy - sy * np.cos(r), 0.0), "rotation": (0.0, 0.0, r),
+            "scale": (sx, sy, 1.0)}
+
+
+def srgb_to_linear(c) -> np.ndarray:
+    """sRGB-encoded values in 0..1 to linear (the sRGB transfer function)."""
+    c = np.asarray(c, dtype=np.float64)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+_IMAGE_ARRAYS: OrderedDict[int, tuple] = OrderedDict()  # id(PIL image) -> (PIL image, linear RGB float32 array)
+
+
+def _linear_rgb(pil) -> np.ndarray:
+    hit = _IMAGE_ARRAYS.get(id(pil))
+    if hit is not None and hit[0] is pil:
+        _IMAGE_ARRAYS.move_to_end(id(pil))
+        return hit[1]
+    a = np.asarray(pil.convert("RGB"), dtype=np.uint8)
+    lut = srgb_to_linear(np.arange(256) / 255.0).astype(np.float32)
+    arr = lut[a]
+    while len(_IMAGE_ARRAYS) >= 32:
+        _IMAGE_ARRAYS.popitem(last=False)
+    _IMAGE_ARRAYS[id(pil)] = (pil, arr)
+    return arr
+
+
+def _bilinear_repeat(img: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Bilinear lookup with REPEAT wrapping of an image (rows from the top) at trimesh-convention UVs
+    (origin bottom-left; texel centres at half-integers, as in OpenGL and Cycles)."""
+    h, w = img.shape[:2]
+    x = uv[:, 0] * w - 0.5
+    y = (1.0 - uv[:, 1]) * h - 0.5
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+    x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
+    x1, y1 = (x0 + 1) % w, (y0 + 1) % h
+    x0, y0 = x0 % w, y0 % h
+    top = img[y0, x0] * (1 - fx) + img[y0, x1] * fx
+    bot = img[y1, x0] * (1 - fx) + img[y1, x1] * fx
+    return top * (1 - fy) + bot * fy
+
+
+def sample_base_color(mesh: trimesh.Trimesh, faces, bary) -> np.ndarray:
+    """Linear RGB base colour of a ``load_glb_parts`` part at points on its triangles: ``faces``
+    (N triangle indices) and ``bary`` (N x 3 barycentric weights of the triangle's three corners).
+    The base colour texture (sRGB, decoded to linear) sampled bilinearly with REPEAT wrapping at
+    the UVs with the slot's ``KHR_texture_transform`` applied, times ``baseColorFactor``; the factor
+    alone without a decodable texture or UVs. Unlit albedo, not shading."""
+    params = pbr(mesh)
+    factor = np.asarray(params["base_color"][:3], dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    n = len(faces)
+    tex = params["base_color_texture"]
+    uv = texture_uv(mesh, "baseColorTexture") if tex is not None else None
+    if uv is None or n == 0:
+        return np.tile(factor, (n, 1))
+    try:
+        img = _linear_rgb(tex)
+    except Exception:  # noqa: BLE001 - undecodable: the factor alone (as in Blender)
+        return np.tile(factor, (n, 1))
+    corners = np.asarray(mesh.faces, dtype=np.int64)[faces]  # N x 3
+    b = np.asarray(bary, dtype=np.float64)
+    at = np.einsum("nk,nkj->nj", b, uv[corners])
+    return _bilinear_repeat(img, at) * factor

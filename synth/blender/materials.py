@@ -49,7 +49,10 @@ glTF materials (mesh assets: ReplicaCAD)
   the lighting like the lamp shades') whose colour is ``emissiveTexture`` (sRGB) x
   ``emissiveFactor`` x the colour of an RGB node named ``"emission_light"`` (the light's colour,
   white by default; :func:`set_emission` and the scene builder set it);
-* occlusion maps, vertex colours, texture transforms and samplers are ignored; IOR 1.5 (glTF's).
+* ``KHR_texture_transform`` of a slot (``params["texture_transforms"]``): a UV Map node ("UVMap")
+  and a Mapping node (POINT, values from ``synth.gltf.blender_mapping``, as Blender's own glTF
+  importer sets them) feed that slot's Image Texture node;
+* occlusion maps, vertex colours and samplers are ignored; IOR 1.5 (glTF's).
 
 PIL images become Blender images once per process (saved as PNG to a temporary file, loaded,
 packed, the file removed). An image that PIL cannot decode is logged once and left out (the
@@ -249,12 +252,24 @@ def _build_gltf(params: dict, emissive: bool, key: str | None) -> bpy.types.Mate
     label = os.path.basename(params["key"])
 
     sources = params.get("sources", {})
+    transforms = params.get("texture_transforms", {})
 
     def tex(pil, colorspace, what):
         img = _bpy_image(pil, colorspace, f"{label}:{what}", sources.get(what + "Texture")) if uv else None
         if img is None:
             return None
-        return t.add("ShaderNodeTexImage", image=img, interpolation="Linear", extension="REPEAT")
+        node = t.add("ShaderNodeTexImage", image=img, interpolation="Linear", extension="REPEAT")
+        tt = transforms.get(what + "Texture")
+        if tt is not None:  # KHR_texture_transform: UV map -> Mapping -> this image
+            from ..gltf import blender_mapping
+
+            m = blender_mapping(tt)
+            uvmap = t.add("ShaderNodeUVMap", uv_map="UVMap")
+            mapping = t.add("ShaderNodeMapping", name=f"uv_transform:{what}", vector_type="POINT",
+                            inputs={"Vector": uvmap.outputs["UV"], "Location": m["location"],
+                                    "Rotation": m["rotation"], "Scale": m["scale"]})
+            t.nt.links.new(mapping.outputs["Vector"], node.inputs["Vector"])
+        return node
 
     bc = params["base_color"]
     base_tex = tex(params["base_color_texture"], "sRGB", "baseColor")
