@@ -123,11 +123,36 @@ def translation_origin(file, v, field: str) -> str | None:
 # dataset paths
 
 
-def dataset_root(root) -> Path:
+DATASET_CONFIG_GLOB = "*.scene_dataset_config.json"
+
+
+def dataset_root(root, require_config: bool = False) -> Path:
+    """The dataset folder, resolved. SceneFormatError when it is not a folder, and with
+    ``require_config`` when it holds no ``*.scene_dataset_config.json`` (:func:`dataset_config_path`)."""
     p = Path(root).expanduser()
     if not p.is_dir():
         fail(p, None, "ReplicaCAD dataset folder not found")
-    return p.resolve()
+    p = p.resolve()
+    if require_config:
+        dataset_config_path(p)
+    return p
+
+
+def dataset_config_path(root, required: bool = True) -> Path | None:
+    """``<root>/*.scene_dataset_config.json``, the scene dataset config habitat-sim is pointed at
+    (ReplicaCAD's is ``replicaCAD.scene_dataset_config.json``). None when there is none and not
+    ``required``; SceneFormatError naming the folder when there is none (and it is required) or
+    when there are several (which one habitat would load is the user's choice, not ours)."""
+    r = Path(root)
+    configs = sorted(r.glob(DATASET_CONFIG_GLOB))
+    if not configs:
+        if not required:
+            return None
+        fail(r, None, f"no {DATASET_CONFIG_GLOB} in the ReplicaCAD folder (the dataset's root holds "
+                      "replicaCAD.scene_dataset_config.json next to configs/ and objects/)")
+    if len(configs) > 1:
+        fail(r, None, f"several scene dataset configs ({', '.join(c.name for c in configs)}); keep one")
+    return configs[0]
 
 
 class ConfigFinder:
@@ -162,10 +187,17 @@ def asset_name(root: Path, glb: Path) -> str:
 
 
 def render_asset(root: Path, config: Path, cfg: dict) -> Path:
+    """The GLB a config's ``render_asset`` names (relative to the config's folder). SceneFormatError
+    naming the config and ``render_asset`` when it does not exist, and naming the GLB when it is a
+    Git LFS pointer (a clone made without ``git lfs``: "run git lfs pull")."""
+    from .gltf import LFS_HINT, is_lfs_pointer
+
     rel = string(config, cfg.get("render_asset"), "render_asset")
     glb = Path(os.path.normpath(config.parent / rel))
     if not glb.is_file():
         fail(config, "render_asset", f"GLB not found: {glb}")
+    if is_lfs_pointer(glb):
+        fail(glb, None, f"cannot read GLB: {LFS_HINT} (named by {config}: render_asset)")
     return glb
 
 

@@ -16,9 +16,25 @@ The format (habitat-sim ``docs/pages/attributesJSON.rst``, LightLayoutAttributes
 A light without ``type`` is a point light when it has a position, else directional; habitat reads
 ``spot`` as a point light and so does this module. Negative intensities are habitat's way of
 faking shadows in its rasteriser (ReplicaCAD's configs have several): they are read, kept in
-``HabitatLight.intensity``, and never become fixtures (a path tracer casts its own shadows). The
-file's intensity scales are applied to ``intensity``; the scene dataset's
-``light_setups.default_attributes`` scales are not read (the presets decide power anyway).
+``HabitatLight.intensity``, and never become fixtures (a path tracer casts its own shadows).
+
+Intensity scales. ``HabitatLight.intensity`` is the file's intensity times the positive scale
+(intensity > 0) or the negative scale (otherwise), as habitat-sim's
+``LightLayoutAttributesManager::createLightSetupFromAttributes`` does (``color * (intensity > 0 ?
+posIntensityScale : negIntensityScale) * intensity``). Where the scales come from follows
+habitat-sim's attribute inheritance (read in its source, src/esp/metadata/managers/):
+``SceneDatasetAttributesManager::readDatasetJSONCell`` builds ``light_setups.default_attributes``
+of the scene dataset config into an attributes object and makes it the light manager's default
+(``setDefaultObject``) before it loads the configs under ``paths``; every lighting config then
+starts as a copy of that default (``LightLayoutAttributesManager::initNewObjectInternal`` ->
+``constructFromDefault``), and ``setValsFromJSONDoc`` overrides ``positive_intensity_scale`` /
+``negative_intensity_scale`` only where the file itself has them. So: the file's own value, else
+the dataset config's default, else 1. ReplicaCAD's ``replicaCAD.scene_dataset_config.json`` sets
+2.5 and 0.1 and its lighting configs set neither: its lights shine at 2.5 x their file intensity
+(and its fake-shadow lights at 0.1 x). ``read_lighting_config(path)`` alone reads no dataset
+defaults (scales from the file, else 1); ``read_lighting_config(path, dataset_config=...)`` (a
+``*.scene_dataset_config.json`` path, e.g. ``synth.habitat_format.dataset_config_path(root)``,
+or the defaults dict of :func:`dataset_light_defaults`) applies them.
 
 Frames: positions and directions are converted once, here, with C = ``Y_UP_TO_Z_UP``:
 ``(x, y, z)_habitat -> (x, -z, y)_ours``. A "global" light is placed in habitat's world frame,
@@ -44,8 +60,8 @@ From lights to fixtures (``fixtures_for_imported``)
       (id ``P_<room>``), so that every room can be lit at night like the procedural apartment's.
     Colour and power of the config are recorded (``color_temperature``: the correlated colour
     temperature of the light's colour, McCamy's formula; ``power``: ``WATTS_PER_INTENSITY`` times
-    the intensity), but as for the procedural apartment the presets decide how the fixtures shine
-    (``synth.lighting.resolve_lighting``).
+    the scaled intensity), but as for the procedural apartment the presets decide how the fixtures
+    shine (``synth.lighting.resolve_lighting``).
 """
 
 from __future__ import annotations
@@ -108,13 +124,32 @@ def _ours(v) -> tuple[float, float, float]:
     return tuple(float(x) + 0.0 for x in C @ np.asarray(v, float))  # type: ignore[return-value]
 
 
-def parse_lighting_config(doc, path="<memory>") -> list[HabitatLight]:
-    """The lights of a parsed lighting config document (see the module docstring), in file order."""
+SCALE_KEYS = ("positive_intensity_scale", "negative_intensity_scale")
+
+
+def dataset_light_defaults(dataset_config) -> dict[str, float]:
+    """The intensity scales a scene dataset config (``<root>/*.scene_dataset_config.json``) gives every
+    lighting config: ``light_setups.default_attributes.{positive,negative}_intensity_scale``, only
+    those it sets (habitat-sim's default attributes; module docstring). Bad fields raise
+    ``SceneFormatError`` naming the file and the field."""
+    from .habitat_format import mapping, read_json
+
+    p = Path(dataset_config)
+    doc = mapping(p, read_json(p), None)
+    setups = mapping(p, doc.get("light_setups", {}), "light_setups")
+    attrs = mapping(p, setups.get("default_attributes", {}), "light_setups.default_attributes")
+    return {k: _num(p, attrs[k], f"light_setups.default_attributes.{k}", nonneg=True) for k in SCALE_KEYS if k in attrs}
+
+
+def parse_lighting_config(doc, path="<memory>", defaults: dict | None = None) -> list[HabitatLight]:
+    """The lights of a parsed lighting config document (see the module docstring), in file order.
+    ``defaults``: the scene dataset's intensity scales (:func:`dataset_light_defaults`), used where
+    the document sets none."""
     if not isinstance(doc, dict):
         raise SceneFormatError(path, "(top level)", f"expected a JSON object, got {type(doc).__name__}")
     scale = {}
-    for key in ("positive_intensity_scale", "negative_intensity_scale"):
-        scale[key] = _num(path, doc[key], key, nonneg=True) if key in doc else 1.0
+    for key in SCALE_KEYS:
+        scale[key] = _num(path, doc[key], key, nonneg=True) if key in doc else float((defaults or {}).get(key, 1.0))
     lights = doc.get("lights", {})
     if not isinstance(lights, dict):
         raise SceneFormatError(path, "lights", f"expected an object mapping light ids to lights, got {type(lights).__name__}")
@@ -158,9 +193,16 @@ def parse_lighting_config(doc, path="<memory>") -> list[HabitatLight]:
     return out
 
 
-def read_lighting_config(path) -> list[HabitatLight]:
+def read_lighting_config(path, dataset_config=None) -> list[HabitatLight]:
     """The lights of ``<...>.lighting_config.json`` in OUR frame. Bad files and fields raise
-    ``SceneFormatError`` naming the file and the field (``lights.<id>.position`` ...)."""
+    ``SceneFormatError`` naming the file and the field (``lights.<id>.position`` ...).
+
+    ``dataset_config``: the scene dataset config whose ``light_setups.default_attributes`` intensity
+    scales apply where the file sets none (a path, or the dict :func:`dataset_light_defaults`
+    returns); None: the file's own scales, else 1."""
+    defaults = None
+    if dataset_config is not None:
+        defaults = dict(dataset_config) if isinstance(dataset_config, dict) else dataset_light_defaults(dataset_config)
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8")
@@ -170,7 +212,7 @@ def read_lighting_config(path) -> list[HabitatLight]:
         doc = json.loads(text)
     except ValueError as e:
         raise SceneFormatError(p, None, f"malformed JSON: {e}") from None
-    return parse_lighting_config(doc, str(p))
+    return parse_lighting_config(doc, str(p), defaults)
 
 
 def color_temperature(rgb) -> float:
