@@ -84,3 +84,16 @@ def test_standin_stage_floor_is_the_navmesh_footprint(root):
     assert covered > 0.9
     assert not (floor & ~fp.mask).any()
     assert m.bounds[0][2] == pytest.approx(-0.1, abs=1e-4)
+
+
+def test_apt_0_imports_on_the_fixture(root):
+    from synth.replicacad import load_replicacad
+
+    lay = load_replicacad(root, "apt_0", allow_unknown=True)
+    doc = json.loads((FILES / "configs/scenes/apt_0.scene_instance.json").read_text())
+    assert len(lay.objects) == len(doc["object_instances"]) + len(doc["articulated_object_instances"])
+    st = lay.stage
+    assert st.floor_z == pytest.approx(0.0, abs=1e-3)
+    assert st.ceiling_height == pytest.approx(2.8, abs=1e-3)
+    assert sum(o.kind == "window" for o in st.openings) >= 4  # the stand-in's windows are found as windows
+    assert len(st.rooms) >= 1
