@@ -20,7 +20,10 @@ Clearance rule (``obstacles``)
     Walls are the edges of the rooms' free interiors (``Room.outline``: the room's polygon when it
     has one, an L-shaped room or a part of an open plan, else its rect), cut where an interior door
     (one that connects two rooms) is, plus that door's jambs; the entrance door counts as wall.
-    An edge two polygon rooms share (an open plan split into rooms) is open. A camera outside every
+    An edge two polygon rooms share (an open plan split into rooms) is open. A stage derived from a
+    mesh (``Stage.asset``: ReplicaCAD) adds the faces of its own walls (``Stage.walls``, cut at
+    interior doors): its rooms need not end at the walls. Flat objects on the floor (top at most
+    ``FLAT`` = 5 cm above it: rugs, mats) are walked over, not obstacles. A camera outside every
     room (``Room.contains``) and door gap has clearance 0. Objects of class ``door`` (ReplicaCAD's
     articulated door leaves, loaded open) are obstacles like any other: a leaf standing in a
     doorway is where a camera would hit it. Planner and checker use the same functions for all of
@@ -48,7 +51,10 @@ The built-in layouts and 0.3 m
     a walkway through all rooms of the reference (planned with 0.35 m): the shared space always
     holds a route through every room, and the shipped query path keeps 0.3 m from every object
     in all six layouts. If the layouts given leave no such route, ``plan_query_path`` raises a
-    ``UserError`` naming the unreachable room and the largest clearance they allow.
+    ``UserError`` naming each unreachable room, its roomiest spot, the clearance at which it would
+    join the others, and the largest clearance the layouts allow. A room no camera fits in even
+    when empty (no point ``clearance`` + ``MARGIN`` from its walls: a niche, a strip of floor, a
+    rect inside another room's) is not required; ``stats.rooms_skipped`` names it.
 
 Files: ``scenes/paths/NAME.txt`` (TUM, ``t = frame / fps``) and ``NAME.yaml``
 (``format: synth-camera-path/1``: name, kind, fps, frames, seed, layouts, planner parameters,

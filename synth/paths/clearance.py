@@ -89,10 +89,35 @@ def _polygon_edge_pieces(stage: Stage, k: int, doors, outlines) -> list[tuple[tu
     return out
 
 
+def _stage_wall_faces(stage: Stage) -> list[tuple[tuple, tuple]]:
+    """The faces of the stage's own walls (``Stage.walls``: centre line +- thickness / 2, and the end
+    caps), their long faces cut at interior doors. Used for stages derived from a mesh
+    (``Stage.asset``), whose rooms need not follow the walls: a rect or a navmesh polygon can hold
+    a wall stub, a free-standing wall or a window bay; procedural stages' rooms end at the wall faces."""
+    out = []
+    for w in stage.walls:
+        L = w.length
+        if L < 1e-9:
+            continue
+        d = w.direction
+        n = np.array([-d[1], d[0]])
+        a = np.asarray(w.start, float)
+        h = w.thickness / 2
+        cuts = [(op.offset - op.width / 2, op.offset + op.width / 2) for op in _interior_doors(stage) if op.wall == w.id]
+        for side in (-1.0, 1.0):
+            o = a + n * side * h
+            for p, q in _cut(0.0, L, cuts):
+                out.append((tuple(o + d * p), tuple(o + d * q)))
+        for t in (0.0, L):
+            e = a + d * t
+            out.append((tuple(e - n * h), tuple(e + n * h)))
+    return out
+
+
 def wall_segments(stage: Stage) -> np.ndarray:
     """(K, 2, 2) wall segments: the edges of every room's free interior (``Room.outline``: its polygon,
     else its rect) minus interior door gaps, plus those doors' jambs. Edges two polygon rooms share
-    are open (no wall)."""
+    are open (no wall). A stage from a mesh (``Stage.asset``) adds its walls' faces (``_stage_wall_faces``)."""
     doors = []
     for op in _interior_doors(stage):
         w = stage.wall(op.wall)
@@ -120,6 +145,8 @@ def wall_segments(stage: Stage) -> np.ndarray:
                     segs.append(((p, fixed), (q, fixed)))
                 else:
                     segs.append(((fixed, p), (fixed, q)))
+    if stage.asset is not None:
+        segs += _stage_wall_faces(stage)
     for op, w, c, d in doors:
         n = np.array([-d[1], d[0]])
         h = w.thickness / 2 + 0.01
@@ -229,10 +256,17 @@ class Boxes:
         return out, arg
 
 
+FLAT = 0.05  # m: an object whose top is at most this far above the floor (a rug, a mat) is walked over
+
+
 def _object_boxes(layout: Layout, obstacles: str):
+    """The boxes that obstruct a camera: every object but ceiling-mounted ones (``all``; every
+    object for ``band``), except flat ones on the floor (top <= floor + ``FLAT``: rugs, mats)."""
     if obstacles not in ("band", "all"):
         raise UserError(f"obstacles must be 'band' or 'all', got {obstacles!r}")
-    return [object_box(o) for o in layout.objects if obstacles == "band" or o.support != "ceiling"]
+    top = layout.stage.floor_z + FLAT
+    boxes = [object_box(o) for o in layout.objects if obstacles == "band" or o.support != "ceiling"]
+    return [b for b in boxes if b.zmax > top]
 
 
 def path_clearance(path: CameraPath, layout: Layout, obstacles: str = "all", band: float = BAND) -> np.ndarray:

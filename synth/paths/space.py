@@ -61,6 +61,7 @@ class Space:
         dist = np.minimum(_seg_dist(pts, self.segs), DCAP)
         dist[~inside] = 0.0
         dist = dist.reshape(self.ny, self.nx)
+        self.shell = dist.copy()  # walls only: what an empty room allows
         occ = np.zeros((self.ny, self.nx))
         self.boxes: list[Boxes] = []
         for lay in layouts:
@@ -81,6 +82,11 @@ class Space:
         self.walk = dist >= clearance + MARGIN
         # rooms per cell
         self.room = room_index(st, pts).reshape(self.ny, self.nx)
+        # rooms no camera fits in even when empty (a niche, a strip of floor narrower than twice the
+        # clearance, a room whose interior lies inside another room's): not required, recorded
+        fits = set(np.unique(self.room[self.shell >= clearance + MARGIN])) - {-1}
+        self.skipped = [r.name for k, r in enumerate(st.rooms) if k not in fits]
+        self.required = [k for k in range(len(st.rooms)) if k in fits]
         # the connected walkable component that covers the most rooms (then the largest)
         lab, n = ndimage.label(self.walk, structure=np.ones((3, 3), bool))
         best, best_key = 0, None
@@ -245,29 +251,54 @@ def _check_args(frames, fps, speed, clearance):
 
 
 def _require_rooms(space: Space, what: str) -> None:
+    """Every room a camera fits in (``Space.required``) must be in the walkable component; else say
+    which, how much clearance each one's roomiest spot has and at what clearance it would connect."""
     have = set(np.unique(space.room[space.comp])) - {-1}
-    missing = [r.name for k, r in enumerate(space.stage.rooms) if k not in have]
+    missing = [k for k in space.required if k not in have]
     if missing:
         names = ", ".join(l.name for l in space.layouts)
         best = _max_connecting_clearance(space) - MARGIN
         hint = (f"; the most these layouts allow is about {math.floor(best * 100) / 100:.2f} m" if best > 0.05 else "")
-        raise UserError(f"{what}: room(s) {', '.join(missing)} cannot be reached with {space.clearance:g} m clearance "
+        where = []
+        for k in missing:
+            m = space.room == k
+            i, j = np.unravel_index(int(np.argmax(np.where(m, space.dist, -1.0))), m.shape)
+            x, y = space.xy(i * space.nx + j)
+            reach = _joining_clearance(space, k) - MARGIN
+            where.append(f"{space.stage.rooms[k].name} (roomiest spot ({x:.2f}, {y:.2f}) with {space.dist[i, j]:.2f} m; "
+                         f"joins the others at up to {max(reach, 0.0):.2f} m)")
+        raise UserError(f"{what}: room(s) {', '.join(where)} cannot be reached with {space.clearance:g} m clearance "
                         f"(obstacles '{space.obstacles}') in every layout ({names}){hint}")
 
 
 def _max_connecting_clearance(space: Space) -> float:
-    """The largest clearance at which one walkable component still reaches every room (bisection)."""
+    """The largest clearance at which one walkable component still reaches every required room (bisection)."""
     from scipy import ndimage
 
-    n_rooms = len(space.stage.rooms)
+    need = set(space.required)
 
     def ok(th):
         lab, n = ndimage.label(space.dist >= th, structure=np.ones((3, 3), bool))
         for c in range(1, n + 1):
-            if len(set(np.unique(space.room[lab == c])) - {-1}) == n_rooms:
+            if need <= set(np.unique(space.room[lab == c])):
                 return True
         return False
-    lo, hi = 0.0, float(space.dist.max())
+    return _bisect(ok, float(space.dist.max()))
+
+
+def _joining_clearance(space: Space, k: int) -> float:
+    """The largest clearance at which room ``k`` joins the walkable component (bisection)."""
+    from scipy import ndimage
+
+    def ok(th):
+        lab, _ = ndimage.label(space.dist >= th, structure=np.ones((3, 3), bool))
+        joined = set(np.unique(lab[space.comp])) - {0}
+        return bool(np.isin(lab[space.room == k], list(joined)).any())
+    return _bisect(ok, space.clearance + MARGIN)
+
+
+def _bisect(ok, hi: float) -> float:
+    lo = 0.0
     if not ok(lo + 1e-6):
         return 0.0
     for _ in range(12):
@@ -297,5 +328,6 @@ def _meta(kind, layouts, seed, frames, fps, speed, clearance, obstacles, space, 
         "stats": {
             "length_m": round(path.length, 3), "duration_s": round(path.duration, 3),
             "min_clearance_m": round(clr, 4), "rooms": visited,
+            **({"rooms_skipped": list(space.skipped)} if space.skipped else {}),  # no camera fits in them
         },
     }
