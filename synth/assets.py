@@ -85,7 +85,8 @@ class Surface:
     ``z`` is the height of the surface above the object's bottom; ``xmin..xmax`` x ``ymin..ymax`` the
     usable area (about 2 cm inside the supporting board's edges, excluding arm- and backrests);
     ``clearance`` the free height above it (to the next board for shelves, 0.5 for seats,
-    ``inf`` for open tops)."""
+    ``inf`` for open tops); ``band`` how far above ``z`` a resting object's bottom may be (0 for
+    boards; a ReplicaCAD receptacle's box height, ``synth.receptacles``)."""
 
     z: float
     xmin: float
@@ -93,6 +94,7 @@ class Surface:
     ymin: float
     ymax: float
     clearance: float
+    band: float = 0.0  # the bottom of what stands here may lie up to this far above z (a receptacle box: synth.receptacles)
 
 
 # ----------------------------------------------------------------------------------------------

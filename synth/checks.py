@@ -16,6 +16,7 @@ from scipy import ndimage
 
 from . import assets
 from . import geometry as geo
+from .collision import CONTACT_GAP, PENETRATION_TOL, penetration, touching, world_pieces
 from .placement import door_zone, mesh_surfaces, opening_box
 from .scene import Layout, object_box
 
@@ -23,6 +24,11 @@ Z_TOL = 0.003  # how far an object may float above / sink into its support (m)
 XY_TOL = 0.002
 OVERLAP_TOL = 0.005  # boxes may touch; interpenetration deeper than this counts
 WALL_TOL = 0.03
+# Structure derived from a stage mesh (ReplicaCAD: synth.stage_structure) has a finite resolution:
+# wall faces found from the mesh, rooms from the floor; a navmesh-built stand-in stage is good to
+# about its cell size plus its edge error (5 + 6.5 cm). Footprint-in-room and wall-contact tests on
+# such a stage allow this much.
+STRUCTURE_TOL = 0.08
 GRID = 0.05  # free-space grid resolution (m)
 WALKER_RADIUS = 0.2  # half the width a person needs to pass (m)
 OBSTACLE_BELOW = 1.5  # objects whose box starts below this height obstruct walking (m)
@@ -58,13 +64,13 @@ class CheckReport:
         }
 
 
-def _support_problem(layout: Layout, o, box: geo.OrientedBox, by_id, boxes) -> str | None:
+def _support_problem(layout: Layout, o, box: geo.OrientedBox, by_id, boxes, pieces=None) -> str | None:
     st = layout.stage
     floor, ceil = st.floor_z, st.floor_z + st.ceiling_height
     if o.support == "floor":
         if abs(box.zmin - floor) > Z_TOL:
             return f"bottom at z={box.zmin:.3f} m, floor at {floor:.3f} m"
-        if st.rooms and not any(geo.polygon_inside_rect(box.corners_2d(), r.rect, XY_TOL) for r in st.rooms):
+        if st.rooms and not _in_rooms(st, box.corners_2d()):
             return "footprint not inside any room"
         return None
     if o.support == "ceiling":
@@ -103,19 +109,88 @@ def _support_problem(layout: Layout, o, box: geo.OrientedBox, by_id, boxes) -> s
         if k >= len(surfs):
             return f"surface {k} of object {pid} ({parent.cls}) does not exist"
         s = surfs[k]
-        if abs(box.zmin - (parent.position[2] + s.z)) > Z_TOL:
-            return f"bottom {box.zmin - parent.position[2] - s.z:+.3f} m off surface {k} of object {pid}"
-        if box.size[2] > s.clearance + Z_TOL:
+        dz = box.zmin - (parent.position[2] + s.z)
+        if dz < -Z_TOL or dz > s.band + Z_TOL:
+            where = f"{dz:+.3f} m off" if s.band == 0 else f"{dz:+.3f} m above the bottom of (band {s.band:.3f} m)"
+            return f"bottom {where} surface {k} of object {pid}"
+        if box.zmax - (parent.position[2] + s.z) > s.clearance + Z_TOL:
             return f"taller than the {s.clearance:.2f} m clearance of surface {k} of object {pid}"
-        # footprint in the parent's frame
+        # footprint in the parent's frame: inside a board's rectangle; a receptacle (band > 0) is the
+        # region the dataset places object centres in (synth.receptacles), so its centre must be inside
+        # (also for an object a dataset's physics placed: it stands as long as its centre is over the surface)
         Rp = geo.rot_z(parent.yaw)[:2, :2]
-        local = (box.corners_2d() - np.asarray(parent.position[:2])) @ Rp
+        centre_rule = s.band > 0 or "motion_type" in o.params
+        pts = box.corners_2d() if not centre_rule else np.asarray(box.center[:2], float)[None, :]
+        local = (pts - np.asarray(parent.position[:2])) @ Rp
         if not geo.polygon_inside_rect(local, (s.xmin, s.ymin, s.xmax, s.ymax), XY_TOL):
-            return f"footprint overhangs surface {k} of object {pid} ({parent.cls})"
+            what = "centre lies outside" if centre_rule else "footprint overhangs"
+            return f"{what} surface {k} of object {pid} ({parent.cls})"
         return None
     if o.support == "free":
-        return _rests_on_some_box(box, list(boxes.values()), floor)
+        why = _rests_on_some_box(box, list(boxes.values()), floor)
+        if why and pieces and pieces.get(o.id):
+            # a physics-settled object (ReplicaCAD): it rests on, leans against or hangs from what its
+            # collision shape touches: another object's, the floor, or a wall (hooks and brackets)
+            mine = pieces[o.id]
+            if min(float(v[:, 2].min()) for v in mine) - floor <= CONTACT_GAP:
+                return None
+            near = [p for p, b in boxes.items() if p != o.id and geo.boxes_overlap(b, _grown(box, CONTACT_GAP), 0.0)]
+            if any(touching(mine, pieces.get(p) or [_box_corners(boxes[p])]) for p in near):
+                return None
+            if _wall_distance(st, box) <= STRUCTURE_TOL:
+                return None
+            why = f"bottom at z={box.zmin:.3f} m touches no object, floor or wall"
+        return why
     return f"unknown support '{o.support}'"
+
+
+def _both_static(a, b) -> bool:
+    """Two objects a dataset marks STATIC (habitat-sim's motion type: placed by its authors, never
+    simulated): their fit is by design (a monitor's neck in its stand's socket) and no physics
+    resolved it, so it is not checked. Objects without a motion type (procedural, variants' moved
+    copies keep theirs) are always checked."""
+    return a.params.get("motion_type") == "STATIC" and b.params.get("motion_type") == "STATIC"
+
+
+def _grown(b: geo.OrientedBox, d: float) -> geo.OrientedBox:
+    return geo.OrientedBox(b.id, b.cls, b.center, tuple(s + 2 * d for s in b.size), b.yaw)
+
+
+def _wall_distance(st, box: geo.OrientedBox) -> float:
+    """Horizontal distance from an object's box footprint to the nearest wall face (inf without walls)."""
+    best = math.inf
+    pts = box.corners_2d()
+    for w in st.walls:
+        a, b = np.asarray(w.start, float), np.asarray(w.end, float)
+        ab = b - a
+        L2 = float(ab @ ab)
+        if L2 <= 0:
+            continue
+        t = np.clip(((pts - a) @ ab) / L2, 0.0, 1.0)
+        d = np.hypot(*(pts - a - t[:, None] * ab).T) - w.thickness / 2.0
+        best = min(best, float(d.min()))
+    return best
+
+
+def _in_rooms(st, corners: np.ndarray) -> bool:
+    """Whether a footprint lies inside the rooms: inside one room's rect (a procedural stage), or, on a
+    stage mesh's derived structure, with every corner (moved ``STRUCTURE_TOL`` towards the centre)
+    inside some room (an open plan's rooms meet without a wall, so a sofa may span two)."""
+    if st.asset is None:
+        return any(geo.polygon_inside_rect(corners, r.rect, XY_TOL) for r in st.rooms)
+    c = corners.mean(axis=0)
+    d = corners - c
+    n = np.linalg.norm(d, axis=1, keepdims=True)
+    pts = c + d * np.clip(1.0 - STRUCTURE_TOL / np.maximum(n, 1e-9), 0.0, 1.0)
+    inside = np.zeros(len(pts), bool)
+    for r in st.rooms:
+        inside |= r.contains(pts)
+    return bool(inside.all())
+
+
+def _box_corners(b: geo.OrientedBox) -> np.ndarray:
+    c2 = b.corners_2d()
+    return np.concatenate([np.c_[c2, np.full(4, b.zmin)], np.c_[c2, np.full(4, b.zmax)]])
 
 
 def _rests_on_some_box(box, others, floor) -> str | None:
@@ -178,32 +253,44 @@ def check_layout(layout: Layout) -> CheckReport:
         if not st.walls:
             rep.structure.append({"what": "walls", "why": "no walls (stage.walls is empty)"})
 
+    root = layout.meta.get("root")
+    pieces = {o.id: world_pieces(o, root) for o in objs} if root is not None else {}
     # support
     for o in objs:
-        why = _support_problem(layout, o, boxes[o.id], by_id, boxes)
+        why = _support_problem(layout, o, boxes[o.id], by_id, boxes, pieces)
         if why:
             rep.unsupported.append({"id": o.id, "class": o.cls, "support": o.support, "why": why})
 
-    # interpenetration between objects (an object may overlap the box of what holds it)
+    # interpenetration between objects (an object may overlap the box of what holds it). Objects
+    # with collision shapes (ReplicaCAD: synth.collision) are tested on those where their boxes
+    # overlap: a chair under a table, a book in a cabinet, shoes in a rack are no collision
     ids = sorted(boxes)
     parent = {o.id: (o.support_parent() or (None, None))[0] for o in objs}
     for i, a in enumerate(ids):
         for b in ids[i + 1 :]:
             if parent[a] == b or parent[b] == a:
                 continue
+            if _both_static(by_id[a], by_id[b]):
+                continue
             if geo.boxes_overlap(boxes[a], boxes[b], OVERLAP_TOL):
+                pa, pb = pieces.get(a), pieces.get(b)
+                if pa or pb:
+                    depth = penetration(pa or [_box_corners(boxes[a])], pb or [_box_corners(boxes[b])])
+                    if depth < PENETRATION_TOL:
+                        continue
                 rep.collisions.append({"a": a, "b": b, "classes": [by_id[a].cls, by_id[b].cls]})
     # objects poking through the ceiling (a ceiling light touches it; nothing may go through)
     ceil = st.floor_z + st.ceiling_height
     for o in objs:
-        if boxes[o.id].zmax > ceil + Z_TOL:
+        top = max(float(v[:, 2].max()) for v in pieces[o.id]) if pieces.get(o.id) else boxes[o.id].zmax
+        if top > ceil + Z_TOL:
             rep.collisions.append({"a": o.id, "b": "ceiling", "classes": [o.cls, "ceiling"]})
     # objects poking through walls: footprints must lie inside a room (procedural stages)
     if st.rooms:
         for o in objs:
             if o.support.startswith("wall:") or o.support.startswith("object:"):
                 continue
-            if not any(geo.polygon_inside_rect(boxes[o.id].corners_2d(), r.rect, XY_TOL) for r in st.rooms):
+            if not _in_rooms(st, boxes[o.id].corners_2d()):
                 if not any(u["id"] == o.id for u in rep.unsupported):
                     rep.collisions.append({"a": o.id, "b": "wall", "classes": [o.cls, "wall"]})
 

@@ -11,7 +11,7 @@ import yaml
 
 from formats.errors import SceneFormatError, UnknownNameError
 
-from .resources import classes_file
+from .resources import classes_file, replicacad_lexicon_file
 
 SUPPORTS = ("floor", "surface", "wall", "ceiling")
 
@@ -116,3 +116,78 @@ def _load(path: str) -> ClassTable:
 def class_table(path: str | Path | None = None) -> ClassTable:
     """The class table, loaded once per path."""
     return _load(str(path or classes_file()))
+
+
+LEXICON_FORMAT = "synth-replicacad-lexicon/1"
+
+
+@dataclass(frozen=True)
+class LexiconTable:
+    """``scenes/replicacad_lexicon.yaml``: ReplicaCAD lexicon names and template overrides -> classes."""
+
+    lexicon: dict[str, str]  # lexicon class name -> toolkit class
+    templates: dict[str, str]  # template base name -> toolkit class (lexicon errors, articulated objects)
+    source: str
+
+    def class_of(self, template_name: str, lexicon_name: str | None) -> tuple[str | None, str]:
+        """(class, rule) of an object: its template override, else its lexicon name's class; None when
+        neither applies. ``rule`` says which: ``"template"``, ``"lexicon"`` or ``""``."""
+        base = template_base(template_name)
+        if base in self.templates:
+            return self.templates[base], "template"
+        if lexicon_name is not None and lexicon_name in self.lexicon:
+            return self.lexicon[lexicon_name], "lexicon"
+        return None, ""
+
+
+def template_base(template_name: str) -> str:
+    """``objects/frl_apartment_chair_01.object_config.json`` -> ``frl_apartment_chair_01``."""
+    base = template_name.replace("\\", "/").rsplit("/", 1)[-1]
+    return re.sub(r"\.(object_config\.json|ao_config\.json|urdf|glb)$", "", base)
+
+
+def parse_lexicon_table(data, source: str, classes: ClassTable) -> LexiconTable:
+    if not isinstance(data, dict):
+        raise SceneFormatError(source, None, "expected a mapping with format, templates, lexicon")
+    unknown = set(data) - {"format", "templates", "lexicon"}
+    if unknown:
+        raise SceneFormatError(source, sorted(unknown)[0], "unknown key")
+    if data.get("format") != LEXICON_FORMAT:
+        raise SceneFormatError(source, "format", f"expected '{LEXICON_FORMAT}', got {data.get('format')!r}")
+    out = {}
+    for key in ("templates", "lexicon"):
+        m = data.get(key) or {}
+        if not isinstance(m, dict):
+            raise SceneFormatError(source, key, "expected a mapping of name -> class")
+        for name, cls in m.items():
+            if not isinstance(cls, str) or cls not in classes.classes:
+                raise SceneFormatError(source, f"{key}.{name}", f"maps to unknown class {cls!r} (not in {classes.source})")
+            if classes.classes[cls].structure:
+                raise SceneFormatError(source, f"{key}.{name}", f"maps to structure class '{cls}'; objects need an object class")
+        out[key] = {str(k): v for k, v in m.items()}
+    return LexiconTable(out["lexicon"], out["templates"], source)
+
+
+@functools.lru_cache(maxsize=8)
+def _read_lexicon(path: str):
+    p = Path(path)
+    if not p.exists():
+        raise SceneFormatError(p, None, "ReplicaCAD lexicon table not found")
+    try:
+        return yaml.safe_load(p.read_text())
+    except yaml.YAMLError as e:
+        raise SceneFormatError(p, None, f"malformed YAML: {e}".replace("\n", " ")) from None
+
+
+def lexicon_table(path: str | Path | None = None, classes: ClassTable | None = None) -> LexiconTable:
+    """The ReplicaCAD lexicon table (read once per path), checked against ``classes`` (default: the class table)."""
+    p = str(path or replicacad_lexicon_file())
+    default = class_table()
+    if classes is None or classes.source == default.source:
+        return parse_lexicon_table(_read_lexicon(p), p, default)
+    # a user's own class table: the rules whose class it lacks do not apply (its name rules do)
+    data = dict(_read_lexicon(p) or {})
+    for key in ("templates", "lexicon"):
+        if isinstance(data.get(key), dict):
+            data[key] = {k: v for k, v in data[key].items() if v in classes.classes}
+    return parse_lexicon_table(data, p, classes)

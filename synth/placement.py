@@ -220,9 +220,15 @@ def asset_levels(root: str, asset: str) -> tuple:
 
 def mesh_surfaces(obj: ObjectInstance, root) -> list[assets.Surface]:
     """The supporting surfaces of a mesh object (see the module docstring), in the object's local
-    frame (origin at ``obj.position``, scaled): surface 0 is its local box top when the mesh covers
-    it, then the levels below it (``mesh_levels``: a sofa's seat, shelf boards), highest first; []
-    for classes that hold nothing and tilted objects."""
+    frame (origin at ``obj.position``, scaled): the receptacles its dataset declares, when it has any
+    (``params["receptacles"]``: ReplicaCAD's ``receptacle_aabb_*``, ``synth.receptacles``), in their
+    file order; else surface 0 is its local box top when the mesh covers it, then the levels below
+    it (``mesh_levels``: a sofa's seat, shelf boards), highest first; [] for classes that hold
+    nothing and tilted objects."""
+    if obj.params.get("receptacles"):
+        from .receptacles import surfaces as receptacle_surfaces
+
+        return receptacle_surfaces(obj)
     if root is None or obj.asset.startswith("proc:") or obj.cls in MESH_NO_SURFACE_CLASSES:
         return []
     R = geo.quat_to_matrix(obj.rotation)

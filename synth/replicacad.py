@@ -68,7 +68,8 @@ import numpy as np
 from formats.boxes import MAX_OBJECT_ID
 from formats.errors import UnknownNameError
 
-from .classes import ClassTable, class_table
+from .classes import ClassTable, LexiconTable, class_table, lexicon_table
+from .receptacles import read_receptacles, to_object_frame
 from .habitat_format import (  # noqa: F401 - Y_UP_TO_Z_UP, ASSET_PREFIX, URDF_PREFIX: re-exported for readers
     ASSET_PREFIX, MIN_EXTENT, MOTION_TYPES, UNKNOWN_CLASS, URDF_PREFIX, Y_UP_TO_Z_UP, ConfigFinder, asset_name, check_frame,
     convert_quat, dataset_root, fail, hab_matrix, mapping, number, numbers, quat, read_json, render_asset, string,
@@ -83,7 +84,9 @@ log = logging.getLogger(__name__)
 __all__ = ["ASSET_PREFIX", "URDF_PREFIX", "Y_UP_TO_Z_UP", "infer_supports", "list_scenes", "load_asset_mesh", "load_replicacad"]
 
 LIGHTING_SUFFIX = ".lighting_config.json"
-SUPPORT_SNAP = 0.03  # m: an object whose bottom is this close to the floor or to another object's top rests on it
+SUPPORT_SNAP = 0.03  # m: an object whose bottom is this close to the floor or to a supporting surface rests on it
+FLOOR_SINK = 0.05  # m: ... or this far below the floor (visual meshes sink into it: a bike's tyres, a beanbag, a door leaf)
+BOX_TOP_SNAP = 0.005  # m: ... or this close to the box top of an object without surfaces (a monitor 2 cm above its stand's box is mounted on it)
 SCENE_SUFFIX = ".scene_instance.json"
 OBJECT_SUFFIX = ".object_config.json"
 STAGE_SUFFIX = ".stage_config.json"
@@ -108,6 +111,9 @@ class _Template:
     asset: str
     scale: np.ndarray  # config scale, habitat object axes
     com: np.ndarray | None  # config COM, habitat object frame, unscaled
+    semantic_id: int | None = None  # the config's semantic_id (the dataset's lexicon names it)
+    receptacles: tuple = ()  # the config's user_defined receptacle_aabb_* (habitat object frame, unscaled)
+    collision: str | None = None  # the config's collision_asset, relative to the root (synth.collision)
 
 
 @dataclass
@@ -130,7 +136,19 @@ def _object_template(root: Path, config: Path) -> _Template:
     scale = numbers(config, cfg["scale"], "scale", 3, positive=True) if "scale" in cfg else np.ones(3)
     com = numbers(config, cfg["COM"], "COM", 3) if "COM" in cfg else None
     check_frame(config, cfg)
-    return _Template(config, glb, asset_name(root, glb), scale, com)
+    sid = None
+    if "semantic_id" in cfg:
+        v = cfg["semantic_id"]
+        if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+            fail(config, "semantic_id", f"expected a non-negative integer, got {v!r}")
+        sid = v
+    collision = "box" if cfg.get("use_bounding_box_for_collision") is True else None
+    if collision is None and isinstance(cfg.get("collision_asset"), str) and cfg["collision_asset"]:
+        cpath = Path(os.path.normpath(config.parent / cfg["collision_asset"]))
+        if cpath.is_file():  # optional: the checks fall back to the object's box without it
+            check_glb(cpath)
+            collision = Path(os.path.relpath(cpath, root)).as_posix()
+    return _Template(config, glb, asset_name(root, glb), scale, com, sid, read_receptacles(config, cfg), collision)
 
 
 def _load_stage(root: Path, scene_path: Path, doc: dict, structure: bool = True) -> tuple[Stage, dict]:
@@ -182,7 +200,7 @@ def _load_stage(root: Path, scene_path: Path, doc: dict, structure: bool = True)
     return stage, st.report
 
 
-def _parse_instances(root: Path, scene_path: Path, doc: dict, classes: ClassTable) -> list[_Instance]:
+def _parse_instances(root: Path, scene_path: Path, doc: dict, classes: ClassTable, semantics: Semantics) -> list[_Instance]:
     raw = doc.get("object_instances", [])
     if not isinstance(raw, list):
         fail(scene_path, "object_instances", f"expected a list, got {type(raw).__name__}")
@@ -219,8 +237,86 @@ def _parse_instances(root: Path, scene_path: Path, doc: dict, classes: ClassTabl
         if config not in templates:
             templates[config] = _object_template(root, config)
         tmpl = templates[config]
-        out.append(_Instance(i, name, tmpl, classes.replicacad_class(name), t, q, scale * tmpl.scale, mt, asset_local))
+        out.append(_Instance(i, name, tmpl, object_class(name, tmpl.semantic_id, tmpl.config, semantics, classes),
+                             t, q, scale * tmpl.scale, mt, asset_local))
     return out
+
+
+@dataclass(frozen=True)
+class Semantics:
+    """What names an imported object's class: the dataset's lexicon (semantic id -> name, from the
+    file the scene dataset config names) and the toolkit's table (``scenes/replicacad_lexicon.yaml``)."""
+
+    names: dict[int, str] | None  # None: the dataset has no lexicon (name rules only)
+    source: Path | None
+    table: LexiconTable
+
+
+def read_semantics(root: Path, scene_path: Path, doc: dict, classes: ClassTable) -> Semantics:
+    """The lexicon of a scene as habitat-sim finds it: the scene's ``semantic_scene_instance``, else the
+    scene dataset config's ``scene_instances.default_attributes.semantic_scene_instance``, is a key of
+    the config's ``semantic_scene_descriptor_instances``, whose value is the lexicon's path relative to
+    the root. A dataset without a config or without that entry has no lexicon."""
+    table = lexicon_table(classes=classes)
+    cfg_path = dataset_config(root)
+    if cfg_path is None:
+        return Semantics(None, None, table)
+    cfg = mapping(cfg_path, read_json(cfg_path), None)
+    descs = cfg.get("semantic_scene_descriptor_instances")
+    if descs is None:
+        return Semantics(None, None, table)
+    descs = mapping(cfg_path, descs, "semantic_scene_descriptor_instances")
+    key = doc.get("semantic_scene_instance")
+    field = "semantic_scene_instance"
+    where = scene_path
+    if key is None:
+        si = cfg.get("scene_instances") or {}
+        key = ((si.get("default_attributes") or {}) if isinstance(si, dict) else {}).get("semantic_scene_instance")
+        field, where = "scene_instances.default_attributes.semantic_scene_instance", cfg_path
+    if key is None:
+        return Semantics(None, None, table)
+    key = string(where, key, field)
+    if key not in descs:
+        fail(where, field, f"names '{key}', which semantic_scene_descriptor_instances in {cfg_path.name} lacks")
+    rel = string(cfg_path, descs[key], f"semantic_scene_descriptor_instances.{key}")
+    lex = (root / rel).resolve()
+    if not lex.is_file():
+        fail(cfg_path, f"semantic_scene_descriptor_instances.{key}", f"lexicon not found: {lex}")
+    doc_l = mapping(lex, read_json(lex), None)
+    raw = doc_l.get("classes")
+    if not isinstance(raw, list):
+        fail(lex, "classes", "expected a list of {name, id}")
+    names: dict[int, str] = {}
+    for k, c in enumerate(raw):
+        c = mapping(lex, c, f"classes[{k}]")
+        cid, nm = c.get("id"), c.get("name")
+        if isinstance(cid, bool) or not isinstance(cid, int):
+            fail(lex, f"classes[{k}].id", f"expected an integer, got {cid!r}")
+        names[cid] = string(lex, nm, f"classes[{k}].name")
+    missing = sorted(set(names.values()) - set(table.lexicon))
+    if missing:
+        fail(lex, "classes", f"lexicon name(s) {', '.join(missing)} have no class in {table.source}")
+    return Semantics(names, lex, table)
+
+
+def dataset_config(root: Path) -> Path | None:
+    """``<root>/*.scene_dataset_config.json`` (the first in name order), or None."""
+    found = sorted(p for p in Path(root).glob("*.scene_dataset_config.json") if p.is_file())
+    return found[0] if found else None
+
+
+def object_class(template_name: str, semantic_id: int | None, config: Path | None, semantics: Semantics,
+                 classes: ClassTable) -> str | None:
+    """An imported object's class (scenes/replicacad_lexicon.yaml says the order): a template override,
+    else the lexicon name of its ``semantic_id``, else the name rules of the class table; None when
+    nothing maps it. A semantic id that the dataset's lexicon lacks is an error naming the config."""
+    name = None
+    if semantic_id is not None and semantics.names is not None:
+        name = semantics.names.get(semantic_id)
+        if name is None and semantics.table.class_of(template_name, None)[0] is None:
+            fail(config, "semantic_id", f"{semantic_id} is not in the dataset's lexicon {semantics.source}")
+    cls, _ = semantics.table.class_of(template_name, name)
+    return cls if cls is not None else classes.replicacad_class(template_name)
 
 
 def _articulated_names(scene_path: Path, doc: dict) -> list[str]:
@@ -259,7 +355,9 @@ def _object(inst: _Instance, oid: int, cls: str) -> ObjectInstance:
         support="free",  # ReplicaCAD places objects by physics: no support relation is recorded
         movable=inst.motion_type != "STATIC",
         scale=vec(scale),
-        params={"template": inst.template_name, "motion_type": inst.motion_type},
+        params={"template": inst.template_name, "motion_type": inst.motion_type,
+                **({"receptacles": to_object_frame(inst.template.receptacles, scale)} if inst.template.receptacles else {}),
+                **({"collision": inst.template.collision} if inst.template.collision else {})},
     )
 
 
@@ -303,7 +401,7 @@ def infer_supports(objects: list[ObjectInstance], floor_z: float, root=None) -> 
         box = object_box(o)
         support, target = "free", None
         centre = np.asarray(box.center[:2], float)
-        if abs(box.zmin - floor_z) <= SUPPORT_SNAP:
+        if -FLOOR_SINK <= box.zmin - floor_z <= SUPPORT_SNAP:
             support, target = "floor", floor_z
         else:
             best = None
@@ -312,15 +410,22 @@ def infer_supports(objects: list[ObjectInstance], floor_z: float, root=None) -> 
                 if pb.zmin >= box.zmin:
                     continue
                 local = geo.rot_z(p.yaw)[:2, :2].T @ (centre - np.asarray(p.position[:2], float))
-                for k, srf in enumerate(mesh_surfaces(p, root) if root is not None else []):
+                surfs = mesh_surfaces(p, root) if root is not None else []
+                for k, srf in enumerate(surfs):
                     zs = p.position[2] + srf.z
-                    if abs(zs - box.zmin) <= SUPPORT_SNAP and srf.xmin <= local[0] <= srf.xmax and srf.ymin <= local[1] <= srf.ymax:
-                        if best is None or zs > best[2]:
-                            best = (p.id, k, zs)
-                if best is None or best[0] != p.id:
-                    if abs(pb.zmax - box.zmin) <= SUPPORT_SNAP and geo.polygons_overlap_2d(pb.corners_2d(), box.corners_2d()):
-                        if best is None or pb.zmax > best[2]:
-                            best = (p.id, 0, pb.zmax)
+                    if zs - SUPPORT_SNAP <= box.zmin <= zs + srf.band + SUPPORT_SNAP and srf.xmin <= local[0] <= srf.xmax \
+                            and srf.ymin <= local[1] <= srf.ymax:
+                        # resting in a receptacle's band needs no snap; below a surface or above the band it does
+                        z_to = min(max(box.zmin, zs), zs + srf.band)
+                        if best is None or zs > best[3]:
+                            best = (p.id, k, z_to, zs)
+                # an object without supporting surfaces holds what rests on its box top (checked the
+                # same way by synth.checks); one with surfaces holds things on them only: the index
+                # names one of its surfaces, never its box top
+                if (best is None or best[0] != p.id) and not surfs:
+                    if abs(pb.zmax - box.zmin) <= BOX_TOP_SNAP and geo.polygons_overlap_2d(pb.corners_2d(), box.corners_2d()):
+                        if best is None or pb.zmax > best[3]:
+                            best = (p.id, 0, pb.zmax, pb.zmax)
             if best is not None:
                 support, target = f"object:{best[0]}:{best[1]}", best[2]
         params = dict(o.params)
@@ -358,7 +463,8 @@ def load_replicacad(root, scene: str, classes: ClassTable | None = None, allow_u
         fail(scene_path, None, f"scene {scene!r} not found; scenes in {r}: {known or 'none'}")
     doc = mapping(scene_path, read_json(scene_path), "(top level)")
 
-    instances = _parse_instances(r, scene_path, doc, classes)
+    semantics = read_semantics(r, scene_path, doc, classes)
+    instances = _parse_instances(r, scene_path, doc, classes, semantics)
     unknown = sorted({inst.template_name for inst in instances if inst.cls is None})
     if unknown and not allow_unknown:
         raise UnknownNameError(
@@ -378,7 +484,8 @@ def load_replicacad(root, scene: str, classes: ClassTable | None = None, allow_u
     if structure:
         from .urdf import load_articulated_instances
 
-        objects += load_articulated_instances(r, scene_path, doc, len(objects) + 1, classes, allow_unknown=allow_unknown)
+        objects += load_articulated_instances(r, scene_path, doc, len(objects) + 1, classes, allow_unknown=allow_unknown,
+                                              lexicon=semantics.table)
         if len(objects) > MAX_OBJECT_ID:
             fail(scene_path, "articulated_object_instances", f"{len(objects)} objects in all; at most {MAX_OBJECT_ID} are supported")
         objects = infer_supports(objects, stage.floor_z, r)

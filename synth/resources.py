@@ -18,3 +18,7 @@ def layouts_dir() -> Path:
 
 def classes_file() -> Path:
     return scenes_dir() / "classes.yaml"
+
+
+def replicacad_lexicon_file() -> Path:
+    return scenes_dir() / "replicacad_lexicon.yaml"

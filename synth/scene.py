@@ -102,12 +102,42 @@ class Room:
     name: str
     type: str  # living | kitchen | bedroom | bathroom | hallway | ...
     rect: tuple[float, float, float, float]  # free interior (inside wall faces): xmin, ymin, xmax, ymax
+    # The free interior as a simple polygon (counter-clockwise XY vertices) when it is not the whole
+    # rect (an open plan, an L-shaped room: ReplicaCAD rooms from the floor or the navmesh); ``rect``
+    # is then its bounding rectangle. None: the interior is ``rect``.
+    polygon: tuple[tuple[float, float], ...] | None = None
 
     def __post_init__(self):
         self.rect = quantize_vec(self.rect)
+        if self.polygon is not None:
+            self.polygon = tuple(quantize_vec(p) for p in self.polygon)
+            if len(self.polygon) < 3:
+                raise ValueError(f"room {self.name}: a polygon needs at least 3 vertices")
+
+    def outline(self) -> np.ndarray:
+        """The free interior's boundary, (N, 2) counter-clockwise: the polygon, else the rect's corners."""
+        if self.polygon is not None:
+            return np.asarray(self.polygon, float)
+        x0, y0, x1, y1 = self.rect
+        return np.array([(x0, y0), (x1, y0), (x1, y1), (x0, y1)], float)
+
+    def contains(self, pts) -> np.ndarray:
+        """Which XY points lie in the free interior (boundary included, to 1 mm)."""
+        pts = np.atleast_2d(np.asarray(pts, float))
+        x0, y0, x1, y1 = self.rect
+        inside = (pts[:, 0] >= x0) & (pts[:, 0] <= x1) & (pts[:, 1] >= y0) & (pts[:, 1] <= y1)
+        if self.polygon is not None and inside.any():
+            from matplotlib.path import Path as MplPath
+
+            inside[inside] = MplPath(self.outline()).contains_points(pts[inside], radius=1e-3) | \
+                MplPath(self.outline()).contains_points(pts[inside], radius=-1e-3)
+        return inside
 
     @property
     def area(self) -> float:
+        if self.polygon is not None:
+            q = self.outline()
+            return float(abs(np.dot(q[:, 0], np.roll(q[:, 1], -1)) - np.dot(q[:, 1], np.roll(q[:, 0], -1))) / 2.0)
         return (self.rect[2] - self.rect[0]) * (self.rect[3] - self.rect[1])
 
 
@@ -182,7 +212,7 @@ class Stage:
     def room_at(self, xy) -> Room | None:
         x, y = xy
         for r in self.rooms:
-            if r.rect[0] <= x <= r.rect[2] and r.rect[1] <= y <= r.rect[3]:
+            if r.contains((x, y))[0]:
                 return r
         return None
 
@@ -366,7 +396,10 @@ def layout_to_dict(layout: Layout) -> dict:
         stage["asset"] = st.asset
         stage["position"] = _vec(st.position)
         stage["rotation"] = list(quantize_quat(st.rotation))
-    stage["rooms"] = [{"name": r.name, "type": r.type, "rect": _vec(r.rect)} for r in st.rooms]
+    stage["rooms"] = [
+        {"name": r.name, "type": r.type, "rect": _vec(r.rect), **({} if r.polygon is None else {"polygon": [_vec(p) for p in r.polygon]})}
+        for r in st.rooms
+    ]
     stage["walls"] = [
         {"id": w.id, "start": _vec(w.start), "end": _vec(w.end), "thickness": quantize(w.thickness), "height": quantize(w.height)}
         for w in st.walls
@@ -480,11 +513,20 @@ def layout_from_dict(doc, source: str = "<memory>", classes: ClassTable | None =
     rooms = []
     for i, r in enumerate(rd.seq(s.get("rooms"), "stage.rooms")):
         f = f"stage.rooms[{i}]"
-        rd.mapping(r, f, {"name", "type", "rect"}, {"name", "type", "rect"})
+        rd.mapping(r, f, {"name", "type", "rect", "polygon"}, {"name", "type", "rect"})
         rect = rd.vec(r["rect"], f + ".rect", 4)
         if rect[2] <= rect[0] or rect[3] <= rect[1]:
             rd.fail(f + ".rect", f"expected xmin < xmax and ymin < ymax, got {list(rect)}")
-        rooms.append(Room(rd.string(r["name"], f + ".name"), rd.string(r["type"], f + ".type"), rect))
+        polygon = None
+        if r.get("polygon") is not None:
+            pts = rd.seq(r["polygon"], f + ".polygon")
+            if len(pts) < 3:
+                rd.fail(f + ".polygon", f"expected at least 3 vertices, got {len(pts)}")
+            polygon = tuple(tuple(rd.vec(p, f"{f}.polygon[{k}]", 2)) for k, p in enumerate(pts))
+            q = np.asarray(polygon)
+            if q[:, 0].min() < rect[0] - 1e-3 or q[:, 0].max() > rect[2] + 1e-3 or q[:, 1].min() < rect[1] - 1e-3 or q[:, 1].max() > rect[3] + 1e-3:
+                rd.fail(f + ".polygon", "extends outside the room's rect")
+        rooms.append(Room(rd.string(r["name"], f + ".name"), rd.string(r["type"], f + ".type"), rect, polygon))
     walls = []
     for i, w in enumerate(rd.seq(s.get("walls"), "stage.walls")):
         f = f"stage.walls[{i}]"

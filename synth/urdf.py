@@ -109,6 +109,7 @@ from formats.errors import SceneFormatError, UnknownNameError
 
 from . import habitat_format as hf
 from .classes import ClassTable
+from .receptacles import to_object_frame
 from .scene import URDF_ASSET_PREFIX, ObjectInstance
 
 log = logging.getLogger(__name__)
@@ -116,6 +117,12 @@ log = logging.getLogger(__name__)
 JOINT_TYPES = ("fixed", "revolute", "continuous", "prismatic")
 MOVABLE_JOINT_TYPES = ("revolute", "continuous", "prismatic")
 JOINT_STATE_DECIMALS = 9
+# Doors. ReplicaCAD's door leaves (urdf/doors/*) are closed at joint zero, which walls a camera path
+# off from the rooms behind them. An articulated object of this class whose instance states no
+# ``initial_joint_pose`` is loaded with each revolute joint at the limit farthest from zero: open as
+# far as the URDF allows (door2: -2.0 rad, about 115 deg). Its box is then where the open leaf is,
+# so paths and checks treat it as any other object. Fridges, cupboards and drawers stay closed.
+DOOR_CLASS = "door"
 AO_CONFIG_SUFFIX = ".ao_config.json"
 LINK_ORDERS = ("unspecified", "tree_traversal", "urdf_order")
 _PRIMITIVES = ("box", "cylinder", "sphere", "capsule", "plane")
@@ -161,6 +168,7 @@ class _Joint:
     child: str
     origin: np.ndarray  # 4x4, habitat frame, parent link -> joint frame
     axis: np.ndarray  # unit (3,), joint frame
+    limits: tuple[float, float] | None = None  # <limit lower upper> of a revolute or prismatic joint
 
 
 @dataclass
@@ -324,7 +332,14 @@ def _parse(path: Path) -> UrdfModel:
             if n < 1e-9:
                 _fail(path, f + ".axis.xyz", f"zero axis {ax.get('xyz')!r}")
             axis = axis / n
-        joints[jn] = _Joint(jn, jt, ends["parent"], ends["child"], _origin(path, el, f), axis)
+        limits = None
+        lim = el.find("limit")
+        if lim is not None and lim.get("lower") is not None and lim.get("upper") is not None:
+            lo_hi = (_floats(path, lim.get("lower"), f + ".limit.lower", 1)[0], _floats(path, lim.get("upper"), f + ".limit.upper", 1)[0])
+            if lo_hi[0] > lo_hi[1]:
+                _fail(path, f + ".limit", f"lower {lo_hi[0]} > upper {lo_hi[1]}")
+            limits = (float(lo_hi[0]), float(lo_hi[1]))
+        joints[jn] = _Joint(jn, jt, ends["parent"], ends["child"], _origin(path, el, f), axis, limits)
 
     roots = [ln for ln in links if ln not in parent_of]
     if not roots:
@@ -567,6 +582,9 @@ def _ao_config(cfg_path: Path | None) -> dict:
         out["link_order"] = hf.string(cfg_path, cfg["link_order"], "link_order").lower()
     if cfg.get("render_asset"):
         log.warning("%s: render_asset %r (a skinned mesh) is not drawn; the link meshes are", cfg_path, cfg["render_asset"])
+    from .receptacles import read_receptacles
+
+    out["receptacles"] = read_receptacles(cfg_path, cfg, articulated=True)
     return out
 
 
@@ -591,7 +609,7 @@ def _joint_pose(scene_path: Path, v, field: str) -> list[float]:
 
 
 def load_articulated_instances(root, scene_path, doc: dict, first_id: int, classes: ClassTable,
-                               allow_unknown: bool = False) -> list[ObjectInstance]:
+                               allow_unknown: bool = False, lexicon=None) -> list[ObjectInstance]:
     """One ObjectInstance per entry of ``doc["articulated_object_instances"]``, ids ``first_id``,
     ``first_id + 1``, ... in file order.
 
@@ -654,9 +672,13 @@ def load_articulated_instances(root, scene_path, doc: dict, first_id: int, class
         if order == "urdf_order" and pose:
             _fail(scene_path, f + ".initial_joint_pose",
                   "joint positions in link_order 'urdf_order' are not supported (only the default 'tree_traversal')")
-        parsed.append((i, f, name, t, q, s, mt, fixed, pose, urdf))
+        parsed.append((i, f, name, t, q, s, mt, fixed, pose, urdf, cfg.get("receptacles", ()), cfg_path))
 
-    unknown = sorted({p[2] for p in parsed if classes.replicacad_class(p[2]) is None})
+    def class_of(name):  # the lexicon table's template rules, then the class table's name rules
+        cls = lexicon.class_of(name, None)[0] if lexicon is not None else None
+        return cls if cls is not None else classes.replicacad_class(name)
+
+    unknown = sorted({p[2] for p in parsed if class_of(p[2]) is None})
     if unknown and not allow_unknown:
         raise UnknownNameError(
             f"{scene_path}: no class rule for ReplicaCAD articulated template(s) {', '.join(unknown)}; add aliases "
@@ -665,8 +687,8 @@ def load_articulated_instances(root, scene_path, doc: dict, first_id: int, class
     if unknown:
         classes.get(hf.UNKNOWN_CLASS)
     out = []
-    for i, f, name, t, q, s, mt, fixed, pose, urdf in parsed:
-        cls = classes.replicacad_class(name) or hf.UNKNOWN_CLASS
+    for i, f, name, t, q, s, mt, fixed, pose, urdf, recs, cfg_path in parsed:
+        cls = class_of(name) or hf.UNKNOWN_CLASS
         if classes.get(cls).structure:
             raise UnknownNameError(f"{scene_path}: articulated template '{name}' maps to structure class '{cls}'")
         model = parse_urdf(urdf)
@@ -679,9 +701,18 @@ def load_articulated_instances(root, scene_path, doc: dict, first_id: int, class
             v = pose[k] if k < len(pose) else 0.0
             if model.joints[jn].type == "prismatic":
                 v = v / s  # habitat-sim: scaled metres; ours: metres of the unscaled model
+            if cls == DOOR_CLASS and k >= len(pose) and model.joints[jn].type == "revolute" and model.joints[jn].limits:
+                v = max(model.joints[jn].limits, key=abs)  # a door without a stated pose stands open (DOOR_CLASS)
             state[jn] = round(v, JOINT_STATE_DECIMALS) + 0.0
         lo, hi = _local_bounds(model, state)
         lo, hi = s * lo, s * hi
+        extra = {}
+        if recs:
+            poses = link_poses(model, state)
+            for rec in recs:
+                if rec["link"] is not None and rec["link"] not in poses:
+                    _fail(cfg_path, f"user_defined.{rec['name']}.parent_link", f"no link {rec['link']!r} in {urdf}")
+            extra["receptacles"] = to_object_frame(recs, (s, s, s), lambda ln: poses[ln])
         out.append(ObjectInstance(
             id=first_id + i,
             cls=cls,
@@ -694,7 +725,7 @@ def load_articulated_instances(root, scene_path, doc: dict, first_id: int, class
             movable=False,
             scale=(s, s, s),
             params={"template": name, "articulated": True, "links": list(model.links), "joint_state": state,
-                    "motion_type": mt, "fixed_base": fixed},
+                    "motion_type": mt, "fixed_base": fixed, **extra},
         ))
     return out
 
