@@ -16,7 +16,10 @@ is ``synth dataset check``: completeness, readability, channels, sizes, depth va
 objects.json, pose sanity and a multi-view depth consistency test between neighbouring frames
 (it catches shifted or wrong poses, camera axes in the wrong convention and depth stored as ray
 length instead of planar z; it does not catch a wrong focal length, which small camera motions
-hardly reveal). ``contact_sheet`` is
+hardly reveal), and a brightness test: a lit tour whose RGB frames are nearly black fails (the
+median over its RGB frames of each frame's 99th-percentile luminance, in linear RGB at exposure 1
+as ``formats.tour.tonemap(rgb, 1.0)`` shows it, below ``DARK_P99_LUMINANCE``; a scene lit only
+through windows it does not have, or a night preset without lamps, renders like that). ``contact_sheet`` is
 ``synth dataset show``: RGB, depth, instance and semantic images of one frame in one PNG.
 
 No Blender here; this module imports without bpy.
@@ -51,6 +54,14 @@ PAIR_GOOD_MOVE_M, PAIR_GOOD_TURN_DEG = 0.1, 5.0  # ... preferably this much ...
 PAIR_MAX_MOVE_M, PAIR_MAX_TURN_DEG = 1.0, 30.0  # ... but the views still overlap
 CLASS_MISMATCH_FRACTION = 0.005  # instance/semantic pairs disagreeing with objects.json on > 0.5 % of a frame
 ROTATION_TOL = 1e-4
+# a lit tour is nearly black when the median over its RGB frames of each frame's 99th-percentile
+# luminance (Rec. 709 weights, as formats.tour.tonemap; linear RGB at exposure 1) is below this:
+# 0.01 is sRGB 25/255 at exposure 1, i.e. the brightest 1 % of the frame is darker than a dim grey and
+# auto exposure would have to scale the frame by about 90 to show it. The toolkit's renders lie far
+# above (built-in apartment by day about 1.3; ReplicaCAD apt_0 with the stand-in stage: see README)
+DARK_P99_LUMINANCE = 0.01
+DARK_PERCENTILE = 99.0
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)  # formats.tour.tonemap's weights
 PROBLEM_LINES_PER_KIND = 20  # text report: at most this many lines per kind of problem
 
 
@@ -224,6 +235,7 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
         "class_mismatch": [],
         "bad_poses": [],
         "consistency": {},
+        "brightness": {},
         "errors": [],
         "warnings": [],
     }
@@ -280,6 +292,7 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
     channels: set[str] = set()
     frame_channels: dict[int, frozenset] = {}
     depth_ok = np.zeros(N, dtype=bool)
+    rgb_p99: dict[int, float] = {}  # frame -> 99th-percentile linear luminance
     if progress is None:
         progress = sys.stderr.isatty()
     for k, idx in enumerate(tqdm(tour.frame_indices, desc=f"checking {tour.name}", unit="frame", disable=not progress)):
@@ -323,6 +336,7 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
             nonfinite = int((~np.isfinite(img.rgb)).sum())
             if nonfinite:
                 rep["bad_rgb"].append({"frame": idx, "why": f"{nonfinite} NaN/inf values"})
+            rgb_p99[idx] = frame_brightness(img.rgb)
         # ids against objects.json
         if known_inst is not None:
             entry: dict = {}
@@ -361,6 +375,9 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
     # -- multi-view depth consistency ------------------------------------------------------------
     rep["consistency"] = _consistency(tour, depth_ok, consistency_pairs)
 
+    # -- brightness: a lit tour must not be black -------------------------------------------------
+    rep["brightness"] = _brightness(rgb_p99)
+
     # -- summary lines -------------------------------------------------------------------------
     def capped(kind_lines: list[str]) -> None:
         problems.extend(kind_lines[:PROBLEM_LINES_PER_KIND])
@@ -395,6 +412,13 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
     capped([f"frame {m['frame']}: instance/semantic disagree with {OBJECTS_FILE} on {m['fraction']:.1%} of pixels "
             f"(instance, semantic, expected): {m['pairs']}" for m in rep["class_mismatch"]])
     capped([f"frame {b['frame']}: bad pose: {b['why']}" for b in rep["bad_poses"]])
+    br = rep["brightness"]
+    if br.get("dark"):
+        light = tour.meta.get("lighting")
+        problems.append(f"tour {tour.name} ({f'lighting {light}' if light is not None else 'lighting unknown'}) is nearly black: "
+                        f"median 99th-percentile luminance {br['median_p99_luminance']:.3g} over its {br['rgb_frames']} RGB "
+                        f"frames (linear, exposure 1), below {DARK_P99_LUMINANCE:g} (no light reaches the camera: "
+                        "windows or lamps missing?)")
     capped([f"frames {p['frames'][0]} -> {p['frames'][1]}: depth inconsistent with poses: "
             f"{p['agreement']:.1%} of {p['compared_pixels']} pixels agree (need {MIN_AGREEMENT:.0%}), "
             f"median |diff| {p['median_abs_diff_m'] * 100:.1f} cm" for p in rep["consistency"]["pairs"] if p["flagged"]])
@@ -416,12 +440,31 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
         f"frames with ids unknown to {OBJECTS_FILE}": len(rep["unknown_ids"]),
         f"frames whose instance/semantic ids disagree with {OBJECTS_FILE}": len(rep["class_mismatch"]),
         "bad poses": len(rep["bad_poses"]),
+        "nearly black tours": int(bool(br.get("dark"))),
         "frame pairs with depth inconsistent with the poses": len(rep["consistency"]["flagged"]),
     }
     rep["problem_counts"] = {k: v for k, v in counts.items() if v}
     rep["problem_total"] = sum(rep["problem_counts"].values())
     rep["ok"] = not problems
     return rep
+
+
+def frame_brightness(rgb) -> float:
+    """The 99th-percentile luminance of linear RGB (exposure 1, ``formats.tour.tonemap``'s weights)."""
+    rgb = np.nan_to_num(np.asarray(rgb, dtype=np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+    lum = rgb.reshape(-1, 3) @ LUMINANCE
+    return float(np.percentile(lum, DARK_PERCENTILE)) if lum.size else 0.0
+
+
+def _brightness(rgb_p99: dict[int, float]) -> dict:
+    """The brightness summary of the tour's RGB frames; ``dark`` when the median is below the threshold."""
+    if not rgb_p99:
+        return {"rgb_frames": 0}
+    v = np.array(list(rgb_p99.values()))
+    med = float(np.median(v))
+    return {"rgb_frames": len(v), "median_p99_luminance": round(med, 6), "min_p99_luminance": round(float(v.min()), 6),
+            "max_p99_luminance": round(float(v.max()), 6), "threshold": DARK_P99_LUMINANCE,
+            "dark": bool(med < DARK_P99_LUMINANCE)}
 
 
 def _class_mismatch(instance, semantic, inst_to_sem: dict[int, int], classes: dict[str, int]) -> dict | None:
@@ -489,6 +532,11 @@ def format_report(rep: dict) -> str:
                      if ag else f"  depth consistency: {len(pairs)} frame pairs without overlap")
     else:
         lines.append("  depth consistency: no usable frame pairs")
+    b = rep.get("brightness") or {}
+    if b.get("rgb_frames"):
+        lines.append(f"  brightness: 99th-percentile luminance (linear, exposure 1) median {b['median_p99_luminance']:.3g} "
+                     f"over {b['rgb_frames']} RGB frames (min {b['min_p99_luminance']:.3g}, max {b['max_p99_luminance']:.3g}; "
+                     f"nearly black below {b['threshold']:g})")
     for w in rep.get("warnings", []):
         lines.append(f"  warning: {w}")
     for p in rep["problems"]:
