@@ -94,6 +94,25 @@ CLASS_COLORS: dict[str, str] = {
     "laptop": "#58595b",
     "basket": "#c49c94",
     "other": "#d0d0d0",
+    # the ReplicaCAD apartments' own classes
+    "door": "#8b5a2b",
+    "cup": "#e6550d",
+    "plate": "#fdd0a2",
+    "kitchen_utensil": "#31a354",
+    "cookware": "#636363",
+    "small_appliance": "#3182bd",
+    "shoe": "#756bb1",
+    "box": "#bcbddc",
+    "cloth": "#de9ed6",
+    "bike": "#e7298a",
+    "rug": "#c7e9c0",
+    "clock": "#fd8d3c",
+    "electronics": "#252525",
+    "bag": "#a63603",
+    "umbrella": "#6baed6",
+    "rack": "#9e9ac8",
+    "wall_cabinet": "#74c476",
+    "kitchen_item": "#fdae6b",
 }
 # classes without a fixed colour pick one of these by a hash of their name (stable across runs)
 _FALLBACK = (

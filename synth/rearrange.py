@@ -56,7 +56,7 @@ from . import geometry as geo
 from .apartment import layout_fixtures
 from .checks import CheckReport, check_layout
 from .placement import Placer
-from .scene import Layout, ObjectInstance, object_box
+from .scene import Layout, ObjectInstance, Room, object_box
 from .stats import PAPER_RANGES, change_stats, is_imported, movable_counts, reference_counts, scaled_ranges
 
 # classes that go with their back to a wall; the others stand anywhere
@@ -207,11 +207,30 @@ def _relocate_floor(placer: Placer, obj: ObjectInstance, p_other: float) -> bool
         room = _pick_room(placer, cur_room, p_other, obj.cls)
         if room is None:
             return None
+        if room is cur_room and room.area > LARGE_ROOM_M2:
+            room = _window(room, _xy(obj))
         if obj.cls in AGAINST_WALL:
             return placer.against_wall(obj.id, obj.cls, size, obj.params, room, tries=10, template=tmpl)
         return placer.free_spot(obj.id, obj.cls, size, obj.params, room, tries=10, jitter_deg=12.0, template=tmpl)
 
     return _move_family(placer, obj, propose)
+
+
+# An open plan (a ReplicaCAD flat's one derived room holds living room, kitchen and hall) is not a
+# room in the sense of the paper's "moved within its room": a move inside a room larger than this
+# goes somewhere within WINDOW_HALF of where the object stood (and inside the room), so the moved
+# distances stay those of a room of the built-in apartment's size (its largest room is ~22 m2).
+LARGE_ROOM_M2 = 30.0
+WINDOW_HALF = 2.5  # m
+
+
+def _window(room: Room, xy) -> Room:
+    """The part of a room within ``WINDOW_HALF`` of ``xy`` (same name and type; its polygon, if any, is kept)."""
+    x0, y0, x1, y1 = room.rect
+    cx = min(max(float(xy[0]), x0), x1)
+    cy = min(max(float(xy[1]), y0), y1)
+    rect = (max(x0, cx - WINDOW_HALF), max(y0, cy - WINDOW_HALF), min(x1, cx + WINDOW_HALF), min(y1, cy + WINDOW_HALF))
+    return Room(room.name, room.type, rect)
 
 
 def _nudge(placer: Placer, obj: ObjectInstance) -> bool:

@@ -71,7 +71,7 @@ from formats.errors import UnknownNameError
 from .classes import ClassTable, LexiconTable, class_table, lexicon_table
 from .receptacles import read_receptacles, to_object_frame
 from .habitat_format import (  # noqa: F401 - Y_UP_TO_Z_UP, ASSET_PREFIX, URDF_PREFIX: re-exported for readers
-    ASSET_PREFIX, MIN_EXTENT, MOTION_TYPES, UNKNOWN_CLASS, URDF_PREFIX, Y_UP_TO_Z_UP, ConfigFinder, asset_name, check_frame,
+    ASSET_PREFIX, MIN_EXTENT, dataset_config_path, MOTION_TYPES, UNKNOWN_CLASS, URDF_PREFIX, Y_UP_TO_Z_UP, ConfigFinder, asset_name, check_frame,
     convert_quat, dataset_root, fail, hab_matrix, mapping, number, numbers, quat, read_json, render_asset, string,
     translation_origin, vec,
 )
@@ -98,7 +98,7 @@ _C = Y_UP_TO_Z_UP
 
 def list_scenes(root) -> list[str]:
     """Names of the scenes in ``<root>/configs/scenes`` (``apt_0``, ``v3_sc0_staging_00``, ...)."""
-    d = dataset_root(root) / "configs" / "scenes"
+    d = dataset_root(root, require_config=True) / "configs" / "scenes"
     if not d.is_dir():
         fail(d, None, "folder not found (not a ReplicaCAD dataset root?)")
     return sorted(p.name[: -len(SCENE_SUFFIX)] for p in d.glob("*" + SCENE_SUFFIX) if p.is_file())
@@ -258,7 +258,7 @@ def read_semantics(root: Path, scene_path: Path, doc: dict, classes: ClassTable)
     the config's ``semantic_scene_descriptor_instances``, whose value is the lexicon's path relative to
     the root. A dataset without a config or without that entry has no lexicon."""
     table = lexicon_table(classes=classes)
-    cfg_path = dataset_config(root)
+    cfg_path = dataset_config_path(root, required=False)
     if cfg_path is None:
         return Semantics(None, None, table)
     cfg = mapping(cfg_path, read_json(cfg_path), None)
@@ -297,12 +297,6 @@ def read_semantics(root: Path, scene_path: Path, doc: dict, classes: ClassTable)
     if missing:
         fail(lex, "classes", f"lexicon name(s) {', '.join(missing)} have no class in {table.source}")
     return Semantics(names, lex, table)
-
-
-def dataset_config(root: Path) -> Path | None:
-    """``<root>/*.scene_dataset_config.json`` (the first in name order), or None."""
-    found = sorted(p for p in Path(root).glob("*.scene_dataset_config.json") if p.is_file())
-    return found[0] if found else None
 
 
 def object_class(template_name: str, semantic_id: int | None, config: Path | None, semantics: Semantics,
@@ -455,7 +449,7 @@ def load_replicacad(root, scene: str, classes: ClassTable | None = None, allow_u
     the stage is one mesh with no structure, as before (for datasets whose stage the derivation
     cannot read).
     """
-    r = dataset_root(root)
+    r = dataset_root(root, require_config=True)
     classes = classes or class_table()
     scene_path = r / "configs" / "scenes" / f"{scene}{SCENE_SUFFIX}"
     if not isinstance(scene, str) or not scene or not scene_path.is_file():
@@ -499,7 +493,7 @@ def load_replicacad(root, scene: str, classes: ClassTable | None = None, allow_u
     if structure:
         from .habitat_lighting import fixtures_for_imported, read_lighting_config
 
-        lights = read_lighting_config(lighting) if lighting is not None else []
+        lights = read_lighting_config(lighting, dataset_config=dataset_config_path(r)) if lighting is not None else []
         layout.fixtures = fixtures_for_imported(layout, lights)
         meta["lighting_config"] = None if lighting is None else Path(os.path.relpath(lighting, r)).as_posix()
     return layout

@@ -136,6 +136,7 @@ FIXTURE_POS = (1.5, 2.0, 2.1)  # 0.6 m above the first bulb's box centre
 
 
 def make_dataset(root: Path) -> Path:
+    write_json(root / "test.scene_dataset_config.json", {})  # the dataset's root holds one (habitat-sim loads it)
     write_glb(root / "stages/stage.glb", stage_meshes())
     write_glb(root / "objects/tex_box.glb", [textured_box()])
     write_glb(root / "objects/plain_box.glb", [plain_box()])

@@ -98,6 +98,7 @@ def _write_glb(path: Path, mesh: trimesh.Trimesh) -> None:
 
 
 def _make_dataset(root: Path, instances=None) -> Path:
+    _write_json(root / "test.scene_dataset_config.json", {})  # the dataset's root holds one (habitat-sim loads it)
     _write_glb(root / "stages/test_stage.glb", STAGE)
     _write_glb(root / "objects/frl_apartment_chair_01.glb", CHAIR)
     _write_glb(root / "objects/frl_apartment_table_01.glb", TABLE)

@@ -127,8 +127,6 @@ def test_configs_folder_given_as_the_root_is_refused(root):
     assert e.value.file == str(root / "configs")
 
 
-@pytest.mark.xfail(strict=True, reason="synth.replicacad.load_replicacad / list_scenes still call dataset_root(root) "
-                                       "without require_config=True (the lead's file); remove this mark then")
 def test_folder_without_its_dataset_config_exits_2(root, tmp_path, capsys):
     (root / "replicaCAD.scene_dataset_config.json").unlink()
     err = import_error(root, tmp_path, capsys)
