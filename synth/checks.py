@@ -16,7 +16,7 @@ from scipy import ndimage
 
 from . import assets
 from . import geometry as geo
-from .collision import CONTACT_GAP, PENETRATION_TOL, penetration, touching, world_pieces
+from .collision import DEFAULT_MARGIN, PENETRATION_TOL, contact_gap, margin, penetration, stage_distance, touching, world_pieces
 from .placement import door_zone, mesh_surfaces, opening_box
 from .scene import Layout, object_box
 
@@ -29,6 +29,9 @@ WALL_TOL = 0.03
 # about its cell size plus its edge error (5 + 6.5 cm). Footprint-in-room and wall-contact tests on
 # such a stage allow this much.
 STRUCTURE_TOL = 0.08
+# soft furnishings (params["soft"]: ReplicaCAD's beanbags, cushions, cloths, rugs) compress where they
+# press on something: two beanbags of ReplicaCAD's apt_3 and apt_5 overlap by a 1.4-1.5 cm ball
+SOFT_PENETRATION_TOL = 0.02
 GRID = 0.05  # free-space grid resolution (m)
 WALKER_RADIUS = 0.2  # half the width a person needs to pass (m)
 OBSTACLE_BELOW = 1.5  # objects whose box starts below this height obstruct walking (m)
@@ -109,17 +112,19 @@ def _support_problem(layout: Layout, o, box: geo.OrientedBox, by_id, boxes, piec
         if k >= len(surfs):
             return f"surface {k} of object {pid} ({parent.cls}) does not exist"
         s = surfs[k]
+        # an object a dataset's physics placed (it has a motion type) stands where it settled: its centre
+        # over the surface is enough, and a shelf's clearance (a rule for placing things) does not apply
+        dataset_placed = "motion_type" in o.params
         dz = box.zmin - (parent.position[2] + s.z)
         if dz < -Z_TOL or dz > s.band + Z_TOL:
             where = f"{dz:+.3f} m off" if s.band == 0 else f"{dz:+.3f} m above the bottom of (band {s.band:.3f} m)"
             return f"bottom {where} surface {k} of object {pid}"
-        if box.zmax - (parent.position[2] + s.z) > s.clearance + Z_TOL:
+        if not dataset_placed and box.zmax - (parent.position[2] + s.z) > s.clearance + Z_TOL:
             return f"taller than the {s.clearance:.2f} m clearance of surface {k} of object {pid}"
         # footprint in the parent's frame: inside a board's rectangle; a receptacle (band > 0) is the
         # region the dataset places object centres in (synth.receptacles), so its centre must be inside
-        # (also for an object a dataset's physics placed: it stands as long as its centre is over the surface)
         Rp = geo.rot_z(parent.yaw)[:2, :2]
-        centre_rule = s.band > 0 or "motion_type" in o.params
+        centre_rule = s.band > 0 or dataset_placed
         pts = box.corners_2d() if not centre_rule else np.asarray(box.center[:2], float)[None, :]
         local = (pts - np.asarray(parent.position[:2])) @ Rp
         if not geo.polygon_inside_rect(local, (s.xmin, s.ymin, s.xmax, s.ymax), XY_TOL):
@@ -130,16 +135,19 @@ def _support_problem(layout: Layout, o, box: geo.OrientedBox, by_id, boxes, piec
         why = _rests_on_some_box(box, list(boxes.values()), floor)
         if why and pieces and pieces.get(o.id):
             # a physics-settled object (ReplicaCAD): it rests on, leans against or hangs from what its
-            # collision shape touches: another object's, the floor, or a wall (hooks and brackets)
-            mine = pieces[o.id]
-            if min(float(v[:, 2].min()) for v in mine) - floor <= CONTACT_GAP:
+            # collision shape touches, within the two shapes' collision margins (synth.collision):
+            # another object's shape, the floor, the stage mesh, or a derived wall (to STRUCTURE_TOL)
+            mine, m = pieces[o.id], margin(o)
+            stage_margin = float((layout.meta.get("structure") or {}).get("margin", 0.0))
+            if min(float(v[:, 2].min()) for v in mine) - floor <= contact_gap(m, stage_margin):
                 return None
-            near = [p for p, b in boxes.items() if p != o.id and geo.boxes_overlap(b, _grown(box, CONTACT_GAP), 0.0)]
-            if any(touching(mine, pieces.get(p) or [_box_corners(boxes[p])]) for p in near):
+            reach = contact_gap(m, DEFAULT_MARGIN)
+            near = [p for p, b in boxes.items() if p != o.id and geo.boxes_overlap(b, _grown(box, reach), 0.0)]
+            if any(touching(mine, pieces.get(p) or [_box_corners(boxes[p])], contact_gap(m, margin(by_id[p]))) for p in near):
                 return None
-            if _wall_distance(st, box) <= STRUCTURE_TOL:
-                return None
-            why = f"bottom at z={box.zmin:.3f} m touches no object, floor or wall"
+            if stage_distance(layout, mine) <= contact_gap(m, stage_margin) or _wall_distance(st, box) <= STRUCTURE_TOL:
+                return None  # on, against or hanging from the stage mesh (a wall, a built-in shelf, a hook)
+            why = f"bottom at z={box.zmin:.3f} m: its collision shape touches no object, the floor, the stage mesh or a wall"
         return why
     return f"unknown support '{o.support}'"
 
@@ -275,8 +283,9 @@ def check_layout(layout: Layout) -> CheckReport:
             if geo.boxes_overlap(boxes[a], boxes[b], OVERLAP_TOL):
                 pa, pb = pieces.get(a), pieces.get(b)
                 if pa or pb:
-                    depth = penetration(pa or [_box_corners(boxes[a])], pb or [_box_corners(boxes[b])])
-                    if depth < PENETRATION_TOL:
+                    tol = SOFT_PENETRATION_TOL if (by_id[a].params.get("soft") or by_id[b].params.get("soft")) else PENETRATION_TOL
+                    depth = penetration(pa or [_box_corners(boxes[a])], pb or [_box_corners(boxes[b])], stop_at=tol)
+                    if depth < tol:
                         continue
                 rep.collisions.append({"a": a, "b": b, "classes": [by_id[a].cls, by_id[b].cls]})
     # objects poking through the ceiling (a ceiling light touches it; nothing may go through)

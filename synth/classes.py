@@ -128,6 +128,7 @@ class LexiconTable:
     lexicon: dict[str, str]  # lexicon class name -> toolkit class
     templates: dict[str, str]  # template base name -> toolkit class (lexicon errors, articulated objects)
     source: str
+    soft: frozenset = frozenset()  # lexicon names of soft furnishings (they compress: synth.checks)
 
     def class_of(self, template_name: str, lexicon_name: str | None) -> tuple[str | None, str]:
         """(class, rule) of an object: its template override, else its lexicon name's class; None when
@@ -149,7 +150,7 @@ def template_base(template_name: str) -> str:
 def parse_lexicon_table(data, source: str, classes: ClassTable) -> LexiconTable:
     if not isinstance(data, dict):
         raise SceneFormatError(source, None, "expected a mapping with format, templates, lexicon")
-    unknown = set(data) - {"format", "templates", "lexicon"}
+    unknown = set(data) - {"format", "templates", "lexicon", "soft"}
     if unknown:
         raise SceneFormatError(source, sorted(unknown)[0], "unknown key")
     if data.get("format") != LEXICON_FORMAT:
@@ -165,7 +166,13 @@ def parse_lexicon_table(data, source: str, classes: ClassTable) -> LexiconTable:
             if classes.classes[cls].structure:
                 raise SceneFormatError(source, f"{key}.{name}", f"maps to structure class '{cls}'; objects need an object class")
         out[key] = {str(k): v for k, v in m.items()}
-    return LexiconTable(out["lexicon"], out["templates"], source)
+    soft = data.get("soft") or []
+    if not isinstance(soft, list) or not all(isinstance(x, str) for x in soft):
+        raise SceneFormatError(source, "soft", "expected a list of lexicon names")
+    bad = sorted(set(soft) - set(out["lexicon"]))
+    if bad:
+        raise SceneFormatError(source, "soft", f"names not in lexicon: {', '.join(bad)}")
+    return LexiconTable(out["lexicon"], out["templates"], source, frozenset(soft))
 
 
 @functools.lru_cache(maxsize=8)

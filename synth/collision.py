@@ -34,7 +34,14 @@ from .habitat_format import Y_UP_TO_Z_UP, dataset_root
 from .scene import GLB_ASSET_PREFIX, URDF_ASSET_PREFIX
 
 PENETRATION_TOL = 0.01  # m: a ball of this radius fits inside both shapes -> interpenetration
-CONTACT_GAP = 0.02  # m: shapes this close touch (a physics-settled object rests on, or leans against, what it touches)
+# Contact. Bullet grows every convex collision shape by its margin (btCollisionMargin.h:
+# CONVEX_DISTANCE_MARGIN 0.04 m), and habitat-sim gives objects and stages a ``margin`` attribute
+# ("collision shape inflation margin"): ReplicaCAD's stage config sets 0.01, one object config
+# (picture_04) 0.01, the others none. So a settled object rests up to the sum of the two margins
+# away from what holds it (a rug 3.6-4.5 cm above the floor, a shoe box 2 cm above a bin's lid).
+DEFAULT_MARGIN = 0.04  # m: an object's margin when its config sets none
+CONTACT_SLACK = 0.005  # m: added to the sum of margins (solver slop)
+CONTACT_GAP = 0.02  # m: the contact distance when neither object has a margin (procedural objects)
 _C = Y_UP_TO_Z_UP
 
 
@@ -128,6 +135,21 @@ def object_pieces(obj, root) -> list[np.ndarray]:
     return []
 
 
+def margin(obj) -> float:
+    """An object's collision margin: its config's (``params["margin"]``), else ``DEFAULT_MARGIN`` for an
+    object with dataset collision data; 0 for procedural objects (their boxes are exact)."""
+    if "margin" in obj.params:
+        return float(obj.params["margin"])
+    return DEFAULT_MARGIN if ("collision" in obj.params or obj.params.get("articulated")
+                              or obj.asset.startswith(GLB_ASSET_PREFIX)) else 0.0
+
+
+def contact_gap(a_margin: float, b_margin: float) -> float:
+    """How far apart two settled shapes may be and still touch (see ``DEFAULT_MARGIN``)."""
+    m = a_margin + b_margin
+    return m + CONTACT_SLACK if m > 0 else CONTACT_GAP
+
+
 def world_pieces(obj, root) -> list[np.ndarray]:
     """``object_pieces`` placed in the world."""
     R = geo.quat_to_matrix(obj.rotation)
@@ -193,3 +215,32 @@ def touching(a_pieces: list[np.ndarray], b_pieces: list[np.ndarray], gap: float 
             if res.status == 0:
                 return True
     return False
+
+
+@functools.lru_cache(maxsize=8)
+def _stage_scene(root: str, asset: str, position: tuple, rotation: tuple):
+    import open3d as o3d
+
+    from .mesh_assets import load_asset_mesh
+
+    m = load_asset_mesh(root, asset)
+    R = geo.quat_to_matrix(rotation)
+    v = np.asarray(m.vertices, float) @ R.T + np.asarray(position, float)
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(v.astype(np.float32)), o3d.core.Tensor(np.asarray(m.faces, np.uint32)))
+    return scene
+
+
+def stage_distance(layout, pieces: list[np.ndarray]) -> float:
+    """Smallest distance (m) from an object's collision pieces (their vertices) to the stage mesh of
+    an imported layout: how near it comes to the floor, a wall or anything built into the stage (a
+    shelf, a hook); inf without a stage mesh."""
+    import open3d as o3d
+
+    st, root = layout.stage, layout.meta.get("root")
+    if st.asset is None or root is None or not pieces:
+        return float("inf")
+    scene = _stage_scene(str(root), st.asset, tuple(st.position), tuple(st.rotation))
+    pts = np.concatenate(pieces).astype(np.float32)
+    d = scene.compute_distance(o3d.core.Tensor(pts)).numpy()
+    return float(d.min()) if len(d) else float("inf")

@@ -114,6 +114,7 @@ class _Template:
     semantic_id: int | None = None  # the config's semantic_id (the dataset's lexicon names it)
     receptacles: tuple = ()  # the config's user_defined receptacle_aabb_* (habitat object frame, unscaled)
     collision: str | None = None  # the config's collision_asset, relative to the root (synth.collision)
+    margin: float | None = None  # the config's collision margin (m); None: habitat-sim's default (synth.collision)
 
 
 @dataclass
@@ -127,6 +128,7 @@ class _Instance:
     scale: np.ndarray  # habitat object axes, all factors
     motion_type: str
     asset_local: bool
+    soft: bool = False  # a soft furnishing (scenes/replicacad_lexicon.yaml: soft)
 
 
 def _object_template(root: Path, config: Path) -> _Template:
@@ -148,7 +150,10 @@ def _object_template(root: Path, config: Path) -> _Template:
         if cpath.is_file():  # optional: the checks fall back to the object's box without it
             check_glb(cpath)
             collision = Path(os.path.relpath(cpath, root)).as_posix()
-    return _Template(config, glb, asset_name(root, glb), scale, com, sid, read_receptacles(config, cfg), collision)
+    margin = number(config, cfg["margin"], "margin") if "margin" in cfg else None
+    if margin is not None and margin < 0:
+        fail(config, "margin", f"must be >= 0, got {cfg['margin']!r}")
+    return _Template(config, glb, asset_name(root, glb), scale, com, sid, read_receptacles(config, cfg), collision, margin)
 
 
 def _load_stage(root: Path, scene_path: Path, doc: dict, structure: bool = True) -> tuple[Stage, dict]:
@@ -194,10 +199,14 @@ def _load_stage(root: Path, scene_path: Path, doc: dict, structure: bool = True)
         return Stage(ceiling_height=zmax - zmin, floor_z=zmin, asset=asset_name(root, glb), position=position, rotation=rotation), {}
     from .stage_structure import derive_structure
 
+    stage_margin = number(config, cfg["margin"], "margin") if "margin" in cfg else None
     st = derive_structure(world, str(glb))
     stage = Stage(ceiling_height=st.ceiling_height, floor_z=st.floor_z, rooms=st.rooms, walls=st.walls, openings=st.openings,
                   asset=asset_name(root, glb), position=position, rotation=rotation)
-    return stage, st.report
+    report = dict(st.report)
+    if stage_margin is not None:
+        report["margin"] = stage_margin  # the stage's collision margin (synth.collision)
+    return stage, report
 
 
 def _parse_instances(root: Path, scene_path: Path, doc: dict, classes: ClassTable, semantics: Semantics) -> list[_Instance]:
@@ -237,8 +246,9 @@ def _parse_instances(root: Path, scene_path: Path, doc: dict, classes: ClassTabl
         if config not in templates:
             templates[config] = _object_template(root, config)
         tmpl = templates[config]
+        soft = semantics.names is not None and semantics.names.get(tmpl.semantic_id) in semantics.table.soft
         out.append(_Instance(i, name, tmpl, object_class(name, tmpl.semantic_id, tmpl.config, semantics, classes),
-                             t, q, scale * tmpl.scale, mt, asset_local))
+                             t, q, scale * tmpl.scale, mt, asset_local, soft))
     return out
 
 
@@ -351,7 +361,9 @@ def _object(inst: _Instance, oid: int, cls: str) -> ObjectInstance:
         scale=vec(scale),
         params={"template": inst.template_name, "motion_type": inst.motion_type,
                 **({"receptacles": to_object_frame(inst.template.receptacles, scale)} if inst.template.receptacles else {}),
-                **({"collision": inst.template.collision} if inst.template.collision else {})},
+                **({"collision": inst.template.collision} if inst.template.collision else {}),
+                **({"margin": inst.template.margin} if inst.template.margin is not None else {}),
+                **({"soft": True} if inst.soft else {})},
     )
 
 
@@ -482,7 +494,9 @@ def load_replicacad(root, scene: str, classes: ClassTable | None = None, allow_u
                                               lexicon=semantics.table)
         if len(objects) > MAX_OBJECT_ID:
             fail(scene_path, "articulated_object_instances", f"{len(objects)} objects in all; at most {MAX_OBJECT_ID} are supported")
-        objects = infer_supports(objects, stage.floor_z, r)
+        from .urdf import open_doors
+
+        objects = infer_supports(open_doors(objects, r), stage.floor_z, r)
         meta["structure"] = report
     else:
         skipped = _articulated_names(scene_path, doc)

@@ -742,3 +742,61 @@ def _local_bounds(model: UrdfModel, state: dict[str, float]) -> tuple[np.ndarray
     if not np.all(np.isfinite(lo)):
         _fail(model.path, None, "URDF has no visual meshes (nothing to render or box)")
     return lo, hi
+
+
+def with_joint_state(obj: ObjectInstance, root, state: dict[str, float]) -> ObjectInstance:
+    """A copy of an articulated object at another joint state: its local box recomputed (scaled)."""
+    model = parse_urdf(urdf_path(root, obj.asset))
+    lo, hi = _local_bounds(model, state)
+    s = np.asarray(obj.scale, float)
+    lo, hi = s * lo, s * hi
+    params = {**obj.params, "joint_state": {k: round(float(v), JOINT_STATE_DECIMALS) + 0.0 for k, v in state.items()}}
+    return ObjectInstance(obj.id, obj.cls, obj.asset, obj.position, obj.rotation, hf.vec(np.maximum(hi - lo, hf.MIN_EXTENT)),
+                          hf.vec((lo + hi) / 2.0), obj.support, obj.movable, obj.scale, params)
+
+
+DOOR_STEP = math.radians(5.0)  # how far a door swings back per try when its open leaf would hit something
+
+
+def open_doors(objects: list[ObjectInstance], root) -> list[ObjectInstance]:
+    """Doors (``DOOR_CLASS``) opened by ``load_articulated_instances`` swing back towards closed, in
+    ``DOOR_STEP`` steps, until their leaf's collision shape interpenetrates no other object
+    (``synth.collision``): a door opens until it meets the bin behind it. The angle taken is recorded
+    in ``params["door_opening"]`` ("limit", "stopped" or "closed": no open angle was free)."""
+    from .collision import PENETRATION_TOL, penetration, world_pieces
+    from .scene import object_box
+
+    others = [o for o in objects if o.cls != DOOR_CLASS]
+    out = []
+    for o in objects:
+        if o.cls != DOOR_CLASS or not o.params.get("articulated") or "door_opening" in o.params:
+            out.append(o)
+            continue
+        state = dict(o.params.get("joint_state") or {})
+        moving = {k: v for k, v in state.items() if v != 0.0}
+        if not moving:
+            out.append(o)
+            continue
+        steps = int(max(abs(v) for v in moving.values()) / DOOR_STEP) + 1
+        chosen, how = None, "closed"
+        for k in range(steps + 1):
+            f = max(0.0, 1.0 - k * DOOR_STEP / max(abs(v) for v in moving.values()))
+            cand = with_joint_state(o, root, {**state, **{j: v * f for j, v in moving.items()}})
+            box = object_box(cand)
+            mine = world_pieces(cand, root)
+            hit = False
+            for p in others:
+                pb = object_box(p)
+                if np.any(np.abs(np.asarray(pb.center) - np.asarray(box.center)) > (np.asarray(pb.size) + np.asarray(box.size)) / 2.0 * 1.5):
+                    continue
+                if penetration(mine, world_pieces(p, root)) >= PENETRATION_TOL:
+                    hit = True
+                    break
+            if not hit:
+                chosen, how = cand, "limit" if k == 0 else "stopped"
+                break
+        if chosen is None:
+            chosen = with_joint_state(o, root, {**state, **{j: 0.0 for j in moving}})
+        chosen.params["door_opening"] = how
+        out.append(chosen)
+    return out

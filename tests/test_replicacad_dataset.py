@@ -117,6 +117,7 @@ def test_receptacles_in_the_object_frame_and_as_supports(apt0):
 def test_door_leaves_stand_open(apt0):
     door = next(o for o in apt0.objects if o.cls == "door")
     assert door.params["joint_state"] == {"root_rotation": -2.0}  # door2.urdf: limit lower -2.0, upper 0
+    assert door.params["door_opening"] == "limit"
 
 
 def test_an_inserted_collision_is_caught(apt0):
@@ -162,3 +163,40 @@ def test_room_polygon_round_trips_and_tests_points(tmp_path, apt0):
     save_layout(lay, tmp_path / "l.yaml")
     back = load_layout(tmp_path / "l.yaml")
     assert back.stage.rooms[0].polygon == L.polygon and back.stage.room_at((3.0, 2.5)) is None
+
+
+def test_a_settled_object_rests_within_the_collision_margins(root):
+    # apt_3's mat lies 3.6 cm above the floor (habitat-sim: object margin 0.04 + stage margin 0.01)
+    layout = load_replicacad(root, "apt_3")
+    mat = next(o for o in layout.objects if o.params["template"] == "objects/frl_apartment_mat")
+    assert mat.support == "free" and 0.03 < object_box(mat).zmin - layout.stage.floor_z < 0.05
+    assert layout.meta["structure"]["margin"] == 0.01  # frl_apartment_stage.stage_config.json
+    assert mat.id not in {u["id"] for u in check_layout(layout).unsupported}
+    # the same mat 0.8 m above the dining table touches nothing
+    table = object_box(next(o for o in layout.objects if o.params["template"] == "objects/frl_apartment_table_01"))
+    mb = object_box(mat)
+    d = np.r_[np.asarray(table.center[:2]) - mb.center[:2], table.zmax + 0.8 - mb.zmin]
+    moved = ObjectInstance(mat.id, mat.cls, mat.asset, tuple(np.asarray(mat.position) + d), mat.rotation, mat.size,
+                           mat.box_offset, mat.support, mat.movable, mat.scale, mat.params)
+    floating = layout.copy()
+    floating.objects = [moved if o.id == mat.id else o for o in floating.objects]
+    why = {u["id"]: u["why"] for u in check_layout(floating).unsupported}
+    assert "touches no object" in why[mat.id]
+
+
+def test_soft_furnishings_may_press_into_each_other(root):
+    layout = load_replicacad(root, "apt_0")
+    soft = {o.params["template"] for o in layout.objects if o.params.get("soft")}
+    assert "objects/frl_apartment_beanbag" in soft and "objects/frl_apartment_cushion_01" in soft
+    assert "objects/frl_apartment_chair_01" not in soft
+
+
+def test_a_door_opens_until_it_meets_an_object(root):
+    # apt_4: door2 at its far limit (-2.0 rad) would swing into frl_apartment_bin_03
+    layout = load_replicacad(root, "apt_4")
+    door = next(o for o in layout.objects if o.cls == "door")
+    assert door.params["door_opening"] == "stopped"
+    angle = door.params["joint_state"]["root_rotation"]
+    assert -2.0 < angle < -0.5
+    assert not [c for c in check_layout(layout).collisions if door.id in (c["a"], c["b"])]
+    assert next(o for o in load_replicacad(root, "apt_0").objects if o.cls == "door").params["door_opening"] == "limit"
