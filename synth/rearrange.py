@@ -57,7 +57,7 @@ from .apartment import layout_fixtures
 from .checks import CheckReport, check_layout
 from .placement import Placer
 from .scene import Layout, ObjectInstance, Room, object_box
-from .stats import PAPER_RANGES, change_stats, is_imported, movable_counts, reference_counts, scaled_ranges
+from .stats import MOVED_FAR, MOVED_MIN, PAPER_RANGES, change_stats, is_imported, movable_counts, reference_counts, scaled_ranges
 
 # classes that go with their back to a wall; the others stand anywhere
 AGAINST_WALL = {"sofa", "bookshelf", "tv_stand", "cabinet", "desk", "bed", "nightstand", "shoe_rack", "wardrobe"}
@@ -124,8 +124,28 @@ BUILTIN_VARIANTS = [
 ]
 
 
-def _family(placer: Placer, obj: ObjectInstance) -> list[ObjectInstance]:
-    return [obj] + placer.children(obj.id)
+def _family(placer: Placer, obj: ObjectInstance, rests: dict[int, list[int]] | None = None) -> list[ObjectInstance]:
+    """``obj``, what stands on it (``Placer.children``) and the ``free`` objects resting in or on any
+    of them (``rests``: holder id -> free ids, ``free_rests``), with what stands on those, in turn."""
+    fam = [obj] + placer.children(obj.id)
+    if not rests:
+        return fam
+    seen = {o.id for o in fam}
+    k = 0
+    while k < len(fam):
+        for fid in rests.get(fam[k].id, ()):
+            if fid not in seen:
+                for o in [placer.layout.object(fid)] + placer.children(fid):
+                    if o.id not in seen:
+                        seen.add(o.id)
+                        fam.append(o)
+        k += 1
+    return fam
+
+
+def _holds(placer: Placer, oid: int, rests: dict[int, list[int]] | None = None) -> bool:
+    """Whether anything stands on object ``oid`` or a ``free`` object rests in or on it."""
+    return bool(placer.children(oid)) or bool(rests and rests.get(oid))
 
 
 def _transform_family(family: list[ObjectInstance], new_obj: ObjectInstance) -> list[ObjectInstance]:
@@ -175,12 +195,14 @@ def _pick_room(placer: Placer, current, p_other: float, cls: str):
     return others[placer.rng.choice(len(others), p=w / w.sum())]
 
 
-def _move_family(placer: Placer, obj: ObjectInstance, propose, tries: int = 12) -> bool:
-    """Move ``obj`` to the first valid pose from ``propose(ignore_ids)`` and carry what stands on it.
+def _move_family(placer: Placer, obj: ObjectInstance, propose, tries: int = 12,
+                 rests: dict[int, list[int]] | None = None) -> list[ObjectInstance] | None:
+    """Move ``obj`` to the first valid pose from ``propose(ignore_ids)`` and carry what stands on it
+    (and the ``free`` objects resting on the family: ``rests``). Returns the moved family.
 
-    Every proposal is checked with the whole family at its new place; nothing changes on failure.
+    Every proposal is checked with the whole family at its new place; nothing changes on failure (None).
     """
-    fam = _family(placer, obj)
+    fam = _family(placer, obj, rests)
     ids = {o.id for o in fam}
     saved = {i: placer.boxes.pop(i) for i in ids}
     for _ in range(tries):
@@ -193,12 +215,13 @@ def _move_family(placer: Placer, obj: ObjectInstance, propose, tries: int = 12) 
             continue
         _replace(placer.layout, moved)
         placer.boxes.update(boxes)
-        return True
+        return moved
     placer.boxes.update(saved)
-    return False
+    return None
 
 
-def _relocate_floor(placer: Placer, obj: ObjectInstance, p_other: float) -> bool:
+def _relocate_floor(placer: Placer, obj: ObjectInstance, p_other: float,
+                    rests: dict[int, list[int]] | None = None) -> list[ObjectInstance] | None:
     """Somewhere else on the floor, in the same room or (with probability ``p_other``) another."""
     cur_room = placer.stage.room_at(_xy(obj))
     size, tmpl = _shape(obj)
@@ -213,7 +236,7 @@ def _relocate_floor(placer: Placer, obj: ObjectInstance, p_other: float) -> bool
             return placer.against_wall(obj.id, obj.cls, size, obj.params, room, tries=10, template=tmpl)
         return placer.free_spot(obj.id, obj.cls, size, obj.params, room, tries=10, jitter_deg=12.0, template=tmpl)
 
-    return _move_family(placer, obj, propose)
+    return _move_family(placer, obj, propose, rests=rests)
 
 
 # An open plan (a ReplicaCAD flat's one derived room holds living room, kitchen and hall) is not a
@@ -233,7 +256,7 @@ def _window(room: Room, xy) -> Room:
     return Room(room.name, room.type, rect)
 
 
-def _nudge(placer: Placer, obj: ObjectInstance) -> bool:
+def _nudge(placer: Placer, obj: ObjectInstance, rests: dict[int, list[int]] | None = None) -> list[ObjectInstance] | None:
     """Push a floor object 0.15-0.45 m in a random direction and turn it by up to 20 deg."""
     size, tmpl = _shape(obj)
     x0, y0 = _xy(obj)
@@ -246,34 +269,232 @@ def _nudge(placer: Placer, obj: ObjectInstance) -> bool:
         yaw = geo.wrap_angle(yaw0 + math.radians(placer.rng.uniform(-20, 20)))
         return placer.floor_at(obj.id, obj.cls, size, obj.params, xy, yaw, ignore=ids, template=tmpl)
 
-    return _move_family(placer, obj, propose)
+    return _move_family(placer, obj, propose, rests=rests)
 
 
 FREE_HOLD_TOL = 0.02  # m: a free object whose bottom is this close to (or inside) a box's z range rests in or on it
 
 
-def pinned_ids(layout: Layout) -> set[int]:
-    """Objects the operator leaves in place because a ``free`` object rests in or on them: those
-    whose footprint holds the box centre of a ``free`` object whose bottom lies within their height
-    range (2 cm tolerance). Lifting them would leave the ``free`` object in the air. (A layout
-    without ``free`` objects -- every procedural one -- has none.)"""
+def free_holders(layout: Layout) -> dict[int, list[int]]:
+    """For each ``free`` object, the objects it may rest in or on: those (not ``free`` themselves)
+    whose footprint holds its box centre and whose height range holds its bottom (2 cm tolerance),
+    in id order."""
     from .placement import distance_to_box_2d
 
-    free = [object_box(o) for o in layout.objects if o.support == "free"]
+    free = [o for o in layout.objects if o.support == "free"]
     if not free:
-        return set()
-    centres = np.array([b.center[:2] for b in free])
-    out = set()
-    for o in layout.objects:
+        return {}
+    fboxes = [object_box(o) for o in free]
+    centres = np.array([b.center[:2] for b in fboxes])
+    out: dict[int, list[int]] = {o.id: [] for o in free}
+    for o in sorted(layout.objects, key=lambda o: o.id):
         if o.support == "free":
             continue
         b = object_box(o)
         inside = distance_to_box_2d(centres, b) <= 0.0
-        for k, fb in enumerate(free):
+        for k, fb in enumerate(fboxes):
             if inside[k] and b.zmin - FREE_HOLD_TOL <= fb.zmin <= b.zmax + FREE_HOLD_TOL:
-                out.add(o.id)
-                break
+                out[free[k].id].append(o.id)
     return out
+
+
+def free_rests(layout: Layout) -> tuple[dict[int, list[int]], set[int]]:
+    """Where the ``free`` objects go when the operator moves things: (rests, pinned).
+
+    A movable ``free`` object with exactly one holder (``free_holders``), itself movable, rests on
+    it: ``rests[holder]`` lists it, and it moves with its holder's family (a cushion on a sofa, shoes
+    in a rack). Any other ``free`` object stays where it is, and so does every object it may rest on
+    (``pinned``: lifting it would leave the ``free`` object in the air). A layout without ``free``
+    objects -- every procedural one -- has neither."""
+    by_id = layout.by_id()
+    rests: dict[int, list[int]] = {}
+    pinned: set[int] = set()
+    for fid, holders in free_holders(layout).items():
+        if len(holders) == 1 and by_id[fid].movable and by_id[holders[0]].movable:
+            rests.setdefault(holders[0], []).append(fid)
+        else:
+            pinned.update(holders)
+    return rests, pinned
+
+
+def pinned_ids(layout: Layout) -> set[int]:
+    """Objects the operator leaves in place because a ``free`` object that cannot move with them
+    rests in or on them (``free_rests``)."""
+    return free_rests(layout)[1]
+
+
+def _put_elsewhere(placer: Placer, obj: ObjectInstance, plan: RearrangePlan) -> ObjectInstance | None:
+    """A small object onto another surface (mostly in its room): the moved object, or None."""
+    lay, rng = placer.layout, placer.rng
+    size, tmpl = _shape(obj)
+    holders = [o for o in lay.objects if o.id != obj.id and placer.surfaces(o)]
+    if rng.random() >= plan.other_room:  # most small things stay in their room
+        here = placer.stage.room_at(_xy(obj))
+        local = [o for o in holders if placer.stage.room_at(_xy(o)) is here]
+        holders = local or holders
+    saved = placer.boxes.pop(obj.id)
+    cand = placer.on_surface(obj.id, obj.cls, size, obj.params, holders,
+                             yaw_mode="free" if obj.cls in ("bowl", "vase") else "aligned", template=tmpl)
+    if cand is None:
+        placer.boxes[obj.id] = saved
+        return None
+    _replace(lay, [cand])
+    placer.boxes[obj.id] = object_box(cand)
+    return cand
+
+
+def _small(placer: Placer, pinned: set[int], rests) -> list[ObjectInstance]:
+    """Objects on surfaces that the operator may put elsewhere: movable, holding nothing, not pinned."""
+    return [o for o in placer.layout.objects if o.movable and o.support.startswith("object:")
+            and not _holds(placer, o.id, rests) and o.id not in pinned]
+
+
+def _surface_moves(placer: Placer, plan: RearrangePlan, pinned: set[int], rests) -> None:
+    """``plan.surface_moves`` small objects onto other surfaces, anywhere in the flat."""
+    small = _small(placer, pinned, rests)
+    done = 0
+    for k in placer.rng.permutation(len(small)):
+        if done >= plan.surface_moves:
+            break
+        if _put_elsewhere(placer, placer.layout.object(small[k].id), plan) is not None:
+            done += 1
+
+
+def _wall_moves(placer: Placer, plan: RearrangePlan, pinned: set[int], note=None, reached=None) -> None:
+    """Pictures to other walls: ``plan.wall_moves`` of them (fewer once ``reached()``)."""
+    lay, rng = placer.layout, placer.rng
+    hung = [o for o in lay.objects if o.movable and o.support.startswith("wall:") and o.id not in pinned]
+    done = 0
+    for k in rng.permutation(len(hung)):
+        if done >= plan.wall_moves or (reached is not None and reached()):
+            break
+        obj = hung[k]
+        size, tmpl = _shape(obj)
+        saved = placer.boxes.pop(obj.id)
+        room = _pick_room(placer, placer.stage.room_at(_xy(obj)), plan.other_room, obj.cls)
+        zc = obj.position[2] + obj.size[2] / 2 if tmpl is None else object_box(obj).center[2] - placer.stage.floor_z
+        cand = None if room is None else placer.on_wall(obj.id, obj.cls, size, obj.params, room, z_center=zc, template=tmpl)
+        if cand is None:
+            placer.boxes[obj.id] = saved
+            continue
+        _replace(lay, [cand])
+        placer.boxes[obj.id] = object_box(cand)
+        if note is not None:
+            note([cand])
+        done += 1
+
+
+def _nudge_on_surface(placer: Placer, obj: ObjectInstance, tries: int = 12) -> ObjectInstance | None:
+    """Push an object standing on a surface 0.15-0.45 m along that surface (same heading, a
+    different spot on the same table or shelf); the moved object, or None."""
+    par = obj.support_parent()
+    if par is None:
+        return None
+    parent = placer.layout.by_id().get(par[0])
+    if parent is None or par[1] >= len(placer.surfaces(parent)):
+        return None
+    s = placer.surfaces(parent)[par[1]]
+    size, tmpl = _shape(obj)
+    b = object_box(obj)
+    Rp = geo.rot_z(parent.yaw)[:2, :2]
+    l0 = (np.asarray(b.center[:2]) - np.asarray(parent.position[:2])) @ Rp
+    yaw0 = b.yaw if tmpl is not None else obj.yaw
+    dyaw = geo.wrap_angle(yaw0 - parent.yaw)
+    c, sn = abs(math.cos(dyaw)), abs(math.sin(dyaw))
+    hx, hy = 0.5 * (c * size[0] + sn * size[1]), 0.5 * (sn * size[0] + c * size[1])
+    saved = placer.boxes.pop(obj.id)
+    for _ in range(tries):
+        ang = placer.rng.uniform(-math.pi, math.pi)
+        dist = placer.rng.uniform(0.15, 0.45)
+        lx, ly = l0[0] + dist * math.cos(ang), l0[1] + dist * math.sin(ang)
+        if not (s.xmin + hx <= lx <= s.xmax - hx and s.ymin + hy <= ly <= s.ymax - hy):
+            continue
+        cand = placer.at_surface_point(obj.id, obj.cls, size, obj.params, parent, par[1], (lx, ly), dyaw, template=tmpl)
+        if cand is not None:
+            _replace(placer.layout, [cand])
+            placer.boxes[obj.id] = object_box(cand)
+            return cand
+    placer.boxes[obj.id] = saved
+    return None
+
+
+def _toward_targets(placer: Placer, ref: Layout, plan: RearrangePlan, floor, order, pinned, rests, targets: dict) -> None:
+    """The moves of ``rearrange`` when it is given ``targets`` (an imported layout: see there).
+
+    Counts (objects moved by more than 0.1 m, ``n``, and by more than 0.5 m, ``n_far``) aim at the
+    middles of ``targets["moved_over_0.1m"]`` and ``targets["moved_over_0.5m"]`` and never pass their
+    tops: floor relocations (families, at most ``plan.floor_moves``), wall moves and moves onto other
+    surfaces (objects not moved yet) until ``n_far`` is at its middle; then the short moves that
+    make up the difference to ``n``'s middle: nudges of floor objects that hold nothing, and of
+    objects on surfaces along their own surface (0.15-0.45 m)."""
+    lay, rng = placer.layout, placer.rng
+    lo, hi = targets["moved_over_0.1m"]
+    flo, fhi = targets.get("moved_over_0.5m", (0, hi))
+    goal = (lo + hi + 1) // 2
+    far_goal = min(goal, (flo + fhi + 1) // 2, fhi)
+    ref_centres = {o.id: np.asarray(object_box(o).center) for o in ref.objects}
+    moved: set[int] = set()
+    far: set[int] = set()
+
+    def note(objs) -> None:
+        for o in objs:
+            if o.id in ref_centres:
+                d = float(np.linalg.norm(np.asarray(object_box(o).center) - ref_centres[o.id]))
+                (moved.add if d > MOVED_MIN else moved.discard)(o.id)
+                (far.add if d > MOVED_FAR else far.discard)(o.id)
+
+    def far_enough() -> bool:
+        return len(far) >= far_goal or len(moved) >= goal
+
+    # far moves: floor furniture with its family, pictures, small things onto other surfaces
+    left, done = [], 0
+    while order and done < plan.floor_moves and not far_enough():
+        k = order.pop(0)
+        obj = lay.object(floor[k].id)
+        ids = {o.id for o in _family(placer, obj, rests)}
+        if len(moved | ids) > hi or len(far | ids) > fhi:
+            left.append(k)  # its family would take a count past its range
+            continue
+        fam = _relocate_floor(placer, obj, plan.other_room, rests)
+        if fam:
+            note(fam)
+            done += 1
+        else:
+            left.append(k)
+    _wall_moves(placer, plan, pinned, note, far_enough)
+    # small things onto other surfaces: plan.surface_moves of them, where one not moved yet is taken
+    # only while the far count is below its middle, and more (not moved yet) until it is there
+    small = _small(placer, pinned, rests)
+    done = 0
+    for k in rng.permutation(len(small)):
+        if done >= plan.surface_moves and far_enough():
+            break
+        obj = lay.object(small[k].id)
+        if obj.id not in moved and far_enough():
+            continue
+        cand = _put_elsewhere(placer, obj, plan)
+        if cand is not None:
+            note([cand])
+            done += 1
+
+    # short moves up to the goal: floor objects nudged (at most plan.nudges), then things on surfaces
+    done = 0
+    for k in left + order:
+        if len(moved) >= goal or done >= plan.nudges:
+            break
+        obj = lay.object(floor[k].id)
+        if not _holds(placer, obj.id, rests):
+            fam = _nudge(placer, obj, rests)
+            if fam:
+                note(fam)
+                done += 1
+    small = [o for o in _small(placer, pinned, rests) if o.id not in moved]
+    for k in rng.permutation(len(small)):
+        if len(moved) >= goal:
+            break
+        cand = _nudge_on_surface(placer, lay.object(small[k].id))
+        if cand is not None:
+            note([cand])
 
 
 def template_pool(ref: Layout) -> list[ObjectInstance]:
@@ -315,11 +536,18 @@ _VARIANT_META = ("generator", "generator_version", "plan", "walkway", "variant_s
 
 
 def rearrange(ref: Layout, name: str, seed: int, plan: RearrangePlan = RearrangePlan(),
-              walkway: np.ndarray | None = None) -> Layout:
-    """One rearranged variant of ``ref``. Non-movable objects and the stage are never touched, nor
-    are ``free`` objects and what holds them (``pinned_ids``); nothing is placed within
-    ``WALKWAY_CLEARANCE`` of the ``walkway`` points (if given). ``plan`` is used as given (see
-    ``scaled_plan`` for imported layouts)."""
+              walkway: np.ndarray | None = None, targets: dict | None = None) -> Layout:
+    """One rearranged variant of ``ref``. Non-movable objects and the stage are never touched; a
+    ``free`` object moves with the one object it rests on, or else stays, and so does what it may
+    rest on (``free_rests``); nothing is placed within ``WALKWAY_CLEARANCE`` of the ``walkway``
+    points (if given). ``plan`` is used as given (see ``scaled_plan`` for imported layouts).
+
+    ``moved_range`` (lo, hi): how many objects should end up moved by more than 0.1 m
+    (``synth.stats``). The floor moves and nudges of the plan then stop once the middle of the range
+    is reached, a floor object whose family would take the count past ``hi`` is passed over, and
+    surface moves (of objects not moved yet) come last and continue past ``plan.surface_moves``
+    until the middle is reached, or stop there. Without it (the built-in variants) the plan's
+    counts are the operations done."""
     imported = is_imported(ref)
     if imported and not ref.stage.rooms:
         raise UserError(f"layout '{ref.name}': rearranging needs the stage's rooms, walls and openings "
@@ -335,70 +563,34 @@ def rearrange(ref: Layout, name: str, seed: int, plan: RearrangePlan = Rearrange
     # an imported layout's new objects never take a removed object's id (the statistics match by id)
     placer = Placer(lay, rng, keepout=None if walkway is None else (walkway, WALKWAY_CLEARANCE),
                     used_ids=max([o.id for o in ref.objects] + [0]) if imported else 0)
-    pinned = pinned_ids(lay)
+    rests, pinned = free_rests(lay)
 
     # remove: movable objects that hold nothing
-    leaves = [o for o in lay.objects if o.movable and not placer.children(o.id) and o.id not in pinned]
+    leaves = [o for o in lay.objects if o.movable and not _holds(placer, o.id, rests) and o.id not in pinned]
     for k in rng.permutation(len(leaves))[: plan.removed]:
         placer.remove(leaves[k].id)
+    present = {o.id for o in lay.objects}
+    rests = {h: [f for f in fs if f in present] for h, fs in rests.items() if any(f in present for f in fs)}
 
-    # relocate floor furniture (with whatever stands on it)
     floor = [o for o in lay.objects if o.movable and o.support == "floor" and o.id not in pinned]
     order = list(rng.permutation(len(floor)))
-    done = 0
-    while order and done < plan.floor_moves:
-        obj = lay.object(floor[order.pop(0)].id)
-        if _relocate_floor(placer, obj, plan.other_room):
-            done += 1
-    # nudge some of the others a little
-    done = 0
-    while order and done < plan.nudges:
-        obj = lay.object(floor[order.pop(0)].id)
-        if not placer.children(obj.id) and _nudge(placer, obj):
-            done += 1
-
-    # small objects onto other surfaces, anywhere in the flat
-    small = [o for o in lay.objects if o.movable and o.support.startswith("object:") and not placer.children(o.id)
-             and o.id not in pinned]
-    done = 0
-    for k in rng.permutation(len(small)):
-        if done >= plan.surface_moves:
-            break
-        obj = lay.object(small[k].id)
-        size, tmpl = _shape(obj)
-        holders = [o for o in lay.objects if o.id != obj.id and placer.surfaces(o)]
-        if rng.random() >= plan.other_room:  # most small things stay in their room
-            here = placer.stage.room_at(_xy(obj))
-            local = [o for o in holders if placer.stage.room_at(_xy(o)) is here]
-            holders = local or holders
-        saved = placer.boxes.pop(obj.id)
-        cand = placer.on_surface(obj.id, obj.cls, size, obj.params, holders,
-                                 yaw_mode="free" if obj.cls in ("bowl", "vase") else "aligned", template=tmpl)
-        if cand is None:
-            placer.boxes[obj.id] = saved
-            continue
-        _replace(lay, [cand])
-        placer.boxes[obj.id] = object_box(cand)
-        done += 1
-
-    # pictures to other walls
-    hung = [o for o in lay.objects if o.movable and o.support.startswith("wall:") and o.id not in pinned]
-    done = 0
-    for k in rng.permutation(len(hung)):
-        if done >= plan.wall_moves:
-            break
-        obj = hung[k]
-        size, tmpl = _shape(obj)
-        saved = placer.boxes.pop(obj.id)
-        room = _pick_room(placer, placer.stage.room_at(_xy(obj)), plan.other_room, obj.cls)
-        zc = obj.position[2] + obj.size[2] / 2 if tmpl is None else object_box(obj).center[2] - placer.stage.floor_z
-        cand = None if room is None else placer.on_wall(obj.id, obj.cls, size, obj.params, room, z_center=zc, template=tmpl)
-        if cand is None:
-            placer.boxes[obj.id] = saved
-            continue
-        _replace(lay, [cand])
-        placer.boxes[obj.id] = object_box(cand)
-        done += 1
+    if targets is not None:
+        _toward_targets(placer, ref, plan, floor, order, pinned, rests, targets)
+    else:
+        # relocate floor furniture (with whatever stands on it)
+        done = 0
+        while order and done < plan.floor_moves:
+            obj = lay.object(floor[order.pop(0)].id)
+            if _relocate_floor(placer, obj, plan.other_room, rests):
+                done += 1
+        # nudge some of the others a little
+        done = 0
+        while order and done < plan.nudges:
+            obj = lay.object(floor[order.pop(0)].id)
+            if not _holds(placer, obj.id, rests) and _nudge(placer, obj, rests):
+                done += 1
+        _surface_moves(placer, plan, pinned, rests)
+        _wall_moves(placer, plan, pinned)
 
     # add new instances: procedural classes in a procedural flat, copies of its own templates in an imported one
     added = 0
@@ -515,7 +707,7 @@ def make_variant(ref: Layout, spec: VariantSpec, ranges: dict | None = None, max
     last, last_ok = None, None
     for k in range(max_attempts):
         sub = spec.seed * 1000 + k
-        var = rearrange(ref, spec.name, sub, plan, walkway)
+        var = rearrange(ref, spec.name, sub, plan, walkway, targets=ranges if imported else None)
         st = change_stats(ref, var)
         last = st
         last_ok = None
