@@ -40,7 +40,8 @@ from formats.atomic import write_json_atomic, write_text_atomic
 from formats.errors import SceneFormatError, UserError
 
 ENV_ROOT = "REPLICACAD_ROOT"
-KEYS = {"root", "allow_unknown"}
+KEYS = {"root", "allow_unknown", "obstacles"}
+OBSTACLES = ("all", "band")  # synth.paths: what the planned paths keep their clearance from
 PATH_KINDS = {"query": 4000, "mapping": 6000}  # default frames: the paper's query and mapping tours
 PREPARED = "prepared.json"
 
@@ -60,7 +61,10 @@ def parse_section(doc, source: str) -> dict:
     allow = doc.get("allow_unknown", False)
     if not isinstance(allow, bool):
         raise SceneFormatError(source, "replicacad.allow_unknown", f"expected true or false, got {allow!r}")
-    return {"root": root, "allow_unknown": allow}
+    obstacles = doc.get("obstacles", "all")
+    if obstacles not in OBSTACLES:
+        raise SceneFormatError(source, "replicacad.obstacles", f"expected one of {', '.join(OBSTACLES)}, got {obstacles!r}")
+    return {"root": root, "allow_unknown": allow, "obstacles": obstacles}
 
 
 def resolve_root(section: dict, source: str, cli_root: str | None = None) -> Path:
@@ -139,17 +143,22 @@ def prepare(spec, out: Path, cli_root: str | None = None, progress=print):
     for name, w in wants.items():
         if name == "mapping" and len(w["layouts"]) != 1:
             raise SceneFormatError(src, w["field"], f"a mapping path is planned on one layout, but designs use it with {w['layouts']}")
+        obstacles = section.get("obstacles", "all")
         key = {"kind": name, "frames": w["frames"], "seed": spec.seed,
-               "layouts": {n: _sha(files[n]) for n in w["layouts"]}}
+               "layouts": {n: _sha(files[n]) for n in w["layouts"]},
+               **({"obstacles": obstacles} if obstacles != "all" else {})}
         txt = prep / "paths" / f"{name}.txt"
         if state["paths"].get(name) == key and txt.exists() and txt.with_suffix(".yaml").exists():
             path_files[name] = txt
             continue
         progress(f"planning the {name} path ({w['frames']} frames) on {', '.join(w['layouts'])} ...")
         try:
-            path = plan_path(name, [load_layout(files[n]) for n in w["layouts"]], w["frames"], seed=spec.seed, name=name)
+            path = plan_path(name, [load_layout(files[n]) for n in w["layouts"]], w["frames"], seed=spec.seed, name=name,
+                             obstacles=obstacles)
         except UserError as e:
             raise SceneFormatError(src, w["field"], f"cannot plan a {name} path on {', '.join(w['layouts'])}: {e}") from None
+        # the layouts by file: an imported apt_0 is not the built-in apt_0 (synth path check reads these)
+        path.meta["layouts"] = [str(files[n].resolve()) for n in w["layouts"]]
         tmp = prep / "paths" / ".tmp" / f"{name}.txt"  # same names, then moved: the sidecar names its poses file
         tmp.parent.mkdir(exist_ok=True)
         save_path(path, tmp)

@@ -241,4 +241,4 @@ def test_spec_document_of_a_plain_spec_is_unchanged_by_the_replicacad_key():
     plain = spec_document(jobs.load_spec(REPO_ROOT / "render_jobs" / "demo.yaml"))
     assert "replicacad" not in plain
     rc = spec_document(jobs.load_spec(REPO_ROOT / "render_jobs" / "replicacad_apt_6x3.yaml"))
-    assert rc["replicacad"] == {"root": None, "allow_unknown": False}
+    assert rc["replicacad"] == {"root": None, "allow_unknown": False, "obstacles": "band"}

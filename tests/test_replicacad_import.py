@@ -246,6 +246,11 @@ def test_spec_from_a_replicacad_root_prepares_layouts_and_paths_once(root, tmp_p
     assert [Path(x).name for x in ready.designs[0].layouts] == ["apt_0.yaml", "apt_1.yaml"]
     q = load_layout(ready.designs[0].layouts[1])
     assert q.meta["source"] == "replicacad" and q.stage.walls
+    # the planned path names the imported layout files, not the built-in layouts of the same names
+    from synth.paths.files import load_path
+
+    planned = load_path(prep / "paths" / "query.txt")
+    assert planned.meta["layouts"] == [str((prep / "layouts" / f"{n}.yaml").resolve()) for n in ("apt_0", "apt_1")]
     # again: nothing is imported or planned a second time
     stamps = {p: p.stat().st_mtime_ns for p in prep.rglob("*") if p.is_file()}
     again = []
@@ -275,6 +280,8 @@ def test_dry_run_shows_the_plan_and_writes_nothing(root, tmp_path, capsys):
     (lambda s, root: (s % (root, "{out}")).replace("name: query", "name: walkway"), "designs[0].path.name"),
     (lambda s, root: (s % (root, "{out}")).replace("replicacad: {root: %s}" % root, "replicacad: {root: %s, extra: 1}" % root),
      "replicacad.extra"),
+    (lambda s, root: (s % (root, "{out}")).replace("replicacad: {root: %s}" % root, "replicacad: {root: %s, obstacles: most}" % root),
+     "replicacad.obstacles"),
 ])
 def test_bad_replicacad_spec_is_one_line(root, tmp_path, capsys, monkeypatch, edit, field):
     monkeypatch.delenv("REPLICACAD_ROOT", raising=False)
@@ -301,6 +308,11 @@ def test_shipped_replicacad_spec_plans_the_paper_design(root, tmp_path):
     plan = expand(ready, tmp_path / "job")
     frames = {name: len(p.frame_ids) for name, p in plan.tours.items()}
     assert len(frames) == 19 and frames["apt_5__night__query"] == 4000 and frames["apt_0__day__mapping"] == 6000
+    from synth.paths.files import load_path
+
+    # the authored apartments share little floor: the shipped spec keeps its clearance at the camera's height
+    q = load_path(tmp_path / "job" / "replicacad" / "paths" / "query.txt")
+    assert q.meta["planner"]["obstacles"] == "band"
 
 
 # ---- the whole pipeline on the fixture -------------------------------------------------------------
