@@ -417,8 +417,11 @@ STANDIN_STAIR_HEADROOM = 2.5  # m above the highest raised level: the ceiling ov
 WINDOW_SILL, WINDOW_HEAD = 0.9, 2.1  # m above the floor
 WINDOW_WIDTH = 1.2  # m
 WINDOW_SPACING = 2.5  # m of exterior wall per window
-WINDOW_MIN_WALL = 1.6  # m: shorter exterior walls get none
-WINDOW_END_MARGIN = 0.3  # m of solid wall at either end of a wall with windows
+WINDOW_MIN_WALL = 0.8  # m: shorter (free) exterior wall stretches get none
+WINDOW_END_MARGIN = 0.1  # m of solid wall at either end of a wall with windows
+WINDOW_CLEAR = 0.2  # m: no window where an object stands this close to the wall
+STANDIN_KEEP_MARGIN = 0.02  # m: the floor holds every object's footprint with this much to spare
+STANDIN_KEEP_MAX = 1.2  # m: footprints farther out of the navmesh footprint are not held (reported)
 STANDIN_COLOURS = {"floor": (0.55, 0.45, 0.35, 1.0), "walls": (0.85, 0.84, 0.80, 1.0), "ceiling": (0.95, 0.95, 0.95, 1.0),
                    "steps": (0.50, 0.42, 0.34, 1.0)}
 
@@ -429,12 +432,23 @@ class StandinSpec:
 
     ``floor_z``: the main floor's true height. The navmesh only brackets it (Recast heights lie up to
     one ``cell_height`` above the surface); None: ``main level z - cell_height / 2``.
-    ``ceiling``: the ceiling height above the floor. ``windows``: cut window openings in exterior walls."""
+    ``ceiling``: the ceiling height above the floor. ``windows``: cut window openings in exterior walls.
+    ``keep``: footprints (XY quads, our frame) of objects that stand in the stage (on its floor or on
+    its walls): the floor is extended to hold each of them with ``keep_margin`` to spare (the walls
+    move out around them), unless one lies more than ``keep_max`` outside the navmesh footprint
+    or does not overlap it (an object outside the building, or in a recess of the building wider than
+    that: reported, not held); no window is cut where one of them whose top (``keep_tops``) is above
+    the sill stands within ``window_clear`` of the wall (a rug or a low table does not hide a window)."""
 
     floor_z: float | None = None
     ceiling: float = STANDIN_CEILING
     wall_cells: int = STANDIN_WALL_CELLS
     windows: bool = True
+    keep: list = field(default_factory=list)  # (4, 2) XY footprints of objects the floor must hold
+    keep_tops: list = field(default_factory=list)  # their tops (z, our frame); empty: all reach above the sills
+    keep_margin: float = STANDIN_KEEP_MARGIN
+    keep_max: float = STANDIN_KEEP_MAX
+    window_clear: float = WINDOW_CLEAR
 
 
 @dataclass
@@ -578,10 +592,37 @@ def standin_stage(nav: NavMesh, spec: StandinSpec | None = None) -> Standin:
     U = np.zeros(shape, bool)
     for f in feet:
         U |= f.mask
+    nav_fp = U.copy()
+    objects = np.zeros(shape, bool)  # cells any kept footprint reaching above the window sills touches
+    keep_info = {"objects": len(spec.keep), "held": 0, "not_held": [], "added_m2": 0.0}
+    if spec.keep:
+        from .stage_structure import _rasterise
+
+        out_dist = ndimage.distance_transform_edt(~nav_fp) * cell  # distance of a cell centre from the footprint
+        grow = spec.keep_margin + cell / 2.0  # a cell whose square meets the footprint + margin
+        for k, q in enumerate(spec.keep):
+            q = np.asarray(q, float).reshape(-1, 2)
+            c = q.mean(axis=0)
+            e = q - c
+            nrm = np.linalg.norm(e, axis=1, keepdims=True)
+            qq = c + e * (1.0 + grow * math.sqrt(2.0) / np.maximum(nrm, 1e-9))  # corners out along the diagonals
+            tri = (np.array([[qq[0], qq[1], qq[2]], [qq[0], qq[2], qq[3]]]) - lo) / cell
+            m = _rasterise(tri, shape)
+            if not m.any():
+                continue
+            if not spec.keep_tops or spec.keep_tops[k] > floor_z + WINDOW_SILL:
+                objects |= m
+            if float(out_dist[m].max()) > spec.keep_max + grow or float(out_dist[m].min()) > cell:
+                keep_info["not_held"].append({"index": k, "outside_m": round(float(out_dist[m].max()), 3)})
+                continue
+            keep_info["held"] += 1
+            U |= m
+        keep_info["added_m2"] = round(float((U & ~nav_fp).sum()) * cell * cell, 3)
     # each footprint cell belongs to the level whose walkable cells are nearest (the main level on ties)
     dist = np.stack([ndimage.distance_transform_edt(~w.mask) if w.mask.any() else np.full(shape, np.inf) for w in walk])
+    added = U & ~nav_fp
     for k, f in enumerate(feet):
-        dist[k][~f.mask] = np.inf
+        dist[k][~f.mask & ~added] = np.inf
     owner = np.argmin(dist, axis=0)
     owner[~U] = -1
     height = np.full(shape, floor_z)
@@ -654,8 +695,21 @@ def standin_stage(nav: NavMesh, spec: StandinSpec | None = None) -> Standin:
     windows = []
     solid = wall.copy()
     win_cells = np.zeros(shape, bool)
+    busy = np.zeros(shape, bool)
     if spec.windows:
         ext = wall & ndimage.binary_dilation(outer, structure=np.ones((3, 3), bool)) & ~near_stair
+        if (U != nav_fp).any():  # straight runs from the navmesh's own walls (not broken by the moves around objects)
+            wall0 = ndimage.binary_dilation(nav_fp, structure=np.ones((2 * t + 1, 2 * t + 1), bool)) & ~nav_fp
+            lab0, _ = ndimage.label(~nav_fp)
+            ol = np.unique(np.concatenate([lab0[0], lab0[-1], lab0[:, 0], lab0[:, -1]]))
+            outer0 = np.isin(lab0, ol[ol > 0]) & ~wall0
+            ext = wall0 & ndimage.binary_dilation(outer0, structure=np.ones((3, 3), bool)) & ~near_stair
+        if objects.any():  # no window behind furniture: wall cells within window_clear (+ the band) of an object
+            r = int(math.ceil((spec.window_clear + t * cell) / cell))
+            yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
+            busy = ndimage.binary_dilation(objects, structure=(xx * xx + yy * yy) <= r * r)
+        ext &= ~busy
+        x = t + int(math.ceil(STANDIN_KEEP_MAX / 4 / cell)) if (U != nav_fp).any() else t  # a hole reaches a moved wall too
         for i0, i1, j0, j1 in _rects(ext):
             wi, wj = i1 - i0, j1 - j0
             if min(wi, wj) > 2 * t:
@@ -672,18 +726,18 @@ def standin_stage(nav: NavMesh, spec: StandinSpec | None = None) -> Standin:
                 a = int(round((cen - width / 2) / cell))
                 b = int(round((cen + width / 2) / cell))
                 if along == 0:
-                    sl = (slice(i0 + a, i0 + b), slice(max(j0 - t, 0), j1 + t))  # the band's whole thickness
+                    sl = (slice(i0 + a, i0 + b), slice(max(j0 - x, 0), j1 + x))  # the band's whole thickness
                     at = (lo[1] + j0 * cell, lo[1] + j1 * cell)
                     span = (lo[0] + (i0 + a) * cell, lo[0] + (i0 + b) * cell)
                 else:
-                    sl = (slice(max(i0 - t, 0), i1 + t), slice(j0 + a, j0 + b))
+                    sl = (slice(max(i0 - x, 0), i1 + x), slice(j0 + a, j0 + b))
                     at = (lo[0] + i0 * cell, lo[0] + i1 * cell)
                     span = (lo[1] + (j0 + a) * cell, lo[1] + (j0 + b) * cell)
-                hole = wall[sl] & ~near_stair[sl]
+                hole = wall[sl] & ~near_stair[sl] & ~busy[sl]
                 win_cells[sl] |= hole
                 across = np.flatnonzero(hole.any(axis=along))  # cells across the wall band
                 if len(across):
-                    base_ = (j0 if along == 0 else i0) - (min(j0, t) if along == 0 else min(i0, t))
+                    base_ = (j0 if along == 0 else i0) - (min(j0, x) if along == 0 else min(i0, x))
                     at = (lo[1 - along] + (base_ + across[0]) * cell, lo[1 - along] + (base_ + across[-1] + 1) * cell)
                 windows.append({"axis": "xy"[along], "wall_line": [round(float(v), 3) for v in at],
                                 "from": round(float(span[0]), 3), "to": round(float(span[1]), 3),
@@ -706,7 +760,7 @@ def standin_stage(nav: NavMesh, spec: StandinSpec | None = None) -> Standin:
               "footprint_m2": round(g.area, 3), "main_footprint_m2": round(main_fp.area, 3),
               "wall_cells_m2": round(float(wall.sum()) * cell * cell, 3), "windows": len(windows),
               "raised_m2": round(float(raised.sum()) * cell * cell, 3),
-              "floating_m2": round(float(floating.sum()) * cell * cell, 3), "levels": info,
+              "floating_m2": round(float(floating.sum()) * cell * cell, 3), "levels": info, "keep": keep_info,
               "quads": nfaces}
     return Standin(parts, floor_z, ceil_z, stair_z, g, main_fp, Grid(wall, lo, cell), windows, info, report)
 

@@ -105,9 +105,18 @@ MIN_ROOM_AREA = 1.0  # m^2
 MIN_COVER_Z = 1.0  # down-facing surfaces above this count as a cover (ceiling) over a room
 MIN_COVER_FRACTION = 0.5
 FILL_WARN = 0.85
+RECT_FILL = 0.97  # a room whose floor fills this much of its rect is the rect (no polygon)
+POLY_EPS = 1.0  # room polygons are simplified to this many floor cells (Douglas-Peucker)
 PROBE = 0.3  # door/window rooms: probe this far out from the wall face
 PROBE_RADIUS = 0.1
 MAX_GRID_CELLS = 40_000_000  # a raster larger than this gets coarser cells
+RAISED_MIN = 0.05  # up-facing surfaces this far above the floor are raised levels (steps, landings, tops)
+RAISED_MIN_AREA = 0.02  # m^2: smaller up-facing planes are ignored (slivers)
+RAISED_CELL = 0.05  # their XY grid
+PLATFORM_DEPTH = (0.45, 0.55)  # probes behind a face, beyond the thickest wall (PAIR_MAX)
+PLATFORM_NEAR = (0.05, 0.15, 0.25)  # probes just behind it (a step's own tread)
+PLATFORM_TOL = 0.05  # a raised surface within this of a column's top is "at that height"
+CEILING_TOL = 0.05  # a column top this close to the ceiling (or above it) reaches the ceiling
 
 # face_ids tolerances
 FACE_TOL = 0.03  # a wall triangle lies within this of its wall box's face
@@ -269,6 +278,7 @@ class _Piece:
     mask: np.ndarray  # (columns, rows) bool
     tris: np.ndarray  # triangle indices
     area: float
+    tops: np.ndarray | None = None  # per column: the face's top row (cells above the floor, not clipped at the ceiling; -1: empty)
 
     @property
     def i1(self) -> int:
@@ -279,6 +289,13 @@ class _Piece:
         m = np.zeros((hi - lo, self.mask.shape[1]), bool)
         m[self.i0 - lo : self.i1 - lo] |= self.mask
         m[other.i0 - lo : other.i1 - lo] |= other.mask
+        if self.tops is not None and other.tops is not None:
+            t = np.full(hi - lo, -1, np.int64)
+            t[self.i0 - lo : self.i1 - lo] = self.tops
+            t[other.i0 - lo : other.i1 - lo] = np.maximum(t[other.i0 - lo : other.i1 - lo], other.tops)
+            self.tops = t
+        else:
+            self.tops = None
         self.i0, self.mask = lo, m
         self.tris = np.union1d(self.tris, other.tris)
         self.area += other.area
@@ -387,8 +404,9 @@ def _direction(two_normal: float) -> _Dir:
     return _Dir(psi, t, np.array([-t[1], t[0]]))
 
 
-def _pieces(dirs, tri, cen, n, area, vert_idx, floor_z, nrows, report) -> list[_Piece]:
-    """Wall planes rasterised on (along, z) and cut at full-height gaps into pieces."""
+def _pieces(dirs, tri, cen, n, area, vert_idx, floor_z, nrows, report, xrows: int | None = None) -> list[_Piece]:
+    """Wall planes rasterised on (along, z) and cut at full-height gaps into pieces. ``xrows``: rows up
+    to the top of the mesh (for the pieces' unclipped column tops; default ``nrows``)."""
     pieces: list[_Piece] = []
     found = small = 0
     gap = int(round(GAP_BRIDGE / WALL_CELL))
@@ -413,14 +431,18 @@ def _pieces(dirs, tri, cen, n, area, vert_idx, floor_z, nrows, report) -> list[_
                     small += 1  # absurdly long plane (an exterior ground skirt...): not a wall
                     continue
                 grid = np.stack([u / WALL_CELL - i_lo, (z - floor_z) / WALL_CELL], axis=-1)
-                mask = _rasterise(grid, (W, nrows))
+                full = _rasterise(grid, (W, max(nrows, xrows or nrows)))
+                mask = full[:, :nrows]
+                anyf = full.any(axis=1)
+                tops_all = np.where(anyf, full.shape[1] - 1 - np.argmax(full[:, ::-1], axis=1), -1)
                 col = _bridge(mask.any(axis=1), gap)
                 umin, umax = u.min(axis=1), u.max(axis=1)
                 for a, b in _runs(col):
                     pm = mask[a:b]
                     lo_u, hi_u = (i_lo + a) * WALL_CELL, (i_lo + b) * WALL_CELL
                     pt = ti[(umax > lo_u - WALL_CELL) & (umin < hi_u + WALL_CELL)]
-                    pieces.append(_Piece(k, s, mean, i_lo + a, pm.copy(), pt, float(pm.sum()) * WALL_CELL**2))
+                    pieces.append(_Piece(k, s, mean, i_lo + a, pm.copy(), pt, float(pm.sum()) * WALL_CELL**2,
+                                         tops_all[a:b].copy()))
     report["planes"] = {"found": found, "below_min_area": small}
     return pieces
 
@@ -443,6 +465,94 @@ def _absorb(pieces: list[_Piece], report) -> list[_Piece]:
             kept.append(p)
     report["pieces"] = {"found": len(pieces), "merged_trim": absorbed}
     return kept
+
+
+def _raised(tri, cen, n, area, floor_z) -> tuple[np.ndarray | None, np.ndarray, float]:
+    """The highest raised level at every XY cell: up-facing planes above the floor (steps, landings,
+    upper levels, the tops of low walls) with something down-facing at least ``MIN_COVER_Z`` above
+    them (a ceiling over them: the top of the ceiling slab or of the roof is not a level).
+    (max z per cell, -inf where none; grid origin; cell), or (None, ...) without any."""
+    cell = RAISED_CELL
+    up = np.flatnonzero((n[:, 2] > HORIZONTAL_NZ) & (cen[:, 2] > floor_z + RAISED_MIN))
+    if up.size == 0:
+        return None, np.zeros(2), cell
+    down = np.flatnonzero(n[:, 2] < -HORIZONTAL_NZ)
+    xy = tri[np.concatenate([up, down])][:, :, :2].reshape(-1, 2)
+    lo = np.floor((xy.min(axis=0) - 1.0) / cell) * cell
+    hi = xy.max(axis=0) + 1.0
+    while np.prod(np.ceil((hi - lo) / cell)) > MAX_GRID_CELLS / 16:
+        cell *= 2
+    shape = tuple(int(v) for v in np.ceil((hi - lo) / cell))
+
+    def highest(idx, min_area):
+        out = np.full(shape, -np.inf)
+        for z, a, g in _planes_1d(cen[idx, 2], area[idx], PLANE_Z_GAP):
+            if a >= min_area:
+                m = _rasterise((tri[idx[g]][:, :, :2] - lo) / cell, shape)
+                out[m] = np.maximum(out[m], z)
+        return out
+
+    top_down = highest(down, 0.0)
+    best = np.full(shape, -np.inf)
+    for z, a, g in _planes_1d(cen[up, 2], area[up], PLANE_Z_GAP):
+        if a < RAISED_MIN_AREA:
+            continue
+        m = _rasterise((tri[up[g]][:, :, :2] - lo) / cell, shape) & (top_down >= z + MIN_COVER_Z)
+        best[m] = np.maximum(best[m], z)
+    return best, lo, cell
+
+
+def _drop_platform_sides(pieces: list[_Piece], dirs, raised, floor_z, ceil_z, tri, report) -> list[_Piece]:
+    """Stairs and raised levels are not walls: the columns of a piece whose top lies below the ceiling
+    and that have behind the face, farther in than the thickest wall (``PAIR_MAX``), a raised level
+    (``_raised``) at the column's height or higher -- or one at any height while the column's own
+    height continues just behind the face (the top step of a flight going down behind it) -- are the
+    side of a step, a flight or a landing and are cut out; what is left of the piece stays (a wall
+    beside the stairs, the part of a face that reaches the ceiling). A half-height wall stays: its
+    top is narrower than ``PAIR_MAX`` and the floor lies beyond it."""
+    best, lo, cell = raised
+    if best is None:
+        report["pieces"]["platform_columns"] = 0
+        return pieces
+    shape = best.shape
+    out, dropped = [], 0
+    for p in pieces:
+        d = dirs[p.dir][0]
+        ncol = p.mask.shape[0]
+        tops = p.tops if p.tops is not None else _col_spans(p.mask) - 1
+        top_z = floor_z + (tops + 1) * WALL_CELL
+        cand = (tops >= 0) & (top_z < ceil_z - CEILING_TOL)
+        plat = np.zeros(ncol, bool)
+        if cand.any():
+            ci = np.flatnonzero(cand)
+            u = (p.i0 + ci + 0.5) * WALL_CELL
+
+            def probe(depth):
+                q = u[:, None] * d.t[None, :] + (p.offset - p.side * depth) * d.n[None, :]
+                ij = np.floor((q - lo) / cell).astype(np.int64)
+                ok = (ij[:, 0] >= 0) & (ij[:, 0] < shape[0]) & (ij[:, 1] >= 0) & (ij[:, 1] < shape[1])
+                h = np.full(len(ci), -np.inf)
+                h[ok] = best[ij[ok, 0], ij[ok, 1]]
+                return h
+
+            want = top_z[ci] - PLATFORM_TOL
+            far = np.max([probe(x) for x in PLATFORM_DEPTH], axis=0)
+            near = np.max([probe(x) for x in PLATFORM_NEAR], axis=0)
+            plat[ci[(far >= want) | ((near >= want) & np.isfinite(far))]] = True
+        if not plat.any():
+            out.append(p)
+            continue
+        dropped += int(plat.sum())
+        keep = ~plat & p.mask.any(axis=1)
+        for a, b in _runs(keep):
+            pm = p.mask[a:b]
+            lo_u, hi_u = (p.i0 + a) * WALL_CELL, (p.i0 + b) * WALL_CELL
+            uu = tri[p.tris, :, :2] @ d.t
+            pt = p.tris[(uu.max(axis=1) > lo_u - WALL_CELL) & (uu.min(axis=1) < hi_u + WALL_CELL)]
+            out.append(_Piece(p.dir, p.side, p.offset, p.i0 + a, pm.copy(), pt, float(pm.sum()) * WALL_CELL**2,
+                              None if p.tops is None else p.tops[a:b].copy()))
+    report["pieces"]["platform_columns"] = dropped
+    return out
 
 
 def _col_spans(mask: np.ndarray) -> np.ndarray:
@@ -687,6 +797,117 @@ def _wall_segment(d, g0, g1, mask, sides, cols, side_ext, a, b, centre, thick, s
 # rooms
 
 
+def _trace(mask: np.ndarray) -> list[np.ndarray]:
+    """Boundary loops of the set cells of a 2-D bool grid, in cell-corner coordinates (i, j): outer
+    boundaries counter-clockwise, holes clockwise (interior on the left); at a corner where two cells
+    touch only diagonally the loops turn left, so such cells give separate loops. Collinear corners
+    are dropped."""
+    m = np.pad(np.asarray(mask, bool), 1)
+    nxt: dict[tuple[int, int], list[tuple[int, int]]] = {}
+
+    def add(a, b):
+        nxt.setdefault(a, []).append(b)
+
+    I, J = np.nonzero(m[1:-1, 1:-1])
+    for i, j in zip(I.tolist(), J.tolist()):
+        pi, pj = i + 1, j + 1
+        if not m[pi, pj - 1]:
+            add((i, j), (i + 1, j))
+        if not m[pi + 1, pj]:
+            add((i + 1, j), (i + 1, j + 1))
+        if not m[pi, pj + 1]:
+            add((i + 1, j + 1), (i, j + 1))
+        if not m[pi - 1, pj]:
+            add((i, j + 1), (i, j))
+    loops = []
+    while nxt:
+        start = next(iter(nxt))
+        loop, cur, prev = [start], start, None
+        while True:
+            outs = nxt[cur]
+            if len(outs) == 1:
+                b = outs.pop()
+            else:  # a diagonal pinch: turn left of the incoming direction
+                din = (cur[0] - prev[0], cur[1] - prev[1])
+                left = (-din[1], din[0])
+                b = next((o for o in outs if (o[0] - cur[0], o[1] - cur[1]) == left), outs[0])
+                outs.remove(b)
+            if not outs:
+                del nxt[cur]
+            prev, cur = cur, b
+            if cur == start:
+                break
+            loop.append(cur)
+        q = np.asarray(loop, float)
+        keep = np.ones(len(q), bool)
+        for k in range(len(q)):
+            a, b, c = q[k - 1], q[k], q[(k + 1) % len(q)]
+            if (b[0] - a[0]) * (c[1] - b[1]) - (b[1] - a[1]) * (c[0] - b[0]) == 0:
+                keep[k] = False
+        loops.append(q[keep])
+    return loops
+
+
+def _signed_area(q: np.ndarray) -> float:
+    return 0.5 * float(np.dot(q[:, 0], np.roll(q[:, 1], -1)) - np.dot(q[:, 1], np.roll(q[:, 0], -1)))
+
+
+def _simplify(q: np.ndarray, eps: float) -> np.ndarray:
+    """Douglas-Peucker on a closed ring (split at the vertex farthest from the first), keeping corners
+    more than ``eps`` off the simplified line; a ring that would fall under 3 vertices is kept."""
+    n = len(q)
+    if n <= 4:
+        return q
+    far = int(np.argmax(np.hypot(*(q - q[0]).T)))
+
+    def dp(pts):
+        if len(pts) < 3:
+            return [0, len(pts) - 1]
+        a, b = pts[0], pts[-1]
+        ab = b - a
+        L = float(np.hypot(*ab))
+        if L < 1e-12:
+            d = np.hypot(*(pts - a).T)
+        else:
+            d = np.abs(ab[0] * (pts[:, 1] - a[1]) - ab[1] * (pts[:, 0] - a[0])) / L
+        k = int(np.argmax(d[1:-1])) + 1
+        if d[k] <= eps:
+            return [0, len(pts) - 1]
+        left = dp(pts[: k + 1])
+        right = dp(pts[k:])
+        return left[:-1] + [k + r for r in right]
+
+    ring = np.concatenate([q, q[:1]])
+    i1 = dp(ring[: far + 1])
+    i2 = dp(ring[far:])
+    idx = i1[:-1] + [far + r for r in i2][:-1]
+    out = q[idx]
+    return out if len(out) >= 3 else q
+
+
+def _room_polygon(mine: np.ndarray, origin: np.ndarray, cell: float, rect) -> tuple[tuple, float, float]:
+    """The free floor of one room (``mine``: its cells, grid origin at ``origin``) as one simple
+    counter-clockwise polygon in world XY, simplified to ``POLY_EPS`` cells and clipped to ``rect``:
+    (polygon, area of the holes filled, area of the pieces left off) -- the polygon is the largest
+    outer boundary; holes in it (a pillar, an island of stairs) are filled, other pieces touching it
+    only at a corner are left off."""
+    loops = _trace(mine)
+    outer = [q for q in loops if _signed_area(q) > 0]
+    holes = [q for q in loops if _signed_area(q) < 0]
+    outer.sort(key=lambda q: -_signed_area(q))
+    main = outer[0]
+    q = _simplify(main, POLY_EPS)
+    if _signed_area(q) <= 0:
+        q = main
+    w = origin + q * cell
+    x0, y0, x1, y1 = rect
+    w[:, 0] = np.clip(w[:, 0], x0, x1)
+    w[:, 1] = np.clip(w[:, 1], y0, y1)
+    filled = -sum(_signed_area(h) for h in holes) * cell * cell
+    left = sum(_signed_area(o) for o in outer[1:]) * cell * cell
+    return tuple((float(a), float(b)) for a, b in w), filled, left
+
+
 def _rooms(tri, cen, n, floor_z, walls: list[Wall], need_cover: bool, report):
     """(rooms, label grid, grid origin, cell, label -> room index). ``need_cover``: a room must have
     something above it (false for a stage without a ceiling)."""
@@ -739,6 +960,7 @@ def _rooms(tri, cen, n, floor_z, walls: list[Wall], need_cover: bool, report):
         return float(cand[j]) if abs(cand[j] - v) <= 1.5 * cell else v
 
     found = []
+    holes_filled, pieces_left = [0.0], [0.0]
     rejected: dict[str, int] = {}
     counts = np.bincount(lab.ravel(), minlength=nlab + 1)
     covered = np.bincount(lab.ravel(), weights=cover.ravel().astype(float), minlength=nlab + 1)
@@ -764,19 +986,30 @@ def _rooms(tri, cen, n, floor_z, walls: list[Wall], need_cover: bool, report):
         y0 = snap(lo[1] + (j0 + jj.min()) * cell, ys)
         y1 = snap(lo[1] + (j0 + jj.max() + 1) * cell, ys)
         fill = area / max((x1 - x0) * (y1 - y0), 1e-12)
-        found.append((li, (x0, y0, x1, y1), area, min(fill, 1.0)))
+        poly = None
+        if fill < RECT_FILL:
+            sub = np.zeros((ii.max() + 1, jj.max() + 1), bool)
+            sub[ii, jj] = True
+            poly, filled, left = _room_polygon(sub, lo + np.array([i0, j0]) * cell, cell, (x0, y0, x1, y1))
+            holes_filled[0] += filled
+            pieces_left[0] += left
+        found.append((li, (x0, y0, x1, y1), area, min(fill, 1.0), poly))
     found.sort(key=lambda r: (quantize(r[1][0], 3), quantize(r[1][1], 3), quantize(r[1][2], 3), quantize(r[1][3], 3)))
-    rooms, fills, lab_to_room = [], {}, {}
-    for k_, (li, rect, area, fill) in enumerate(found):
+    rooms, fills, poly_fills, lab_to_room = [], {}, {}, {}
+    for k_, (li, rect, area, fill, poly) in enumerate(found):
         name = f"room_{k_}"
-        rooms.append(Room(name, "room", rect))
+        room = Room(name, "room", rect, poly)
+        rooms.append(room)
         fills[name] = round(float(fill), 3)
+        poly_fills[name] = round(float(min(area / max(room.area, 1e-12), 1.0)), 3)
         lab_to_room[li] = k_
-        if fill < FILL_WARN:
-            log.warning("stage structure: room %s fills %.0f%% of its rect %s (not a rectangle, or not aligned with the "
-                        "world axes); the rect is its bounding rectangle", name, 100 * fill, tuple(round(v, 3) for v in rect))
+        if poly_fills[name] < FILL_WARN:
+            log.warning("stage structure: room %s: its floor fills %.0f%% of its outline", name, 100 * poly_fills[name])
     report["rooms"] = {"count": len(rooms), "rejected_components": rejected, "fill_ratio": fills,
-                       "area_m2": {r.name: round(float(a), 3) for r, (_, _, a, _) in zip(rooms, found)}}
+                       "outline_fill_ratio": poly_fills,
+                       "polygon_vertices": {r.name: 0 if r.polygon is None else len(r.polygon) for r in rooms},
+                       "holes_filled_m2": round(holes_filled[0], 3), "pieces_left_off_m2": round(pieces_left[0], 3),
+                       "area_m2": {r.name: round(float(a), 3) for r, (_, _, a, _, _) in zip(rooms, found)}}
     return rooms, lab, lo, cell, lab_to_room
 
 
@@ -830,6 +1063,7 @@ def derive_structure(mesh: trimesh.Trimesh, source: str) -> StageStructure:
     floor_z, ceil_z = _floor_ceiling(source, cen, n, area, zmin, zmax, report)
     ceiling_height = quantize(ceil_z - floor_z)
     nrows = int(math.ceil((ceil_z - floor_z) / WALL_CELL - 1e-9))
+    xrows = max(nrows, int(math.ceil((zmax - floor_z) / WALL_CELL - 1e-9)))
 
     # ---- walls
     vert = np.flatnonzero(np.abs(n[:, 2]) < VERTICAL_NZ)
@@ -837,8 +1071,9 @@ def derive_structure(mesh: trimesh.Trimesh, source: str) -> StageStructure:
     h = h / np.linalg.norm(h, axis=1)[:, None]
     dirs = _directions(h, area[vert])
     report["wall_directions"] = [round(math.degrees(d.psi), 3) for d, _ in dirs]
-    pieces = _pieces(dirs, tri, cen, n, area, vert, floor_z, nrows, report)
+    pieces = _pieces(dirs, tri, cen, n, area, vert, floor_z, nrows, report, xrows)
     pieces = _absorb(pieces, report)
+    pieces = _drop_platform_sides(pieces, dirs, _raised(tri, cen, n, area, floor_z), floor_z, ceil_z, tri, report)
     reasons: dict[str, int] = {}
     good = []
     for p in pieces:
@@ -910,7 +1145,7 @@ def face_ids(stage: Stage, centroids: np.ndarray, normals: np.ndarray) -> np.nda
 
     Floor (``FLOOR_ID_BASE + k``): faces up (``n_z > 0.95``) within 5 cm of ``floor_z``; ceiling
     (``CEILING_ID_BASE + k``): faces down within 5 cm of ``floor_z + ceiling_height``; both go to
-    the room whose rect holds the centroid (the first, in stage order), else to the nearest room
+    the room whose outline holds the centroid (the first, in stage order), else to the nearest room
     rect. Wall (``WALL_ID_BASE + k``): the centroid lies within 3 cm of wall k's box but not more
     than 1 cm inside one of its openings (reveals, sills and lintels are wall; door frames and glass
     inside the opening are not), preferably on a face of the box whose outward normal matches the
@@ -983,6 +1218,9 @@ def face_ids(stage: Stage, centroids: np.ndarray, normals: np.ndarray) -> np.nda
         dx = np.maximum(np.maximum(rect[None, :, 0] - p[:, None, 0], p[:, None, 0] - rect[None, :, 2]), 0.0)
         dy = np.maximum(np.maximum(rect[None, :, 1] - p[:, None, 1], p[:, None, 1] - rect[None, :, 3]), 0.0)
         dist = np.hypot(dx, dy)
+        for r_, room in enumerate(rooms):  # a polygon room holds only the part of its rect inside the polygon
+            if room.polygon is not None:
+                dist[:, r_] += np.where(room.contains(p), 0.0, 1e-3)
         k = np.argmin(dist, axis=1)  # inside -> 0 distance; the first such room in stage order
         base = np.where(is_floor[flat], FLOOR_ID_BASE, CEILING_ID_BASE)
         out[flat] = base + k

@@ -175,7 +175,15 @@ def test_yawed_and_translated_stage(caplog):
     # a rotated 4 x 3 room fills 12 / (4.96 x 4.6) of its bounding rectangle: reported, warned
     fills = s.report["rooms"]["fill_ratio"]
     assert all(0.45 < f < 0.65 for f in fills.values()), fills
-    assert "fills" in caplog.text
+    # ... so each room is its polygon (counter-clockwise, within its rect), which its floor fills: no warning
+    for r in s.rooms:
+        q = np.asarray(r.polygon)
+        assert q[:, 0].min() >= r.rect[0] - 1e-6 and q[:, 0].max() <= r.rect[2] + 1e-6
+        assert np.dot(q[:, 0], np.roll(q[:, 1], -1)) - np.dot(q[:, 1], np.roll(q[:, 0], -1)) > 0
+        assert r.area == pytest.approx(s.report["rooms"]["area_m2"][r.name], rel=0.03)
+    assert sorted(round(r.area) for r in s.rooms) == [9, 12]
+    assert all(f > 0.95 for f in s.report["rooms"]["outline_fill_ratio"].values()), s.report["rooms"]
+    assert "fills" not in caplog.text
 
 
 def _quad(corners, normal) -> trimesh.Trimesh:

@@ -131,6 +131,39 @@ def object_bottoms(root: Path, scenes: list[tuple[Path, dict]]) -> list[float]:
     return out
 
 
+def scene_objects(root: Path, scene_path: Path, doc: dict) -> list:
+    """The objects of a scene as the importer reads them (``synth.replicacad``: rigid objects at their
+    configs' bounds, articulated ones from their URDFs, doors opened) without reading its stage,
+    which is what is being built."""
+    from synth import replicacad as rc
+    from synth.urdf import load_articulated_instances, open_doors
+
+    r = rc.dataset_root(root, require_config=True)
+    classes = rc.class_table()
+    sem = rc.read_semantics(r, scene_path, doc, classes)
+    inst = rc._parse_instances(r, scene_path, doc, classes, sem)
+    objs = [rc._object(i, k + 1, i.cls or rc.UNKNOWN_CLASS) for k, i in enumerate(inst)]
+    objs += load_articulated_instances(r, scene_path, doc, len(objs) + 1, classes, allow_unknown=True, lexicon=sem.table)
+    return open_doors(objs, r)
+
+
+def object_footprints(root: Path, scenes: list[tuple[Path, dict]], floor_z: float, ceiling: float) -> tuple[list, list, list]:
+    """XY footprints (4, 2) of the boxes of every object of the scenes that stands in the storey (its
+    box's bottom between 0.1 m below the floor and the ceiling: on the floor, on furniture, on a
+    wall), their tops (z), and (scene, object id, class) of each, in the same order."""
+    from synth.scene import object_box
+
+    quads, tops, who = [], [], []
+    for p, doc in scenes:
+        for o in scene_objects(root, p, doc):
+            b = object_box(o)
+            if floor_z - 0.1 <= b.zmin < floor_z + ceiling:
+                quads.append(b.corners_2d())
+                tops.append(float(b.zmax))
+                who.append((p.name[: -len(SCENE_SUFFIX)], o.id, o.cls))
+    return quads, tops, who
+
+
 def floor_height(nav: NavMesh, bottoms: list[float], margin: float) -> tuple[float, str]:
     z = nav.main_level().z
     ch = nav.settings.cell_height
@@ -179,7 +212,7 @@ def glb_bounds_habitat(path: Path) -> np.ndarray:
     return np.stack([v.min(0), v.max(0)])
 
 
-def build(src: Path, final: Path, spec: StandinSpec, force: bool = False) -> list[dict]:
+def build(src: Path, final: Path, spec: StandinSpec, force: bool = False, hold: bool = True) -> list[dict]:
     """Copy ``src`` to ``final`` with stand-ins (built in a temporary sibling folder, then swapped in,
     so that readers of ``final`` never see a half-built dataset)."""
     src, final = src.resolve(), final.resolve()
@@ -191,7 +224,7 @@ def build(src: Path, final: Path, spec: StandinSpec, force: bool = False) -> lis
     if out.exists():
         shutil.rmtree(out)
     shutil.copytree(src, out, symlinks=False)
-    rows = _fill(out, spec)
+    rows = _fill(out, spec, hold)
     if final.exists():
         old = final.with_name(final.name + ".old")
         if old.exists():
@@ -204,9 +237,26 @@ def build(src: Path, final: Path, spec: StandinSpec, force: bool = False) -> lis
     return rows
 
 
-def _fill(out: Path, spec: StandinSpec) -> list[dict]:
+def _fill(out: Path, spec: StandinSpec, hold: bool = True) -> list[dict]:
     rows = []
     scenes = stage_scenes(out)
+    # object stand-ins first: the stages are built around the scenes' objects, which need their GLBs
+    for cfg_p in sorted((out / "configs" / "objects").rglob("*" + OBJECT_SUFFIX)):
+        cfg = mapping(cfg_p, read_json(cfg_p), None)
+        glb = (cfg_p.parent / str(cfg.get("render_asset", ""))).resolve()
+        if glb.is_file():
+            continue
+        col = cfg.get("collision_asset")
+        colp = (cfg_p.parent / str(col)).resolve() if isinstance(col, str) else None
+        if colp is None or not colp.is_file():
+            colp = sibling_glb(glb)  # clothes_hanger_01 has no collision asset: clothes_hanger_02's GLB
+        if colp is None:
+            rows.append({"file": str(glb.relative_to(out)), "kind": "object", "built": "NO: no collision asset, no sibling"})
+            continue
+        bounds = glb_bounds_habitat(colp)
+        box_glb(bounds, glb, name=glb.stem)
+        rows.append({"file": str(glb.relative_to(out)), "kind": "object", "from": str(colp.relative_to(out)),
+                     "bounds_min": [round(float(v), 4) for v in bounds[0]], "bounds_max": [round(float(v), 4) for v in bounds[1]]})
     for cfg_p in sorted((out / "configs" / "stages").glob("*" + STAGE_SUFFIX)):
         t0 = time.time()
         cfg = mapping(cfg_p, read_json(cfg_p), None)
@@ -225,7 +275,9 @@ def _fill(out: Path, spec: StandinSpec) -> list[dict]:
             continue
         nav = merged([read_navmesh(f) for f in files])
         floor, why = floor_height(nav, object_bottoms(out, users), float(cfg.get("margin", 0.0)))
-        s = standin_stage(nav, StandinSpec(floor_z=floor, ceiling=spec.ceiling, wall_cells=spec.wall_cells, windows=spec.windows))
+        keep, tops, who = object_footprints(out, users, floor, spec.ceiling) if hold else ([], [], [])
+        s = standin_stage(nav, StandinSpec(floor_z=floor, ceiling=spec.ceiling, wall_cells=spec.wall_cells, windows=spec.windows,
+                                           keep=keep, keep_tops=tops, keep_margin=spec.keep_margin, window_clear=spec.window_clear))
         write_standin_glb(s, glb)
         r = s.report
         rows.append({"file": str(glb.relative_to(out)), "kind": "stage",
@@ -233,23 +285,12 @@ def _fill(out: Path, spec: StandinSpec) -> list[dict]:
                      "ceiling_z": r["ceiling_z"], "stair_ceiling_z": r["stair_ceiling_z"],
                      "footprint_m2": r["footprint_m2"], "main_footprint_m2": r["main_footprint_m2"],
                      "raised_m2": r["raised_m2"], "windows": r["windows"], "quads": r["quads"],
-                     "levels": r["levels"], "window_list": s.windows, "seconds": round(time.time() - t0, 2)})
-    for cfg_p in sorted((out / "configs" / "objects").rglob("*" + OBJECT_SUFFIX)):
-        cfg = mapping(cfg_p, read_json(cfg_p), None)
-        glb = (cfg_p.parent / str(cfg.get("render_asset", ""))).resolve()
-        if glb.is_file():
-            continue
-        col = cfg.get("collision_asset")
-        colp = (cfg_p.parent / str(col)).resolve() if isinstance(col, str) else None
-        if colp is None or not colp.is_file():
-            colp = sibling_glb(glb)  # clothes_hanger_01 has no collision asset: clothes_hanger_02's GLB
-        if colp is None:
-            rows.append({"file": str(glb.relative_to(out)), "kind": "object", "built": "NO: no collision asset, no sibling"})
-            continue
-        bounds = glb_bounds_habitat(colp)
-        box_glb(bounds, glb, name=glb.stem)
-        rows.append({"file": str(glb.relative_to(out)), "kind": "object", "from": str(colp.relative_to(out)),
-                     "bounds_min": [round(float(v), 4) for v in bounds[0]], "bounds_max": [round(float(v), 4) for v in bounds[1]]})
+                     "levels": r["levels"], "window_list": s.windows,
+                     "objects_held": r["keep"]["held"], "objects_considered": r["keep"]["objects"],
+                     "floor_added_m2": r["keep"]["added_m2"],
+                     "objects_not_held": [dict(x, scene=who[x["index"]][0], id=who[x["index"]][1], cls=who[x["index"]][2])
+                                          for x in r["keep"]["not_held"]],
+                     "seconds": round(time.time() - t0, 2)})
     return rows
 
 
@@ -260,6 +301,7 @@ def print_table(rows: list[dict]) -> None:
             lv = ", ".join(f"{x['kind']} {x['z_navmesh']:.2f}: {x['owned_m2']:.1f} m2" for x in r["levels"])
             sc = "" if r["stair_ceiling_z"] is None else f" / stairs {r['stair_ceiling_z']:.2f}"
             d = (f"floor z {r['floor_z']:.2f} ({r['floor_from']}), ceiling {r['ceiling_z']:.2f}{sc}, "
+                 f"holds {r['objects_held']} of {r['objects_considered']} object footprints (+{r['floor_added_m2']:.2f} m2), "
                  f"footprint {r['footprint_m2']:.1f} m2 (main {r['main_footprint_m2']:.1f}), windows {r['windows']}, "
                  f"{len(r['navmeshes'])} navmesh(es); levels: {lv}")
         elif "bounds_min" in r:
@@ -275,11 +317,14 @@ def main(argv=None) -> int:
     ap.add_argument("out", type=Path, help="output folder (a complete dataset root)")
     ap.add_argument("--ceiling", type=float, default=StandinSpec.ceiling, help="ceiling height above the floor, m")
     ap.add_argument("--no-windows", action="store_true", help="no window openings")
+    ap.add_argument("--no-hold-objects", action="store_true",
+                    help="walls from the navmesh alone (not moved out around the scenes' objects)")
     ap.add_argument("--force", action="store_true", help="replace OUT if it exists")
     ap.add_argument("--report", type=Path, help="write the rows as JSON here")
     a = ap.parse_args(argv)
     try:
-        rows = build(a.src, a.out, StandinSpec(ceiling=a.ceiling, windows=not a.no_windows), a.force)
+        rows = build(a.src, a.out, StandinSpec(ceiling=a.ceiling, windows=not a.no_windows), a.force,
+                     hold=not a.no_hold_objects)
     except UserError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
