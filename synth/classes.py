@@ -197,4 +197,6 @@ def lexicon_table(path: str | Path | None = None, classes: ClassTable | None = N
     for key in ("templates", "lexicon"):
         if isinstance(data.get(key), dict):
             data[key] = {k: v for k, v in data[key].items() if v in classes.classes}
+    if isinstance(data.get("soft"), list) and isinstance(data.get("lexicon"), dict):
+        data["soft"] = [n for n in data["soft"] if n in data["lexicon"]]
     return parse_lexicon_table(data, p, classes)
