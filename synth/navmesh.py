@@ -585,6 +585,8 @@ def standin_stage(nav: NavMesh, spec: StandinSpec | None = None) -> Standin:
     shift = floor_z - main.z  # navmesh height -> true height (the same offset on every level)
     pts = np.concatenate([p.vertices[:, :2] for p in nav.polygons])
     margin = 1.0
+    if spec.keep:  # room for a held footprint keep_max out of the navmesh footprint, its walls and the outside
+        margin = max(margin, nav.agent_radius + spec.keep_max + spec.keep_margin + (max(1, int(spec.wall_cells)) + 3) * cell)
     lo = np.floor((pts.min(axis=0) - margin) / cell) * cell
     shape = tuple(int(v) for v in np.ceil((pts.max(axis=0) + margin - lo) / cell))
     walk = [lv.grid(lo, shape) for lv in levels]
@@ -608,7 +610,10 @@ def standin_stage(nav: NavMesh, spec: StandinSpec | None = None) -> Standin:
             qq = c + e * (1.0 + grow * math.sqrt(2.0) / np.maximum(nrm, 1e-9))  # corners out along the diagonals
             tri = (np.array([[qq[0], qq[1], qq[2]], [qq[0], qq[2], qq[3]]]) - lo) / cell
             m = _rasterise(tri, shape)
-            if not m.any():
+            if not m.any():  # wholly off the grid: farther out than keep_max
+                fc = lo + (np.argwhere(nav_fp) + 0.5) * cell
+                far = max(float(np.min(np.hypot(*(fc - v).T))) for v in q)
+                keep_info["not_held"].append({"index": k, "outside_m": round(far, 3)})
                 continue
             if not spec.keep_tops or spec.keep_tops[k] > floor_z + WINDOW_SILL:
                 objects |= m

@@ -111,3 +111,125 @@ def test_standin_stage_matches_the_navmesh(tmp_path):
     up = (m.face_normals[:, 2] > 0.95) & (np.abs(m.triangles_center[:, 2]) < 1e-6)
     area = m.area_faces[up].sum()
     assert s.main_footprint.area - 10.0 < area <= s.footprint.area + 1e-6
+
+
+# --------------------------------------------------------------------------------------------
+# the stand-in holds the scenes' objects (StandinSpec.keep) and puts no window behind them
+#
+# The empty stage's footprint ends at x = 4.4 along y -4.25 .. 2 and at 4.35 along y -7.9 .. -4.3 (its
+# east wall; windows without objects at y -6.75..-5.6, -3.65..-2.5, -1.1..0.05). Objects (XY boxes, tops):
+EAST = 4.4
+SHELF = (EAST - 0.6, -3.5, EAST + 0.2, -2.7)  # 0.2 m out of the footprint, 1.5 m tall, before a window
+BENCH = (EAST - 0.5, -0.9, EAST + 0.1, -0.2)  # 0.1 m out, 0.5 m tall (under the sills): a window may stay
+FAR = (EAST - 0.4, -6.0, EAST + 1.4, -5.0)  # 1.45 m out: not held
+OUTSIDE = (EAST + 0.5, -1.0, EAST + 0.9, -0.5)  # does not overlap the footprint: not held
+OFF_GRID = (EAST + 20.0, 0.0, EAST + 21.0, 1.0)  # far off: not held
+KEEP = [SHELF, BENCH, FAR, OUTSIDE, OFF_GRID]
+TOPS = [1.5, 0.5, 1.5, 1.5, 1.5]
+
+
+def _quad_xy(r):
+    x0, y0, x1, y1 = r
+    return np.array([(x0, y0), (x1, y0), (x1, y1), (x0, y1)])
+
+
+def _grow(r, d):
+    return (r[0] - d, r[1] - d, r[2] + d, r[3] + d)
+
+
+def _cells_in(grid, r):
+    """World XY centres of ``grid``'s cells (set or not) whose centre lies in the rect ``r``."""
+    c = grid.cell
+    i = np.arange(int(np.ceil((r[0] - grid.origin[0]) / c - 0.5)), int(np.floor((r[2] - grid.origin[0]) / c - 0.5)) + 1)
+    j = np.arange(int(np.ceil((r[1] - grid.origin[1]) / c - 0.5)), int(np.floor((r[3] - grid.origin[1]) / c - 0.5)) + 1)
+    I, J = np.meshgrid(i, j, indexing="ij")
+    return grid.origin + (np.stack([I.ravel(), J.ravel()], axis=1) + 0.5) * c
+
+
+def _window_rect(w):
+    a, b = w["wall_line"]
+    return (w["from"], a, w["to"], b) if w["axis"] == "x" else (a, w["from"], b, w["to"])
+
+
+def _rect_gap(r, s):
+    dx = max(r[0] - s[2], s[0] - r[2], 0.0)
+    dy = max(r[1] - s[3], s[1] - r[3], 0.0)
+    return float(np.hypot(dx, dy))
+
+
+def _east_windows(s, y0, y1):
+    return [w for w in s.windows if w["axis"] == "y" and w["wall_line"][0] > EAST - 0.1 and w["from"] < y1 and w["to"] > y0]
+
+
+@pytest.fixture(scope="module")
+def plain():
+    return standin_stage(read_navmesh(NAV / "empty_stage.navmesh"), StandinSpec(floor_z=0.0))
+
+
+@pytest.fixture(scope="module")
+def held():
+    spec = StandinSpec(floor_z=0.0, keep=[_quad_xy(r) for r in KEEP], keep_tops=TOPS)
+    return standin_stage(read_navmesh(NAV / "empty_stage.navmesh"), spec)
+
+
+def test_the_objects_stick_out_of_the_plain_stand_in(plain):
+    fp = plain.footprint
+    assert fp.contains([(EAST - 0.025, -3.1), (EAST - 0.025, -0.5), (EAST - 0.075, -5.5)]).all()
+    assert not fp.contains([(EAST + 0.025, -3.1), (EAST + 0.025, -0.5), (EAST - 0.025, -5.5)]).any()
+    assert _east_windows(plain, SHELF[1], SHELF[3]) and _east_windows(plain, BENCH[1], BENCH[3])
+    assert plain.report["keep"] == {"objects": 0, "held": 0, "not_held": [], "added_m2": 0.0}
+
+
+def test_standin_floor_holds_an_object_sticking_out(plain, held):
+    m = 0.02  # StandinSpec.keep_margin
+    assert held.report["keep"]["objects"] == 5 and held.report["keep"]["held"] == 2
+    for r in (SHELF, BENCH):
+        assert held.footprint.contains(_cells_in(held.footprint, _grow(r, m))).all(), r
+        assert not held.walls.contains(_cells_in(held.walls, _grow(r, m))).any(), r
+    # what was added is the two boxes (+ margin, to the cell), nothing else
+    c = held.footprint.cell
+    add = held.footprint.centres()[~plain.footprint.contains(held.footprint.centres())]
+    near = np.zeros(len(add), bool)
+    for r in (SHELF, BENCH):
+        g = _grow(r, m + c / 2 + 1e-6)
+        near |= (add[:, 0] >= g[0]) & (add[:, 0] <= g[2]) & (add[:, 1] >= g[1]) & (add[:, 1] <= g[3])
+    assert near.all() and len(add) > 0
+    want = (0.2 + m) * (SHELF[3] - SHELF[1] + 2 * m) + (0.1 + m) * (BENCH[3] - BENCH[1] + 2 * m)
+    assert want <= held.report["keep"]["added_m2"] <= want + 2 * c * (SHELF[3] - SHELF[1] + BENCH[3] - BENCH[1] + 8 * m)
+    # the mesh: floor faces (up, z 0) cover the shelf's box + margin, no wall face stands in it
+    floor, walls = held.parts["floor"], held.parts["walls"]
+    up = (floor.face_normals[:, 2] > 0.95) & (np.abs(floor.triangles_center[:, 2]) < 1e-6)
+    from synth.stage_structure import _rasterise
+
+    r = _grow(SHELF, m)
+    fine = 0.005
+    shape = (int(round((r[2] - r[0]) / fine)), int(round((r[3] - r[1]) / fine)))
+    cover = _rasterise((floor.triangles[up][:, :, :2] - r[:2]) / fine, shape)
+    assert cover.all()
+    wc = walls.triangles_center
+    inside = (wc[:, 0] > r[0] + 1e-3) & (wc[:, 0] < r[2] - 1e-3) & (wc[:, 1] > r[1] + 1e-3) & (wc[:, 1] < r[3] - 1e-3)
+    assert not inside.any()
+
+
+def test_no_window_behind_a_tall_object(plain, held):
+    clear = 0.2  # StandinSpec.window_clear
+    assert not _east_windows(held, SHELF[1] - clear, SHELF[3] + clear)
+    for w in held.windows:
+        for r, top in zip(KEEP, TOPS):
+            if top > 0.9:  # above the sills
+                assert _rect_gap(_window_rect(w), r) >= clear - 1e-6, (w, r)
+    assert _east_windows(held, BENCH[1], BENCH[3])  # the bench is under the sills
+    assert len(held.windows) >= 4
+
+
+def test_objects_far_out_are_not_held(plain, held):
+    rep = held.report["keep"]
+    out = {x["index"]: x["outside_m"] for x in rep["not_held"]}
+    assert sorted(out) == [2, 3, 4]
+    assert out[2] > 1.2 and out[2] == pytest.approx(1.45, abs=0.1)
+    assert 0.3 < out[3] < 1.2 and out[4] > 20.0
+    for r in (FAR, OUTSIDE):
+        pts = _cells_in(held.footprint, r)
+        assert (held.footprint.contains(pts) == plain.footprint.contains(pts)).all(), r
+    # the wall east of FAR stays where the plain stand-in has it
+    assert held.walls.contains([(EAST + 0.025, -5.5)]).all() and plain.walls.contains([(EAST + 0.025, -5.5)]).all()
