@@ -392,3 +392,147 @@ def test_derived_stage_serves_layout_checks_and_path_walls():
     for x in (4.0, 4.1):
         edge = sorted(tuple(sorted(s_[:, 1])) for s_ in segs if np.allclose(s_[:, 0], x, atol=1e-6))
         assert np.allclose(edge, [(0.0, 1.0), (1.9, 3.0)], atol=TOL), (x, edge)
+
+
+# --------------------------------------------------------------------------------------------
+# stairs and raised levels are not walls
+#
+# One room x[0, 6] y[0, 4], floor slab z[-0.1, 0], ceiling slab z[2.5, 2.6], walls 0.1 thick outside
+# it: south with a door x[1.0, 1.9] z[0, 2.1], west with a window y[1.0, 2.2] z[0.9, 2.0], north,
+# east. Along the north wall a straight flight (y[3, 4]) of five 0.3 m treads from x 3.5, rising
+# 0.17 m each, and the sixth rise to a landing z 1.02 over x[5, 6] y[2.5, 4] in the north-east
+# corner, modelled as their visible faces (treads, risers, the flight's south side, the landing's
+# top and its west and south fronts). A half-height wall x[1.5, 3.0] y[2.0, 2.1] z[0, 1.1] (a box).
+
+RISE, TREAD, LANDING_Z = 0.17, 0.3, 6 * 0.17
+STAIR_WALLS = {
+    "south": ((3.0, -0.05, 1.25), (6.2, 0.1, 2.5), 0.0),
+    "north": ((3.0, 4.05, 1.25), (6.2, 0.1, 2.5), 0.0),
+    "west": ((-0.05, 2.0, 1.25), (4.0, 0.1, 2.5), math.pi / 2),
+    "east": ((6.05, 2.0, 1.25), (4.0, 0.1, 2.5), math.pi / 2),
+    "low": ((2.25, 2.05, 0.55), (1.5, 0.1, 1.1), 0.0),
+}
+
+
+def stairs_room(stairs=True) -> trimesh.Trimesh:
+    H = 2.5
+    boxes = [((-0.1, -0.1, -0.1), (6.1, 4.1, 0.0)), ((-0.1, -0.1, H), (6.1, 4.1, H + 0.1)),
+             ((-0.1, -0.1, 0.0), (1.0, 0.0, H)), ((1.9, -0.1, 0.0), (6.1, 0.0, H)), ((1.0, -0.1, 2.1), (1.9, 0.0, H)),
+             ((-0.1, 0.0, 0.0), (0.0, 1.0, H)), ((-0.1, 2.2, 0.0), (0.0, 4.0, H)),
+             ((-0.1, 1.0, 0.0), (0.0, 2.2, 0.9)), ((-0.1, 1.0, 2.0), (0.0, 2.2, H)),
+             ((-0.1, 4.0, 0.0), (6.1, 4.1, H)), ((6.0, 0.0, 0.0), (6.1, 4.0, H)),
+             ((1.5, 2.0, 0.0), (3.0, 2.1, 1.1))]
+    parts = [_box(*b) for b in boxes]
+    if stairs:
+        for k in range(1, 6):
+            x0, z0, z1 = 3.5 + TREAD * (k - 1), RISE * (k - 1), RISE * k
+            parts.append(_quad([(x0, 3, z1), (x0 + TREAD, 3, z1), (x0 + TREAD, 4, z1), (x0, 4, z1)], (0, 0, 1)))  # tread
+            parts.append(_quad([(x0, 3, z0), (x0, 4, z0), (x0, 4, z1), (x0, 3, z1)], (-1, 0, 0)))  # riser
+            parts.append(_quad([(x0, 3, 0), (x0 + TREAD, 3, 0), (x0 + TREAD, 3, z1), (x0, 3, z1)], (0, -1, 0)))  # side
+        zl = LANDING_Z
+        parts.append(_quad([(5, 2.5, zl), (6, 2.5, zl), (6, 4, zl), (5, 4, zl)], (0, 0, 1)))  # landing
+        parts.append(_quad([(5, 3, 5 * RISE), (5, 4, 5 * RISE), (5, 4, zl), (5, 3, zl)], (-1, 0, 0)))  # sixth riser
+        parts.append(_quad([(5, 2.5, 0), (5, 3, 0), (5, 3, zl), (5, 2.5, zl)], (-1, 0, 0)))  # landing, west front
+        parts.append(_quad([(5, 2.5, 0), (6, 2.5, 0), (6, 2.5, zl), (5, 2.5, zl)], (0, -1, 0)))  # landing, south front
+    return trimesh.util.concatenate(parts)
+
+
+def test_stairs_and_a_landing_are_not_walls_a_half_height_wall_is():
+    s = derive_structure(stairs_room(), "stairs.glb")
+    assert abs(s.floor_z - 0.0) <= 1e-6 and abs(s.ceiling_height - 2.5) <= 1e-6
+    stage = _stage(s)
+    walls = _match_walls(stage, STAIR_WALLS)  # the four room walls and the low wall, nothing else
+    assert s.walls[walls["low"]].height == pytest.approx(1.1, abs=TOL)
+    assert s.report["pieces"]["platform_columns"] > 0
+    # no wall box reaches into the stairs or the landing (the room walls only touch them)
+    for b in structure_boxes(stage):
+        if b.kind == "wall":
+            c = np.asarray(b.corners_2d())
+            assert not ((c[:, 0] > 3.5 + TOL) & (c[:, 0] < 6.0 - TOL) & (c[:, 1] > 2.5 + TOL) & (c[:, 1] < 4.0 - TOL)).any()
+    doors = [o for o in s.openings if o.kind == "door"]
+    windows = [o for o in s.openings if o.kind == "window"]
+    assert len(doors) == 1 and len(windows) == 1
+    door, win = doors[0], windows[0]
+    assert door.wall == stage.walls[walls["south"]].id and door.rooms == ("room_0",)
+    assert abs(door.width - 0.9) <= TOL and abs(door.height - 2.1) <= TOL and door.bottom == 0.0
+    assert np.allclose(_opening_centre(stage, door), (1.45, -0.05, 1.05), atol=TOL)
+    assert win.wall == stage.walls[walls["west"]].id
+    assert abs(win.width - 1.2) <= TOL and abs(win.bottom - 0.9) <= TOL and abs(win.height - 1.1) <= TOL
+    assert np.allclose(_opening_centre(stage, win), (-0.05, 1.6, 1.45), atol=TOL)
+    assert len(s.rooms) == 1 and np.allclose(s.rooms[0].rect, (0.0, 0.0, 6.0, 4.0), atol=TOL)
+
+
+def test_without_the_stairs_rule_the_landing_fronts_would_be_walls(monkeypatch):
+    """The stage above exercises the rule: the landing's fronts are 1.02 m high (taller than
+    MIN_WALL_HEIGHT) and long enough, so without it they come out as two more walls."""
+    import synth.stage_structure as ss
+
+    monkeypatch.setattr(ss, "_drop_platform_sides", lambda pieces, *a, **k: pieces)
+    s = derive_structure(stairs_room(), "stairs.glb")
+    boxes = [b for b in structure_boxes(_stage(s)) if b.kind == "wall"]
+    assert len(boxes) == len(STAIR_WALLS) + 2
+    extra = sorted((round(b.center[0], 2), round(b.center[1], 2)) for b in boxes
+                   if min(np.linalg.norm(np.subtract(b.center, c)) for c, _, _ in STAIR_WALLS.values()) > TOL)
+    assert np.allclose(extra, [(5.05, 3.25), (5.5, 2.55)], atol=TOL), extra
+
+
+# --------------------------------------------------------------------------------------------
+# rooms as polygons
+#
+# An L: floor and ceiling over x[0, 6] y[0, 3] and x[0, 3] y[3, 5] (area 24 m2), walls 0.1 thick
+# around it. With the notch x[3.1, 6] y[3.1, 5] a second (rectangular) room: floor and ceiling over
+# the whole x[0, 6] y[0, 5], walls x[3.0, 3.1] y[3.1, 5] and x[3.0, 6] y[3.0, 3.1] between them.
+
+L_AREA = 24.0
+
+
+def l_room(notch=False) -> trimesh.Trimesh:
+    H = 2.5
+    if notch:
+        boxes = [((-0.1, -0.1, -0.1), (6.1, 5.1, 0.0)), ((-0.1, -0.1, H), (6.1, 5.1, H + 0.1)),
+                 ((6.0, 0.0, 0.0), (6.1, 5.1, H)), ((3.0, 3.0, 0.0), (6.0, 3.1, H)), ((-0.1, 5.0, 0.0), (6.1, 5.1, H))]
+    else:
+        boxes = [((-0.1, -0.1, -0.1), (6.1, 3.0, 0.0)), ((-0.1, 3.0, -0.1), (3.1, 5.1, 0.0)),
+                 ((-0.1, -0.1, H), (6.1, 3.0, H + 0.1)), ((-0.1, 3.0, H), (3.1, 5.1, H + 0.1)),
+                 ((6.0, 0.0, 0.0), (6.1, 3.1, H)), ((3.0, 3.0, 0.0), (6.1, 3.1, H)), ((-0.1, 5.0, 0.0), (3.0, 5.1, H))]
+    boxes += [((-0.1, -0.1, 0.0), (6.1, 0.0, H)), ((3.0, 3.1, 0.0), (3.1, 5.0, H)), ((-0.1, 0.0, 0.0), (0.0, 5.0, H))]
+    return trimesh.util.concatenate([_box(*b) for b in boxes])
+
+
+def _ccw(q) -> bool:
+    q = np.asarray(q, float)
+    return np.dot(q[:, 0], np.roll(q[:, 1], -1)) - np.dot(q[:, 1], np.roll(q[:, 0], -1)) > 0
+
+
+def test_l_shaped_room_is_a_polygon_its_floor_fills(caplog):
+    with caplog.at_level(logging.WARNING, logger="synth.stage_structure"):
+        s = derive_structure(l_room(), "l.glb")
+    assert len(s.walls) == 6 and len(s.rooms) == 1
+    r = s.rooms[0]
+    assert np.allclose(r.rect, (0.0, 0.0, 6.0, 5.0), atol=TOL)
+    assert r.polygon is not None and _ccw(r.polygon)
+    q = np.asarray(r.polygon)
+    assert (q[:, 0] >= r.rect[0] - 1e-6).all() and (q[:, 0] <= r.rect[2] + 1e-6).all()
+    assert (q[:, 1] >= r.rect[1] - 1e-6).all() and (q[:, 1] <= r.rect[3] + 1e-6).all()
+    assert r.area == pytest.approx(L_AREA, rel=0.03)
+    assert s.report["rooms"]["area_m2"]["room_0"] == pytest.approx(L_AREA, rel=0.03)
+    assert s.report["rooms"]["fill_ratio"]["room_0"] == pytest.approx(L_AREA / 30.0, abs=0.02)  # of its rect
+    assert s.report["rooms"]["outline_fill_ratio"]["room_0"] > 0.97
+    assert 6 <= len(r.polygon) <= 8
+    # the L holds its arms, not the missing corner
+    assert list(r.contains([(1.5, 4.0), (5.0, 1.5), (4.5, 4.0)])) == [True, True, False]
+    assert "fills" not in caplog.text
+
+
+def test_rectangular_rooms_have_no_polygon():
+    s = derive_structure(two_room_stage(), "two_room.glb")
+    assert [r.polygon for r in s.rooms] == [None, None]
+    assert s.report["rooms"]["polygon_vertices"] == {"room_0": 0, "room_1": 0}
+    st = derive_structure(l_room(notch=True), "l_notch.glb")
+    assert [r.polygon is None for r in st.rooms] == [False, True]  # the L and the notch
+    assert np.allclose(st.rooms[1].rect, (3.1, 3.1, 6.0, 5.0), atol=TOL)
+    # face_ids: a floor (ceiling) face in the notch goes to the notch room, though it lies in the L's rect
+    stage = _stage(st)
+    p = np.array([[4.5, 4.0, 0.0], [1.5, 4.0, 0.0], [4.5, 1.5, 0.0], [4.5, 4.0, 2.5]])
+    nrm = np.array([[0, 0, 1.0], [0, 0, 1.0], [0, 0, 1.0], [0, 0, -1.0]])
+    assert list(face_ids(stage, p, nrm)) == [FLOOR_ID_BASE + 1, FLOOR_ID_BASE, FLOOR_ID_BASE, CEILING_ID_BASE + 1]
