@@ -351,6 +351,27 @@ def distance_to_box_2d(points: np.ndarray, box: geo.OrientedBox) -> np.ndarray:
     return np.hypot(out[:, 0], out[:, 1])
 
 
+def footprint_in_polygon(corners: np.ndarray, room: Room) -> bool:
+    """Whether a convex footprint (corners (4, 2)) lies inside ``room``'s polygon: every corner inside
+    (``Room.contains``) and no edge of the polygon crossing or touching the footprint's sides (a thin
+    wall that reaches into the room between two corners)."""
+    c = np.asarray(corners, float)
+    if not room.contains(c).all():
+        return False
+    q = room.outline()
+    a, b = q, np.roll(q, -1, axis=0)  # polygon edges a -> b
+    p, r = c, np.roll(c, -1, axis=0)  # footprint sides p -> r
+
+    def orient(o, u, v):  # sign of the turn o -> u -> v, broadcast (footprint sides x polygon edges)
+        return np.sign((u[..., 0] - o[..., 0]) * (v[..., 1] - o[..., 1]) - (u[..., 1] - o[..., 1]) * (v[..., 0] - o[..., 0]))
+
+    P, R = p[:, None, :], r[:, None, :]
+    A, B = a[None, :, :], b[None, :, :]
+    d1, d2 = orient(P, R, A), orient(P, R, B)
+    d3, d4 = orient(A, B, P), orient(A, B, R)
+    return not bool(((d1 * d2 <= 0) & (d3 * d4 <= 0) & ~((d1 == 0) & (d2 == 0))).any())
+
+
 class Placer:
     """Keeps the boxes of a layout and answers whether a new placement is valid.
 
@@ -433,9 +454,11 @@ class Placer:
         return any(geo.boxes_overlap(box, z, tol=0.0) for z in self.opening_boxes)
 
     def room_of(self, box: geo.OrientedBox) -> Room | None:
+        """The room whose free interior holds the box's footprint: inside its rect and, for a room
+        with a polygon (an open plan), inside the polygon (``footprint_in_polygon``)."""
         poly = box.corners_2d()
         for r in self.stage.rooms:
-            if geo.polygon_inside_rect(poly, r.rect):
+            if geo.polygon_inside_rect(poly, r.rect) and (r.polygon is None or footprint_in_polygon(poly, r)):
                 return r
         return None
 

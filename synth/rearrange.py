@@ -55,7 +55,7 @@ from formats.errors import UserError
 from . import geometry as geo
 from .apartment import layout_fixtures
 from .checks import CheckReport, check_layout
-from .placement import Placer
+from .placement import GAP, Placer
 from .scene import Layout, ObjectInstance, Room, object_box
 from .stats import MOVED_FAR, MOVED_MIN, PAPER_RANGES, change_stats, is_imported, movable_counts, reference_counts, scaled_ranges
 
@@ -196,22 +196,23 @@ def _pick_room(placer: Placer, current, p_other: float, cls: str):
 
 
 def _move_family(placer: Placer, obj: ObjectInstance, propose, tries: int = 12,
-                 rests: dict[int, list[int]] | None = None) -> list[ObjectInstance] | None:
+                 rests: dict[int, list[int]] | None = None, over: frozenset = frozenset()) -> list[ObjectInstance] | None:
     """Move ``obj`` to the first valid pose from ``propose(ignore_ids)`` and carry what stands on it
     (and the ``free`` objects resting on the family: ``rests``). Returns the moved family.
 
-    Every proposal is checked with the whole family at its new place; nothing changes on failure (None).
+    Every proposal is checked with the whole family at its new place (``over``: ids it may overlap,
+    the flat things on the floor it may stand on); nothing changes on failure (None).
     """
     fam = _family(placer, obj, rests)
     ids = {o.id for o in fam}
     saved = {i: placer.boxes.pop(i) for i in ids}
     for _ in range(tries):
-        cand = propose(ids)
+        cand = propose(ids | over if over else ids)
         if cand is None:
             continue
         moved = _transform_family(fam, cand)
         boxes = {o.id: object_box(o) for o in moved}
-        if any(placer.collides(b, ids) for b in boxes.values()):
+        if any(placer.collides(b, ids | over) for b in boxes.values()):
             continue
         _replace(placer.layout, moved)
         placer.boxes.update(boxes)
@@ -226,17 +227,97 @@ def _relocate_floor(placer: Placer, obj: ObjectInstance, p_other: float,
     cur_room = placer.stage.room_at(_xy(obj))
     size, tmpl = _shape(obj)
 
+    # a mesh object in a room that is not a rectangle (an imported flat's open plan: Room.polygon)
+    # goes back against some wall of the stage, the same side of it to the wall, when it stood
+    # against one; in a rectangular room against a side of it as procedural objects do
+    rel = _wall_relation(placer.stage, object_box(obj)) if tmpl is not None else None
+    tries = 10 if tmpl is None else 25
+
     def propose(ids):
         room = _pick_room(placer, cur_room, p_other, obj.cls)
         if room is None:
             return None
         if room is cur_room and room.area > LARGE_ROOM_M2:
             room = _window(room, _xy(obj))
-        if obj.cls in AGAINST_WALL:
-            return placer.against_wall(obj.id, obj.cls, size, obj.params, room, tries=10, template=tmpl)
-        return placer.free_spot(obj.id, obj.cls, size, obj.params, room, tries=10, jitter_deg=12.0, template=tmpl)
+        if rel is not None and room.polygon is not None:
+            return _against_stage_wall(placer, obj, size, tmpl, room, rel, ids, tries=tries)
+        if obj.cls in AGAINST_WALL and (tmpl is None or room.polygon is None):
+            return placer.against_wall(obj.id, obj.cls, size, obj.params, room, tries=tries, template=tmpl)
+        return placer.free_spot(obj.id, obj.cls, size, obj.params, room, tries=tries, jitter_deg=12.0, template=tmpl)
 
-    return _move_family(placer, obj, propose, rests=rests)
+    return _move_family(placer, obj, propose, rests=rests, over=_flat_ids(placer, obj))
+
+
+FLAT = 0.05  # m: a mesh object on the floor whose top is at most this high (a rug, a mat) is stood on, as walked over
+
+
+def _flat_ids(placer: Placer, obj: ObjectInstance) -> frozenset:
+    """The flat things on the floor (``FLAT``: rugs, mats of an imported flat) that a mesh object
+    which is not flat itself may stand on when it is put on the floor; empty for procedural objects."""
+    if _is_proc(obj) or object_box(obj).zmax - placer.stage.floor_z <= FLAT:
+        return frozenset()
+    return frozenset(o.id for o in placer.layout.objects if o.id != obj.id and not _is_proc(o) and o.support == "floor"
+                     and placer.boxes.get(o.id) is not None and placer.boxes[o.id].zmax - placer.stage.floor_z <= FLAT)
+
+
+WALL_NEAR = 0.15  # m: a mesh object whose box comes this close to a wall face stands against that wall
+
+
+def _extent_along(box_yaw: float, size, n) -> float:
+    """Half the extent of a box footprint (yaw, size) along the unit vector ``n``."""
+    c, sn = math.cos(box_yaw), math.sin(box_yaw)
+    return 0.5 * (size[0] * abs(c * n[0] + sn * n[1]) + size[1] * abs(-sn * n[0] + c * n[1]))
+
+
+def _wall_relation(stage, box) -> float | None:
+    """How a box stands against the nearest wall of ``stage``: its yaw minus the heading of the
+    wall's normal towards it, when its footprint comes within ``WALL_NEAR`` of that wall's face
+    (beside the wall, not beyond its ends); else None (it stands free)."""
+    best = None
+    centre = np.asarray(box.center[:2], float)
+    for w in stage.walls:
+        if w.length <= 0:
+            continue
+        d = w.direction
+        rel = centre - np.asarray(w.start, float)
+        t = float(rel @ d)
+        if t < 0 or t > w.length:
+            continue
+        n = np.array([-d[1], d[0]])
+        side = float(rel @ n)
+        if side < 0:
+            n, side = -n, -side
+        gap = side - w.thickness / 2 - _extent_along(box.yaw, box.size, n)
+        if gap <= WALL_NEAR and (best is None or gap < best[0]):
+            best = (gap, geo.wrap_angle(box.yaw - math.atan2(n[1], n[0])))
+    return None if best is None else best[1]
+
+
+def _against_stage_wall(placer: Placer, obj: ObjectInstance, size, tmpl, room: Room, rel: float, ids, tries: int,
+                        oid: int | None = None):
+    """A placed copy of ``obj`` with the same side to a wall of the stage as it had (``rel``:
+    ``_wall_relation``), the wall point drawn uniformly on the walls that pass through ``room``'s
+    rect, on either side; the footprint ``GAP`` off the wall face, its centre inside ``room``."""
+    x0, y0, x1, y1 = room.rect
+    walls = [w for w in placer.stage.walls if w.length > 0 and min(w.start[0], w.end[0]) <= x1 and max(w.start[0], w.end[0]) >= x0
+             and min(w.start[1], w.end[1]) <= y1 and max(w.start[1], w.end[1]) >= y0]
+    if not walls:
+        return None
+    lengths = np.array([w.length for w in walls])
+    for _ in range(tries):
+        w = walls[placer.rng.choice(len(walls), p=lengths / lengths.sum())]
+        d = w.direction
+        t = placer.rng.uniform(0.0, w.length)
+        n = np.array([-d[1], d[0]]) * (1.0 if placer.rng.random() < 0.5 else -1.0)
+        yaw = geo.wrap_angle(math.atan2(n[1], n[0]) + rel)
+        xy = np.asarray(w.start, float) + t * d + n * (w.thickness / 2 + _extent_along(yaw, size, n) + GAP)
+        if not room.contains(xy)[0]:
+            continue
+        cand = placer.floor_at(obj.id if oid is None else oid, obj.cls, size, obj.params, (float(xy[0]), float(xy[1])), yaw,
+                               ignore=ids, template=tmpl)
+        if cand is not None:
+            return cand
+    return None
 
 
 # An open plan (a ReplicaCAD flat's one derived room holds living room, kitchen and hall) is not a
@@ -245,15 +326,18 @@ def _relocate_floor(placer: Placer, obj: ObjectInstance, p_other: float,
 # distances stay those of a room of the built-in apartment's size (its largest room is ~22 m2).
 LARGE_ROOM_M2 = 30.0
 WINDOW_HALF = 2.5  # m
+SURFACE_WINDOW_HALF = 4.0  # m: a small thing put on another surface (not its own) within this of where it stood
 
 
-def _window(room: Room, xy) -> Room:
-    """The part of a room within ``WINDOW_HALF`` of ``xy`` (same name and type; its polygon, if any, is kept)."""
+def _window(room: Room, xy, half: float = WINDOW_HALF) -> Room:
+    """The part of a room within ``WINDOW_HALF`` of ``xy`` (same name and type): the window's rect,
+    and the room's polygon, if any, kept as it is (``Room.contains`` then holds points inside both:
+    a stand-in for placing only, not a room of the stage)."""
     x0, y0, x1, y1 = room.rect
     cx = min(max(float(xy[0]), x0), x1)
     cy = min(max(float(xy[1]), y0), y1)
-    rect = (max(x0, cx - WINDOW_HALF), max(y0, cy - WINDOW_HALF), min(x1, cx + WINDOW_HALF), min(y1, cy + WINDOW_HALF))
-    return Room(room.name, room.type, rect)
+    rect = (max(x0, cx - half), max(y0, cy - half), min(x1, cx + half), min(y1, cy + half))
+    return Room(room.name, room.type, rect, room.polygon)
 
 
 def _nudge(placer: Placer, obj: ObjectInstance, rests: dict[int, list[int]] | None = None) -> list[ObjectInstance] | None:
@@ -269,7 +353,11 @@ def _nudge(placer: Placer, obj: ObjectInstance, rests: dict[int, list[int]] | No
         yaw = geo.wrap_angle(yaw0 + math.radians(placer.rng.uniform(-20, 20)))
         return placer.floor_at(obj.id, obj.cls, size, obj.params, xy, yaw, ignore=ids, template=tmpl)
 
-    return _move_family(placer, obj, propose, rests=rests)
+    over = _flat_ids(placer, obj)
+    if not _is_proc(obj):  # a mesh object keeps the box overlaps it had (a chair under its table): the checks test its shapes
+        mine = placer.boxes.get(obj.id)
+        over |= frozenset(i for i, b in placer.boxes.items() if i != obj.id and mine is not None and geo.boxes_overlap(mine, b))
+    return _move_family(placer, obj, propose, rests=rests, over=over)
 
 
 FREE_HOLD_TOL = 0.02  # m: a free object whose bottom is this close to (or inside) a box's z range rests in or on it
@@ -330,7 +418,11 @@ def _put_elsewhere(placer: Placer, obj: ObjectInstance, plan: RearrangePlan) -> 
     holders = [o for o in lay.objects if o.id != obj.id and placer.surfaces(o)]
     if rng.random() >= plan.other_room:  # most small things stay in their room
         here = placer.stage.room_at(_xy(obj))
-        local = [o for o in holders if placer.stage.room_at(_xy(o)) is here]
+        if here is not None and here.area > LARGE_ROOM_M2:  # an open plan: somewhere near (as floor moves)
+            win, par = _window(here, _xy(obj), SURFACE_WINDOW_HALF), (obj.support_parent() or (None,))[0]
+            local = [o for o in holders if o.id != par and win.contains(_xy(o))[0]]
+        else:
+            local = [o for o in holders if placer.stage.room_at(_xy(o)) is here]
         holders = local or holders
     saved = placer.boxes.pop(obj.id)
     cand = placer.on_surface(obj.id, obj.cls, size, obj.params, holders,
@@ -356,6 +448,8 @@ def _surface_moves(placer: Placer, plan: RearrangePlan, pinned: set[int], rests)
     for k in placer.rng.permutation(len(small)):
         if done >= plan.surface_moves:
             break
+        if _holds(placer, small[k].id, rests):
+            continue  # something was put on it since
         if _put_elsewhere(placer, placer.layout.object(small[k].id), plan) is not None:
             done += 1
 
@@ -470,8 +564,8 @@ def _toward_targets(placer: Placer, ref: Layout, plan: RearrangePlan, floor, ord
         if done >= plan.surface_moves and far_enough():
             break
         obj = lay.object(small[k].id)
-        if obj.id not in moved and far_enough():
-            continue
+        if (obj.id not in moved and far_enough()) or _holds(placer, obj.id, rests):
+            continue  # (something may have been put on it since)
         cand = _put_elsewhere(placer, obj, plan)
         if cand is not None:
             note([cand])
@@ -492,7 +586,19 @@ def _toward_targets(placer: Placer, ref: Layout, plan: RearrangePlan, floor, ord
     for k in rng.permutation(len(small)):
         if len(moved) >= goal:
             break
+        if _holds(placer, small[k].id, rests):
+            continue
         cand = _nudge_on_surface(placer, lay.object(small[k].id))
+        if cand is not None:
+            note([cand])
+    # too few short moves could be made (a crowded flat): far ones make up the rest, within their range
+    small = [o for o in _small(placer, pinned, rests) if o.id not in moved]
+    for k in rng.permutation(len(small)):
+        if len(moved) >= goal or len(far) >= fhi:
+            break
+        if _holds(placer, small[k].id, rests):
+            continue
+        cand = _put_elsewhere(placer, lay.object(small[k].id), plan)
         if cand is not None:
             note([cand])
 
@@ -526,9 +632,13 @@ def _add_copy(placer: Placer, t: ObjectInstance, oid: int, rng) -> ObjectInstanc
                                  template=t)
     if t.support.startswith("wall:"):
         return placer.on_wall(oid, t.cls, size, t.params, room, template=t)
-    if t.cls in AGAINST_WALL:
-        return placer.against_wall(oid, t.cls, size, t.params, room, tries=20, template=t)
-    return placer.free_spot(oid, t.cls, size, t.params, room, tries=20, jitter_deg=15.0, template=t)
+    over = _flat_ids(placer, t)
+    rel = _wall_relation(placer.stage, object_box(t))
+    if rel is not None and room.polygon is not None:
+        return _against_stage_wall(placer, t, size, t, room, rel, over | {oid}, tries=20, oid=oid)
+    if t.cls in AGAINST_WALL and room.polygon is None:
+        return placer.against_wall(oid, t.cls, size, t.params, room, tries=20, template=t, ignore=over)
+    return placer.free_spot(oid, t.cls, size, t.params, room, tries=20, jitter_deg=15.0, template=t, ignore=over)
 
 
 # meta keys of a variant that are its own, not carried over from an imported reference

@@ -146,3 +146,47 @@ def scaled_ranges(ref: Layout, ranges: dict = PAPER_RANGES) -> dict:
             a = max(1, a)
         out[k] = (a, max(a, math.ceil(hi * f - 1e-9)))
     return out
+
+
+# --------------------------------------------------------------------------------------------
+# the table the CLI prints
+
+LABELS = {
+    "moved_over_0.1m": "moved > 0.1 m",
+    "moved_over_0.5m": "moved > 0.5 m",
+    "moved_median_m": "moved median (m)",
+    "added": "added",
+    "removed": "removed",
+}
+
+
+def _fmt(v) -> str:
+    return f"{v:.2f}" if isinstance(v, float) else str(v)
+
+
+def _span(lo, hi) -> str:
+    return f"{_fmt(lo)}-{_fmt(hi)}"
+
+
+def scale_note(ref: Layout) -> str:
+    """One line saying how ``scaled_ranges(ref)`` scaled the paper's ranges."""
+    have, (base, base_l) = movable_counts(ref)["total"], reference_counts()
+    return (f"counts x {count_scale(ref):.3f} ({have} movable objects not free / {base['total']} in the built-in apt_0), "
+            f"median x {distance_scale(ref):.2f} (mean floor distance {flat_mean_distance(ref):.1f} m / {base_l:.1f} m)")
+
+
+def change_table(stats: dict, ranges: dict, paper: dict = PAPER_RANGES) -> list[str]:
+    """The change statistics of a variant as a table, one statistic a row: the value, the range it
+    must meet (``ranges``: the paper's, or scaled for an imported flat), ``ok``/``OUT`` against it,
+    and the paper's own range (unscaled, Sec. IV-A). Returns the lines (no trailing newline)."""
+    scaled = ranges != paper
+    head = ("statistic", "value", "target" + (" (scaled)" if scaled else ""), "", "paper (apt_0 size)")
+    rows = []
+    for k, (lo, hi) in ranges.items():
+        v = stats[k]
+        p = paper.get(k)
+        rows.append((LABELS.get(k, k), _fmt(v), _span(lo, hi), "ok" if lo <= v <= hi else "OUT",
+                     _span(*p) if p is not None else "-"))
+    w = [max(len(r[i]) for r in [head] + rows) for i in range(5)]
+    line = lambda r: f"  {r[0]:<{w[0]}}  {r[1]:>{w[1]}}  {r[2]:>{w[2]}} {r[3]:<{w[3]}}  {r[4]:>{w[4]}}".rstrip()  # noqa: E731
+    return [line(head)] + [line(r) for r in rows]
