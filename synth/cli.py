@@ -258,6 +258,13 @@ def cmd_rearrange(args) -> int:
     print(f"{var.name}: rearranged from {ref.name} (seed {args.seed}, attempt {var.meta['attempt']}), "
           f"{len(var.objects)} objects")
     _print_stats_table([(ref, ref_rep, None), (var, rep, st)], target_ranges(ref))
+    from .rearrange import is_imported
+    from .stats import change_table, scale_note
+
+    print()
+    if is_imported(ref):
+        print(scale_note(ref))
+    print("\n".join(change_table(st, target_ranges(ref))))
     print(f"wrote {out}")
     # a reference that does not check clean (an imported scene) only asks the variant to add no problem
     return 0 if (rep.ok or (not ref_rep.ok and not new_problems(ref_rep, rep))) else 1
