@@ -10,9 +10,11 @@ the ``empty_stage`` and ``apt_0..apt_5`` navmeshes), plus
   real files through ``synth.gltf.glb_geometry``; the three GLBs the public copy lacks have the
   bounds of their collision asset, or of a sibling: see the table's ``source``). Each box has a
   base colour factor; the first ``TEXTURED`` of them also a 4 x 4 base-colour texture with UVs.
-* the stand-in stage ``stages/frl_apartment_stage.glb`` built from the vendored empty-stage navmesh
-  by ``synth.navmesh.standin_stage`` (floor at z 0, as ``tools/replicacad_standin.py`` chooses for the
-  real data). The four ``Stage_v3_sc*`` stage configs are vendored but their GLBs are not written
+* the stand-in stage ``stages/frl_apartment_stage.glb``, built by ``tools/replicacad_standin.py`` itself
+  (``standin_tool()._fill``) the way it builds the real data's: from the vendored empty-stage navmesh,
+  the floor at z 0 (the median bottom of the scenes' objects, here the box GLBs), the floor holding
+  the box of every object of apt_0..apt_5 (+2 cm; all but one apt_2 shoe that stands outside), no
+  window behind one. The four ``Stage_v3_sc*`` stage configs are vendored but their GLBs are not written
   (no v3 scene is vendored); collision assets (``objects/convex/``) are not written either.
 
 ``python tests/replicacad_real_fixture.py --vendor SRC`` (re)vendors from a real ReplicaCAD folder
@@ -104,9 +106,22 @@ def box_glb(path: Path, lo, hi, colour, textured: bool) -> None:
     path.write_bytes(trimesh.exchange.gltf.export_glb(scene))
 
 
+def standin_tool():
+    """``tools/replicacad_standin.py`` as a module (``tools/`` is not a package)."""
+    import importlib.util
+
+    name = "replicacad_standin_tool"
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(name, Path(__file__).resolve().parents[1] / "tools" / "replicacad_standin.py")
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules[name] = mod
+        spec.loader.exec_module(mod)
+    return sys.modules[name]
+
+
 def write_real_fixture(root) -> Path:
     """Write the fixture dataset root at ``root`` (created; existing files are overwritten)."""
-    from synth.navmesh import StandinSpec, read_navmesh, standin_stage, write_standin_glb
+    from synth.navmesh import StandinSpec
 
     root = Path(root)
     root.mkdir(parents=True, exist_ok=True)
@@ -116,8 +131,11 @@ def write_real_fixture(root) -> Path:
         shutil.copyfile(FILES / rel, dst)
     for k, (rel, b) in enumerate(sorted(bounds_table().items())):
         box_glb(root / rel, b["min"], b["max"], _colour(rel), textured=k < TEXTURED)
-    nav = read_navmesh(root / STAGE_NAVMESH)
-    write_standin_glb(standin_stage(nav, StandinSpec(floor_z=STAGE_FLOOR_Z)), root / STAGE_GLB)
+    # the stand-in stage, as the tool builds the real data's (its object GLBs are all there: it adds none)
+    rows = standin_tool()._fill(root, StandinSpec())
+    built = [r for r in rows if r.get("file") == STAGE_GLB]
+    if len(built) != 1 or built[0].get("floor_z") != STAGE_FLOOR_Z or any(r["kind"] == "object" for r in rows):
+        raise RuntimeError(f"fixture stand-in stage: unexpected build rows {rows}")
     return root
 
 

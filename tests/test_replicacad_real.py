@@ -1,5 +1,6 @@
 """The real-format ReplicaCAD fixture (tests/replicacad_real_fixture.py): vendored files are the real
-ones, every box GLB has the real GLB's bounds, the stand-in stage stands on the navmesh footprint."""
+ones, every box GLB has the real GLB's bounds, the stand-in stage stands on the navmesh footprint and
+holds the scenes' objects."""
 
 from __future__ import annotations
 
@@ -7,8 +8,9 @@ import json
 
 import numpy as np
 import pytest
+from scipy import ndimage
 
-from replicacad_real_fixture import DATA, FILES, STAGE_GLB, bounds_table, manifest, sha256, write_real_fixture
+from replicacad_real_fixture import DATA, FILES, STAGE_GLB, bounds_table, manifest, sha256, standin_tool, write_real_fixture
 
 C = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 
@@ -66,24 +68,106 @@ def test_every_box_glb_has_the_table_bounds(root):
         assert rel in table
 
 
-def test_standin_stage_floor_is_the_navmesh_footprint(root):
-    from synth.gltf import glb_geometry
-    from synth.navmesh import read_navmesh
+@pytest.fixture(scope="module")
+def plain_footprint(root):
+    """The navmesh footprint as the stand-in takes it (every level's), without objects to hold."""
+    from synth.navmesh import StandinSpec, read_navmesh, standin_stage
 
-    nav = read_navmesh(root / "navmeshes/empty_stage.navmesh")
-    fp = nav.footprint()
-    m = glb_geometry(root / STAGE_GLB)
-    up = (m.face_normals[:, 2] > 0.95) & (np.abs(m.triangles_center[:, 2]) < 1e-6)
+    return standin_stage(read_navmesh(root / "navmeshes/empty_stage.navmesh"), StandinSpec(floor_z=0.0)).footprint
+
+
+def _in_rect(pts, quad, grow):
+    """Which points lie in the rectangle ``quad`` (4 x 2 corners, in order) grown by ``grow``."""
+    q = np.asarray(quad, float)
+    c = q.mean(axis=0)
+    out = np.ones(len(pts), bool)
+    for e in (q[1] - q[0], q[3] - q[0]):
+        L = float(np.linalg.norm(e))
+        out &= np.abs((pts - c) @ (e / L)) <= L / 2 + grow
+    return out
+
+
+def test_standin_stage_floor_is_the_navmesh_footprint_and_the_objects(root, plain_footprint):
+    """The floor is the navmesh footprint plus every object's box (+2 cm) that sticks out of it
+    (as tools/replicacad_standin.py builds the real data's): the up-facing floor faces at z 0 cover
+    the footprint except where the stairs stand, and each held box; they lie nowhere else."""
+    from synth.gltf import glb_geometry
+    from synth.navmesh import STANDIN_KEEP_MARGIN, StandinSpec
     from synth.stage_structure import _rasterise
 
-    # the floor's up-facing faces at z 0, on the footprint's grid: they cover the footprint except
-    # where the stairs stand, and lie nowhere else
-    tri = (m.triangles[up][:, :, :2] - fp.origin) / fp.cell
-    floor = _rasterise(tri, fp.mask.shape)
-    covered = (floor & fp.mask).sum() / fp.mask.sum()
-    assert covered > 0.9
-    assert not (floor & ~fp.mask).any()
+    fp = plain_footprint
+    cell, pad = fp.cell, int(round(2.0 / fp.cell))  # a grid 2 m wider than the footprint's on every side
+    origin = fp.origin - pad * cell
+    fpm = np.pad(fp.mask, pad)
+    m = glb_geometry(root / STAGE_GLB)
+    up = (m.face_normals[:, 2] > 0.95) & (np.abs(m.triangles_center[:, 2]) < 1e-6)
+    floor = _rasterise((m.triangles[up][:, :, :2] - origin) / cell, fpm.shape)
+    steps = (m.face_normals[:, 2] > 0.95) & (m.triangles_center[:, 2] > 1e-6) & (m.triangles_center[:, 2] < 2.85)  # not the slabs' tops (2.9, 5.4)
+    stood = floor | _rasterise((m.triangles[steps][:, :, :2] - origin) / cell, fpm.shape)  # floor or a step
+    assert (floor & fpm).sum() / fp.mask.sum() > 0.8  # the stairs and landings (10 m2) stand on the rest
+    assert (stood & fpm).sum() / fp.mask.sum() > 0.98
     assert m.bounds[0][2] == pytest.approx(-0.1, abs=1e-4)
+
+    tool = standin_tool()
+    keep, _, who = tool.object_footprints(root, tool.stage_scenes(root)["frl_apartment_stage"], 0.0, StandinSpec.ceiling)
+    assert len(keep) > 600  # the objects of apt_0..apt_5 (walls' and floor's, not those above the ceiling)
+    ii, jj = np.nonzero(np.ones(fpm.shape, bool))
+    centres = origin + (np.stack([ii, jj], axis=1) + 0.5) * cell
+    held = np.zeros(fpm.shape, bool)  # cells whose square meets a held box + margin
+    near = ndimage.binary_dilation(fpm, structure=np.ones((3, 3), bool))  # within a cell of the footprint
+    sticking = not_held = 0
+    for q, w in zip(keep, who):
+        box = _in_rect(centres, q, STANDIN_KEEP_MARGIN).reshape(fpm.shape)  # centres in the box + margin
+        grown = _in_rect(centres, q, STANDIN_KEEP_MARGIN + cell / 2 + 1e-6).reshape(fpm.shape)  # as the stand-in rasterises it
+        if not (grown & near).any():  # wholly outside the building: not held
+            not_held += 1
+            assert w[:2] == ("apt_2", 37), w  # a shoe outside the east facade
+            continue
+        out = box & ~fpm
+        sticking += bool(out.any())
+        assert stood[out].all(), w  # the floor (or a step: see the next test) holds what sticks out
+        held |= grown
+    assert not_held == 1 and sticking > 20
+    added = floor & ~fpm
+    stray = added & ~held
+    # no floor outside the footprint but under the boxes -- except 15 cells (0.04 m2) at x -2.675, y 1.78..2.5
+    # on the west edge, not explained yet (see the report of the commit that added this test)
+    assert added.any() and stray.sum() <= 20, (int(stray.sum()), centres[stray.ravel()][:5])
+    assert 2.0 < added.sum() * cell * cell < 6.0  # m2 (3.86 m2 when written)
+
+
+@pytest.mark.xfail(strict=True, reason="synth.navmesh.standin_stage gives a cell added to hold an object to the "
+                   "level whose walkable cells are nearest, not to the level the object stands on: beside the "
+                   "stairs the floor under apt_0's bike (bottom z -0.03) is raised into steps 0.34-0.69 m high")
+def test_floor_standing_objects_are_held_at_the_floor(root, plain_footprint):
+    from synth.gltf import glb_geometry
+    from synth.navmesh import STANDIN_KEEP_MARGIN
+    from synth.scene import object_box
+    from synth.stage_structure import _rasterise
+
+    fp = plain_footprint
+    cell, pad = fp.cell, int(round(2.0 / fp.cell))
+    origin = fp.origin - pad * cell
+    fpm = np.pad(fp.mask, pad)
+    m = glb_geometry(root / STAGE_GLB)
+    up = (m.face_normals[:, 2] > 0.95) & (np.abs(m.triangles_center[:, 2]) < 1e-6)
+    floor = _rasterise((m.triangles[up][:, :, :2] - origin) / cell, fpm.shape)
+    ii, jj = np.nonzero(np.ones(fpm.shape, bool))
+    centres = origin + (np.stack([ii, jj], axis=1) + 0.5) * cell
+    tool = standin_tool()
+    bad = []
+    for p, doc in tool.stage_scenes(root)["frl_apartment_stage"]:
+        for o in tool.scene_objects(root, p, doc):
+            b = object_box(o)
+            if abs(b.zmin) > 0.1:  # not on the floor
+                continue
+            box = _in_rect(centres, b.corners_2d(), STANDIN_KEEP_MARGIN).reshape(fpm.shape)
+            out = box & ~fpm
+            if (box & fpm).any() and not floor[out].all():
+                bad.append((p.name, o.id, o.cls, int((out & ~floor).sum())))
+    assert not bad, bad
+
+
 
 
 def test_apt_0_imports_on_the_fixture(root):
