@@ -16,7 +16,8 @@ from scipy import ndimage
 
 from . import assets
 from . import geometry as geo
-from .collision import DEFAULT_MARGIN, PENETRATION_TOL, contact_gap, margin, penetration, stage_distance, touching, world_pieces
+from .collision import (DEFAULT_MARGIN, PENETRATION_TOL, contact_gap, margin, penetration, stage_distance, stage_drop, touching,
+                        world_pieces)
 from .placement import door_zone, mesh_surfaces, opening_box
 from .scene import Layout, object_box
 
@@ -150,6 +151,41 @@ def _support_problem(layout: Layout, o, box: geo.OrientedBox, by_id, boxes, piec
             why = f"bottom at z={box.zmin:.3f} m: its collision shape touches no object, the floor, the stage mesh or a wall"
         return why
     return f"unknown support '{o.support}'"
+
+
+def _on_the_stage(layout: Layout, o, box: geo.OrientedBox, pieces: dict) -> bool:
+    """A physics-placed object above the floor that the stage mesh holds, so that the derived rooms
+    (main-floor interiors) need not hold its footprint: it stands on the stage below it (the stairs'
+    landing: the stage surface under its footprint centre lies within the collision margins of its
+    bottom), or it hangs on a wall (its collision shape touches the stage mesh and its centre lies at
+    most half its depth plus ``STRUCTURE_TOL`` outside the rooms: a picture on its wall, not one
+    pushed through it)."""
+    mine = pieces.get(o.id) if pieces else None
+    if not mine or box.zmin - layout.stage.floor_z <= 0.05:
+        return False
+    stage_margin = float((layout.meta.get("structure") or {}).get("margin", 0.0))
+    gap = contact_gap(margin(o), stage_margin)
+    if stage_distance(layout, mine) > gap:
+        return False
+    lowest = min(float(v[:, 2].min()) for v in mine)
+    if stage_drop(layout, (box.center[0], box.center[1], lowest + 0.01)) <= gap + 0.01:
+        return True
+    return _outside_rooms_by(layout.stage, np.asarray(box.center[:2], float)) <= min(box.size[:2]) / 2.0 + STRUCTURE_TOL
+
+
+def _outside_rooms_by(st, xy: np.ndarray) -> float:
+    """0 for a point inside some room, else its distance to the nearest room outline."""
+    if any(r.contains(xy[None, :])[0] for r in st.rooms):
+        return 0.0
+    best = math.inf
+    for r in st.rooms:
+        q = r.outline()
+        a, b = q, np.roll(q, -1, axis=0)
+        ab = b - a
+        L2 = np.maximum((ab * ab).sum(1), 1e-12)
+        t = np.clip(((xy - a) * ab).sum(1) / L2, 0.0, 1.0)
+        best = min(best, float(np.hypot(*(xy - a - t[:, None] * ab).T).min()))
+    return best
 
 
 def _both_static(a, b) -> bool:
@@ -299,6 +335,8 @@ def check_layout(layout: Layout) -> CheckReport:
         for o in objs:
             if o.support.startswith("wall:") or o.support.startswith("object:"):
                 continue
+            if o.support == "free" and _on_the_stage(layout, o, boxes[o.id], pieces):
+                continue  # hangs on a wall, stands on the stairs' landing: the stage holds it, no room has it
             if not _in_rooms(st, boxes[o.id].corners_2d()):
                 if not any(u["id"] == o.id for u in rep.unsupported):
                     rep.collisions.append({"a": o.id, "b": "wall", "classes": [o.cls, "wall"]})

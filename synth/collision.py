@@ -244,3 +244,16 @@ def stage_distance(layout, pieces: list[np.ndarray]) -> float:
     pts = np.concatenate(pieces).astype(np.float32)
     d = scene.compute_distance(o3d.core.Tensor(pts)).numpy()
     return float(d.min()) if len(d) else float("inf")
+
+
+def stage_drop(layout, point) -> float:
+    """How far below ``point`` the stage mesh is (a ray straight down; inf without a stage mesh or a hit)."""
+    import open3d as o3d
+
+    st, root = layout.stage, layout.meta.get("root")
+    if st.asset is None or root is None:
+        return float("inf")
+    scene = _stage_scene(str(root), st.asset, tuple(st.position), tuple(st.rotation))
+    ray = np.array([[point[0], point[1], point[2], 0.0, 0.0, -1.0]], np.float32)
+    t = float(scene.cast_rays(o3d.core.Tensor(ray))["t_hit"].numpy()[0])
+    return t if np.isfinite(t) else float("inf")

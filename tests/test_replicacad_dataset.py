@@ -200,3 +200,22 @@ def test_a_door_opens_until_it_meets_an_object(root):
     assert -2.0 < angle < -0.5
     assert not [c for c in check_layout(layout).collisions if door.id in (c["a"], c["b"])]
     assert next(o for o in load_replicacad(root, "apt_0").objects if o.cls == "door").params["door_opening"] == "limit"
+
+
+def test_a_picture_on_its_wall_passes_one_pushed_through_it_does_not(root):
+    layout = load_replicacad(root, "apt_0")
+    pic = next(o for o in layout.objects if o.params["template"] == "objects/frl_apartment_picture_01")
+    rep = check_layout(layout)
+    assert pic.id not in {c["a"] for c in rep.collisions} | {u["id"] for u in rep.unsupported}
+    from synth.checks import _outside_rooms_by
+
+    c = np.asarray(object_box(pic).center[:2], float)
+    # the way out of the rooms: the horizontal direction in which the centre leaves them soonest
+    dirs = [np.array([np.cos(a), np.sin(a)]) for a in np.linspace(0, 2 * np.pi, 16, endpoint=False)]
+    out = max(dirs, key=lambda d: _outside_rooms_by(layout.stage, c + 0.3 * d))
+    moved = ObjectInstance(pic.id, pic.cls, pic.asset, tuple(np.asarray(pic.position) + np.r_[0.5 * out, 0.0]), pic.rotation,
+                           pic.size, pic.box_offset, pic.support, pic.movable, pic.scale, pic.params)
+    bad = layout.copy()
+    bad.objects = [moved if o.id == pic.id else o for o in bad.objects]
+    rep2 = check_layout(bad)
+    assert any(c["a"] == pic.id and c["b"] == "wall" for c in rep2.collisions) or pic.id in {u["id"] for u in rep2.unsupported}
