@@ -23,6 +23,7 @@ class ClassInfo:
     support: str
     movable: bool
     structure: bool = False
+    imported: bool = False  # only imported datasets have it: synth.assets has no generator for it
 
 
 @dataclass(frozen=True)
@@ -78,7 +79,7 @@ def parse_class_table(data, source: str) -> ClassTable:
         field = f"classes.{name}"
         if not isinstance(props, dict):
             raise SceneFormatError(source, field, "expected a mapping with id, support, movable")
-        unknown = set(props) - {"id", "support", "movable", "structure"}
+        unknown = set(props) - {"id", "support", "movable", "structure", "imported"}
         if unknown:
             raise SceneFormatError(source, field, f"unknown key(s) {sorted(unknown)}")
         cid = props.get("id")
@@ -93,7 +94,10 @@ def parse_class_table(data, source: str) -> ClassTable:
         movable = props.get("movable")
         if not isinstance(movable, bool):
             raise SceneFormatError(source, f"{field}.movable", f"expected true or false, got {movable!r}")
-        classes[name] = ClassInfo(name, cid, support, movable, bool(props.get("structure", False)))
+        for flag in ("structure", "imported"):
+            if not isinstance(props.get(flag, False), bool):
+                raise SceneFormatError(source, f"{field}.{flag}", f"expected true or false, got {props.get(flag)!r}")
+        classes[name] = ClassInfo(name, cid, support, movable, bool(props.get("structure", False)), bool(props.get("imported", False)))
     aliases = (data.get("replicacad") or {}).get("aliases") or {}
     for key, target in aliases.items():
         if target not in classes:
