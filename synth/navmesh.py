@@ -422,6 +422,7 @@ WINDOW_END_MARGIN = 0.1  # m of solid wall at either end of a wall with windows
 WINDOW_CLEAR = 0.2  # m: no window where an object stands this close to the wall
 STANDIN_KEEP_MARGIN = 0.02  # m: the floor holds every object's footprint with this much to spare
 STANDIN_KEEP_MAX = 1.2  # m: footprints farther out of the navmesh footprint are not held (reported)
+STANDIN_KEEP_STAND = 0.1  # m: an object whose bottom is this close to a level it touches stands on it (else: hangs)
 STANDIN_COLOURS = {"floor": (0.55, 0.45, 0.35, 1.0), "walls": (0.85, 0.84, 0.80, 1.0), "ceiling": (0.95, 0.95, 0.95, 1.0),
                    "steps": (0.50, 0.42, 0.34, 1.0)}
 
@@ -435,10 +436,17 @@ class StandinSpec:
     ``ceiling``: the ceiling height above the floor. ``windows``: cut window openings in exterior walls.
     ``keep``: footprints (XY quads, our frame) of objects that stand in the stage (on its floor or on
     its walls): the floor is extended to hold each of them with ``keep_margin`` to spare (the walls
-    move out around them), unless one lies more than ``keep_max`` outside the navmesh footprint
+    move out around them; with ``keep_bottoms``, one whose bottom is more than ``STANDIN_KEEP_STAND``
+    from every level it touches hangs on a wall: held to the cell, without margin, so that the wall
+    stays right behind it), unless one lies more than ``keep_max`` outside the navmesh footprint
     or does not overlap it (an object outside the building, or in a recess of the building wider than
     that: reported, not held); no window is cut where one of them whose top (``keep_tops``) is above
-    the sill stands within ``window_clear`` of the wall (a rug or a low table does not hide a window)."""
+    the sill stands within ``window_clear`` of the wall (a rug or a low table does not hide a window).
+    ``keep_bottoms``: their bottoms (z, our frame). A floor cell added to hold an object goes to the
+    level, among those whose footprint the object's touches, whose height there is nearest the
+    object's bottom (a bike beside the stairs stays on the floor, a plant on the landing is raised
+    to it); a cell held by several objects, to the one with the lowest bottom (what stands on the
+    floor, not what stands on it). Empty: to the level whose walkable cells are nearest."""
 
     floor_z: float | None = None
     ceiling: float = STANDIN_CEILING
@@ -446,6 +454,7 @@ class StandinSpec:
     windows: bool = True
     keep: list = field(default_factory=list)  # (4, 2) XY footprints of objects the floor must hold
     keep_tops: list = field(default_factory=list)  # their tops (z, our frame); empty: all reach above the sills
+    keep_bottoms: list = field(default_factory=list)  # their bottoms (z, our frame); empty: cells to the nearest level
     keep_margin: float = STANDIN_KEEP_MARGIN
     keep_max: float = STANDIN_KEEP_MAX
     window_clear: float = WINDOW_CLEAR
@@ -595,21 +604,58 @@ def standin_stage(nav: NavMesh, spec: StandinSpec | None = None) -> Standin:
     for f in feet:
         U |= f.mask
     nav_fp = U.copy()
+    xc = lo[0] + (np.arange(shape[0]) + 0.5) * cell
+    yc = lo[1] + (np.arange(shape[1]) + 0.5) * cell
+    X, Y = np.meshgrid(xc, yc, indexing="ij")
+    kinds, planes = [], []  # per level: main / flat / ramp; a ramp's (plane coefficients, base, rise)
+    for k, lv in enumerate(levels):
+        z0, z1 = lv.z_range
+        kinds.append("main" if k == 0 else ("ramp" if z1 - z0 > nav.settings.agent_max_climb + 1e-6 else "flat"))
+        if kinds[-1] == "ramp":  # the plane through its vertices, cut into steps
+            V = np.concatenate([p.vertices for p in lv.polygons])
+            A = np.c_[V[:, 0], V[:, 1], np.ones(len(V))]
+            n = max(1, int(math.ceil((z1 - z0) / STANDIN_STEP)))
+            planes.append((np.linalg.lstsq(A, V[:, 2], rcond=None)[0], z0 + shift, (z1 - z0) / n))
+        else:
+            planes.append(None)
+
+    def level_height(k: int, sel: np.ndarray) -> np.ndarray:
+        """True height of level ``k`` at the cells ``sel`` (a ramp's: its step there)."""
+        if k == 0:
+            return np.full(int(sel.sum()), floor_z)
+        if planes[k] is None:
+            return np.full(int(sel.sum()), levels[k].z + shift)
+        (a, b, c), base_, rise_ = planes[k]
+        z0, z1 = levels[k].z_range
+        h = np.clip(a * X[sel] + b * Y[sel] + c, z0, z1) + shift
+        return base_ + np.ceil((h - base_) / rise_ - 1e-6) * rise_
+
+    add_owner = np.full(shape, -1)  # a cell added to hold an object: the level it goes to (keep_bottoms)
+    add_bottom = np.full(shape, np.inf)  # ... and the bottom of the object that chose it
     objects = np.zeros(shape, bool)  # cells any kept footprint reaching above the window sills touches
-    keep_info = {"objects": len(spec.keep), "held": 0, "not_held": [], "added_m2": 0.0}
+    keep_info = {"objects": len(spec.keep), "held": 0, "hung": 0, "not_held": [], "added_m2": 0.0}
     if spec.keep:
         from .stage_structure import _rasterise
 
         out_dist = ndimage.distance_transform_edt(~nav_fp) * cell  # distance of a cell centre from the footprint
         grow = spec.keep_margin + cell / 2.0  # a cell whose square meets the footprint + margin
+        if spec.keep_bottoms and len(spec.keep_bottoms) != len(spec.keep):
+            raise ValueError(f"StandinSpec: {len(spec.keep_bottoms)} keep_bottoms for {len(spec.keep)} keep footprints")
+        touch = [ndimage.binary_dilation(f.mask, iterations=2) for f in feet]  # a held object touches these levels
+        z_rng = [(lv.z_range[0] + shift, lv.z_range[1] + shift) for lv in levels]
+
+        def box_cells(q: np.ndarray, g: float) -> np.ndarray:
+            # each side moved out by g along the box's own axes (corners out along the diagonals
+            # would move a long box's ends by up to g * sqrt(2) and its long sides by less than g)
+            c = q.mean(axis=0)
+            u, v = q[1] - q[0], q[3] - q[0]
+            u, v = u / max(float(np.linalg.norm(u)), 1e-9), v / max(float(np.linalg.norm(v)), 1e-9)
+            qq = q + g * (np.sign((q - c) @ u)[:, None] * u + np.sign((q - c) @ v)[:, None] * v)
+            return _rasterise((np.array([[qq[0], qq[1], qq[2]], [qq[0], qq[2], qq[3]]]) - lo) / cell, shape)
+
         for k, q in enumerate(spec.keep):
             q = np.asarray(q, float).reshape(-1, 2)
-            c = q.mean(axis=0)
-            e = q - c
-            nrm = np.linalg.norm(e, axis=1, keepdims=True)
-            qq = c + e * (1.0 + grow * math.sqrt(2.0) / np.maximum(nrm, 1e-9))  # corners out along the diagonals
-            tri = (np.array([[qq[0], qq[1], qq[2]], [qq[0], qq[2], qq[3]]]) - lo) / cell
-            m = _rasterise(tri, shape)
+            m = box_cells(q, grow)  # whether it is held, and where no window goes, are decided with the margin
             if not m.any():  # wholly off the grid: farther out than keep_max
                 fc = lo + (np.argwhere(nav_fp) + 0.5) * cell
                 far = max(float(np.min(np.hypot(*(fc - v).T))) for v in q)
@@ -621,7 +667,21 @@ def standin_stage(nav: NavMesh, spec: StandinSpec | None = None) -> Standin:
                 keep_info["not_held"].append({"index": k, "outside_m": round(float(out_dist[m].max()), 3)})
                 continue
             keep_info["held"] += 1
+            cand = [j for j in range(len(levels)) if (touch[j] & m).any()]
+            if spec.keep_bottoms and cand:
+                zb = float(spec.keep_bottoms[k])
+                if not any(z_rng[j][0] - STANDIN_KEEP_STAND <= zb <= z_rng[j][1] + STANDIN_KEEP_STAND for j in cand):
+                    keep_info["hung"] += 1  # on a wall (or on furniture): no margin, so that the wall stays behind it
+                    m = box_cells(q, cell / 2.0)
             U |= m
+            if spec.keep_bottoms:
+                zb = float(spec.keep_bottoms[k])
+                new = m & ~nav_fp & (zb < add_bottom)
+                if new.any():
+                    cand = cand or list(range(len(levels)))
+                    d = np.abs(np.stack([level_height(j, new) for j in cand]) - zb)
+                    add_owner[new] = np.asarray(cand)[np.argmin(d, axis=0)]  # ties: the lower level index (main first)
+                    add_bottom[new] = zb
         keep_info["added_m2"] = round(float((U & ~nav_fp).sum()) * cell * cell, 3)
     # each footprint cell belongs to the level whose walkable cells are nearest (the main level on ties)
     dist = np.stack([ndimage.distance_transform_edt(~w.mask) if w.mask.any() else np.full(shape, np.inf) for w in walk])
@@ -629,43 +689,25 @@ def standin_stage(nav: NavMesh, spec: StandinSpec | None = None) -> Standin:
     for k, f in enumerate(feet):
         dist[k][~f.mask & ~added] = np.inf
     owner = np.argmin(dist, axis=0)
+    owner[added & (add_owner >= 0)] = add_owner[added & (add_owner >= 0)]
     owner[~U] = -1
     height = np.full(shape, floor_z)
     over_h = np.full(shape, -np.inf)
-    coef = base = rise = None
     info = []
-    xc = lo[0] + (np.arange(shape[0]) + 0.5) * cell
-    yc = lo[1] + (np.arange(shape[1]) + 0.5) * cell
-    X, Y = np.meshgrid(xc, yc, indexing="ij")
     top = floor_z
     for k, lv in enumerate(levels):
         z0, z1 = lv.z_range
-        kind = "main" if k == 0 else ("ramp" if z1 - z0 > nav.settings.agent_max_climb + 1e-6 else "flat")
+        kind = kinds[k]
         sel = owner == k
         if k > 0 and sel.any():
-            if kind == "flat":
-                h = np.full(int(sel.sum()), lv.z + shift)
-            else:  # a ramp: the plane through its vertices, cut into steps
-                V = np.concatenate([p.vertices for p in lv.polygons])
-                A = np.c_[V[:, 0], V[:, 1], np.ones(len(V))]
-                coef = np.linalg.lstsq(A, V[:, 2], rcond=None)[0]
-                h = np.clip(coef[0] * X[sel] + coef[1] * Y[sel] + coef[2], z0, z1) + shift
-                base = z0 + shift
-                n = max(1, int(math.ceil((z1 - z0) / STANDIN_STEP)))
-                rise = (z1 - z0) / n
-                h = base + np.ceil((h - base) / rise - 1e-6) * rise
-            height[sel] = np.maximum(h, floor_z)
+            height[sel] = np.maximum(level_height(k, sel), floor_z)
             top = max(top, float(height[sel].max()))
         if k > 0:
             # walkable both here and on the main floor (a flight of stairs above a walkable space):
             # a floating slab at this level's height, the space under it left free
             ov = walk[k].mask & (owner == 0)
             if ov.any():
-                if kind == "flat":
-                    hv = np.full(int(ov.sum()), lv.z + shift)
-                else:
-                    hv = np.clip(coef[0] * X[ov] + coef[1] * Y[ov] + coef[2], z0, z1) + shift
-                    hv = base + np.ceil((hv - base) / rise - 1e-6) * rise
+                hv = level_height(k, ov)
                 over_h[ov] = np.maximum(over_h[ov], hv)
                 top = max(top, float(hv.max()))
         info.append({"z_navmesh": round(lv.z, 3), "z_range_navmesh": [round(z0, 3), round(z1, 3)], "kind": kind,

@@ -13,8 +13,9 @@ the ``empty_stage`` and ``apt_0..apt_5`` navmeshes), plus
 * the stand-in stage ``stages/frl_apartment_stage.glb``, built by ``tools/replicacad_standin.py`` itself
   (``standin_tool()._fill``) the way it builds the real data's: from the vendored empty-stage navmesh,
   the floor at z 0 (the median bottom of the scenes' objects, here the box GLBs), the floor holding
-  the box of every object of apt_0..apt_5 (+2 cm; all but one apt_2 shoe that stands outside), no
-  window behind one. The four ``Stage_v3_sc*`` stage configs are vendored but their GLBs are not written
+  the box of every object of apt_0..apt_5 (+2 cm, to the cell for those hung on walls or standing on
+  furniture; all but one apt_2 shoe that stands outside), each added cell on the level the object
+  stands on, no window behind one. The four ``Stage_v3_sc*`` stage configs are vendored but their GLBs are not written
   (no v3 scene is vendored); collision assets (``objects/convex/``) are not written either.
 
 ``python tests/replicacad_real_fixture.py --vendor SRC`` (re)vendors from a real ReplicaCAD folder

@@ -177,7 +177,7 @@ def test_the_objects_stick_out_of_the_plain_stand_in(plain):
     assert fp.contains([(EAST - 0.025, -3.1), (EAST - 0.025, -0.5), (EAST - 0.075, -5.5)]).all()
     assert not fp.contains([(EAST + 0.025, -3.1), (EAST + 0.025, -0.5), (EAST - 0.025, -5.5)]).any()
     assert _east_windows(plain, SHELF[1], SHELF[3]) and _east_windows(plain, BENCH[1], BENCH[3])
-    assert plain.report["keep"] == {"objects": 0, "held": 0, "not_held": [], "added_m2": 0.0}
+    assert plain.report["keep"] == {"objects": 0, "held": 0, "hung": 0, "not_held": [], "added_m2": 0.0}
 
 
 def test_standin_floor_holds_an_object_sticking_out(plain, held):
@@ -233,3 +233,81 @@ def test_objects_far_out_are_not_held(plain, held):
         assert (held.footprint.contains(pts) == plain.footprint.contains(pts)).all(), r
     # the wall east of FAR stays where the plain stand-in has it
     assert held.walls.contains([(EAST + 0.025, -5.5)]).all() and plain.walls.contains([(EAST + 0.025, -5.5)]).all()
+
+
+# beside the stairs (their east flight ends at x 3.6, y 1.1..2.45, steps 0.34..0.69 m there): apt_0's
+# bike, bottom z -0.03, sticking out of the east wall; a plant on the landing (z 1.2), sticking out east
+BIKE = [(4.04, 1.84), (3.529, 0.236), (4.184, 0.028), (4.695, 1.632)]
+LANDING_PLANT = (3.3, 3.4, 3.95, 4.0)
+
+
+def _top_z(s, pts):
+    """Height of the highest up-facing floor or step face over each point (None: none)."""
+    faces = []
+    for part in ("floor", "steps"):
+        m = s.parts[part]
+        up = m.face_normals[:, 2] > 0.95
+        faces.append((m.triangles[up][:, :, :2], m.triangles_center[up][:, 2]))
+    T = np.concatenate([f[0] for f in faces])
+    z = np.concatenate([f[1] for f in faces])
+    out = []
+    for p in np.asarray(pts, float):
+        a, b, c = T[:, 0], T[:, 1], T[:, 2]
+        d = [(v[:, 0] - u[:, 0]) * (p[1] - u[:, 1]) - (v[:, 1] - u[:, 1]) * (p[0] - u[:, 0]) for u, v in ((a, b), (b, c), (c, a))]
+        ins = ((d[0] >= -1e-9) & (d[1] >= -1e-9) & (d[2] >= -1e-9)) | ((d[0] <= 1e-9) & (d[1] <= 1e-9) & (d[2] <= 1e-9))
+        out.append(float(z[ins].max()) if ins.any() else None)
+    return out
+
+
+def test_cells_added_for_an_object_go_to_the_level_of_its_bottom(plain):
+    nav = read_navmesh(NAV / "empty_stage.navmesh")
+    keep = [np.array(BIKE), _quad_xy(LANDING_PLANT)]
+    by_bottom = standin_stage(nav, StandinSpec(floor_z=0.0, keep=keep, keep_bottoms=[-0.03, 1.18]))
+    nearest = standin_stage(nav, StandinSpec(floor_z=0.0, keep=keep))  # no bottoms: the nearest level's
+    for s in (by_bottom, nearest):
+        assert s.report["keep"]["held"] == 2
+    c = by_bottom.footprint.centres()
+    add = c[~plain.footprint.contains(c)]
+    bike = add[:, 1] < 2.5
+    assert bike.sum() > 200 and (~bike).sum() > 50
+    z = np.array(_top_z(by_bottom, add), float)
+    assert np.abs(z[bike]).max() < 1e-6  # the bike's cells: floor at z 0
+    assert np.allclose(z[~bike], 1.2, atol=0.01)  # the plant's: the landing (navmesh 1.32 - 0.12)
+    z0 = np.array(_top_z(nearest, add), float)
+    assert (z0[bike] > 0.3).sum() > 50  # the old rule: steps under the bike
+    assert by_bottom.report["raised_m2"] < nearest.report["raised_m2"]
+    with pytest.raises(ValueError, match="keep_bottoms"):
+        standin_stage(nav, StandinSpec(floor_z=0.0, keep=keep, keep_bottoms=[0.0]))
+
+
+def test_a_long_thin_object_is_held_with_the_margin_on_every_side(plain):
+    """The margin is added along the box's own sides: a 0.25 x 0.81 m box gets 2 cm (+ half a cell)
+    on its long sides too, and no more at its ends (moving the corners out along the diagonals
+    would give its ends 1.4 times as much and its sides a third)."""
+    rail = (EAST - 0.2, -2.02, EAST + 0.05, -1.21)
+    m = 0.02  # StandinSpec.keep_margin
+    s = standin_stage(read_navmesh(NAV / "empty_stage.navmesh"), StandinSpec(floor_z=0.0, keep=[_quad_xy(rail)], keep_tops=[0.5]))
+    fp, cell = s.footprint, s.footprint.cell
+    assert fp.contains(_cells_in(fp, _grow(rail, m + cell / 2 - 1e-6))).all()
+    add = fp.centres()[~plain.footprint.contains(fp.centres())]
+    g = _grow(rail, m + cell / 2 + 1e-6)
+    assert ((add[:, 0] >= g[0]) & (add[:, 0] <= g[2]) & (add[:, 1] >= g[1]) & (add[:, 1] <= g[3])).all()
+    assert fp.contains([(EAST + 0.075, -1.6)]).all() and not fp.contains([(EAST + 0.125, -1.6), (EAST + 0.025, -2.075)]).any()
+    assert len(add) == 2 * 18  # x 4.425, 4.475; y -2.025 .. -1.175
+
+
+def test_an_object_hanging_on_a_wall_keeps_the_wall_right_behind_it(plain):
+    """A TV 0.9 m up on the east wall, 4 cm out of the footprint: held to the cell without margin, so
+    the wall starts within a cell of its back (the checks find it hung on the wall); the same box
+    standing on the floor gets the margin, the wall a cell farther out."""
+    tv = (EAST - 0.03, -1.9, EAST + 0.04, -1.3)
+    nav = read_navmesh(NAV / "empty_stage.navmesh")
+    hung = standin_stage(nav, StandinSpec(floor_z=0.0, keep=[_quad_xy(tv)], keep_tops=[1.5], keep_bottoms=[0.9]))
+    stands = standin_stage(nav, StandinSpec(floor_z=0.0, keep=[_quad_xy(tv)], keep_tops=[1.5], keep_bottoms=[0.0]))
+    assert hung.report["keep"]["held"] == stands.report["keep"]["held"] == 1
+    assert hung.report["keep"]["hung"] == 1 and stands.report["keep"]["hung"] == 0
+    behind, out = (EAST + 0.025, -1.6), (EAST + 0.075, -1.6)
+    assert not plain.footprint.contains([behind]).any()
+    assert hung.footprint.contains([behind]).all() and not hung.footprint.contains([out]).any()
+    assert hung.walls.contains([out]).all()  # the wall's face at x EAST + 0.05: 1 cm behind the TV
+    assert stands.footprint.contains([behind, out]).all() and not stands.walls.contains([out]).any()

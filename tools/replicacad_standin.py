@@ -147,21 +147,22 @@ def scene_objects(root: Path, scene_path: Path, doc: dict) -> list:
     return open_doors(objs, r)
 
 
-def object_footprints(root: Path, scenes: list[tuple[Path, dict]], floor_z: float, ceiling: float) -> tuple[list, list, list]:
+def object_footprints(root: Path, scenes: list[tuple[Path, dict]], floor_z: float, ceiling: float) -> tuple[list, list, list, list]:
     """XY footprints (4, 2) of the boxes of every object of the scenes that stands in the storey (its
     box's bottom between 0.1 m below the floor and the ceiling: on the floor, on furniture, on a
-    wall), their tops (z), and (scene, object id, class) of each, in the same order."""
+    wall), their tops and bottoms (z), and (scene, object id, class) of each, in the same order."""
     from synth.scene import object_box
 
-    quads, tops, who = [], [], []
+    quads, tops, bottoms, who = [], [], [], []
     for p, doc in scenes:
         for o in scene_objects(root, p, doc):
             b = object_box(o)
             if floor_z - 0.1 <= b.zmin < floor_z + ceiling:
                 quads.append(b.corners_2d())
                 tops.append(float(b.zmax))
+                bottoms.append(float(b.zmin))
                 who.append((p.name[: -len(SCENE_SUFFIX)], o.id, o.cls))
-    return quads, tops, who
+    return quads, tops, bottoms, who
 
 
 def floor_height(nav: NavMesh, bottoms: list[float], margin: float) -> tuple[float, str]:
@@ -275,9 +276,9 @@ def _fill(out: Path, spec: StandinSpec, hold: bool = True) -> list[dict]:
             continue
         nav = merged([read_navmesh(f) for f in files])
         floor, why = floor_height(nav, object_bottoms(out, users), float(cfg.get("margin", 0.0)))
-        keep, tops, who = object_footprints(out, users, floor, spec.ceiling) if hold else ([], [], [])
+        keep, tops, bottoms, who = object_footprints(out, users, floor, spec.ceiling) if hold else ([], [], [], [])
         s = standin_stage(nav, StandinSpec(floor_z=floor, ceiling=spec.ceiling, wall_cells=spec.wall_cells, windows=spec.windows,
-                                           keep=keep, keep_tops=tops, keep_margin=spec.keep_margin, window_clear=spec.window_clear))
+                                           keep=keep, keep_tops=tops, keep_bottoms=bottoms, keep_margin=spec.keep_margin, window_clear=spec.window_clear))
         write_standin_glb(s, glb)
         r = s.report
         rows.append({"file": str(glb.relative_to(out)), "kind": "stage",
@@ -286,7 +287,7 @@ def _fill(out: Path, spec: StandinSpec, hold: bool = True) -> list[dict]:
                      "footprint_m2": r["footprint_m2"], "main_footprint_m2": r["main_footprint_m2"],
                      "raised_m2": r["raised_m2"], "windows": r["windows"], "quads": r["quads"],
                      "levels": r["levels"], "window_list": s.windows,
-                     "objects_held": r["keep"]["held"], "objects_considered": r["keep"]["objects"],
+                     "objects_held": r["keep"]["held"], "objects_hung": r["keep"]["hung"], "objects_considered": r["keep"]["objects"],
                      "floor_added_m2": r["keep"]["added_m2"],
                      "objects_not_held": [dict(x, scene=who[x["index"]][0], id=who[x["index"]][1], cls=who[x["index"]][2])
                                           for x in r["keep"]["not_held"]],
@@ -301,7 +302,7 @@ def print_table(rows: list[dict]) -> None:
             lv = ", ".join(f"{x['kind']} {x['z_navmesh']:.2f}: {x['owned_m2']:.1f} m2" for x in r["levels"])
             sc = "" if r["stair_ceiling_z"] is None else f" / stairs {r['stair_ceiling_z']:.2f}"
             d = (f"floor z {r['floor_z']:.2f} ({r['floor_from']}), ceiling {r['ceiling_z']:.2f}{sc}, "
-                 f"holds {r['objects_held']} of {r['objects_considered']} object footprints (+{r['floor_added_m2']:.2f} m2), "
+                 f"holds {r['objects_held']} of {r['objects_considered']} object footprints ({r['objects_hung']} hung, +{r['floor_added_m2']:.2f} m2), "
                  f"footprint {r['footprint_m2']:.1f} m2 (main {r['main_footprint_m2']:.1f}), windows {r['windows']}, "
                  f"{len(r['navmeshes'])} navmesh(es); levels: {lv}")
         elif "bounds_min" in r:
