@@ -168,7 +168,9 @@ def _on_the_stage(layout: Layout, o, box: geo.OrientedBox, pieces: dict) -> bool
     if stage_distance(layout, mine) > gap:
         return False
     lowest = min(float(v[:, 2].min()) for v in mine)
-    if stage_drop(layout, (box.center[0], box.center[1], lowest + 0.01)) <= gap + 0.01:
+    # the stage surface under the centre within the margins of the bottom, above or below it (the ray
+    # starts a margin above the bottom: a shape may rest that far into what holds it)
+    if stage_drop(layout, (box.center[0], box.center[1], lowest + gap)) <= 2 * gap:
         return True
     return _outside_rooms_by(layout.stage, np.asarray(box.center[:2], float)) <= min(box.size[:2]) / 2.0 + STRUCTURE_TOL
 
