@@ -24,6 +24,7 @@ assets) has none here, and the checks fall back to its box.
 from __future__ import annotations
 
 import functools
+import logging
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -32,6 +33,8 @@ import numpy as np
 from . import geometry as geo
 from .habitat_format import Y_UP_TO_Z_UP, dataset_root
 from .scene import GLB_ASSET_PREFIX, URDF_ASSET_PREFIX
+
+log = logging.getLogger(__name__)
 
 PENETRATION_TOL = 0.01  # m: a ball of this radius fits inside both shapes -> interpenetration
 # Contact. Bullet grows every convex collision shape by its margin (btCollisionMargin.h:
@@ -219,11 +222,19 @@ def touching(a_pieces: list[np.ndarray], b_pieces: list[np.ndarray], gap: float 
 
 @functools.lru_cache(maxsize=8)
 def _stage_scene(root: str, asset: str, position: tuple, rotation: tuple):
+    """Open3D ray-casting scene of a stage mesh in the world; None when the mesh cannot be read (the
+    checks then go without it, saying so once)."""
     import open3d as o3d
+
+    from formats.errors import SceneFormatError, UnknownNameError
 
     from .mesh_assets import load_asset_mesh
 
-    m = load_asset_mesh(root, asset)
+    try:
+        m = load_asset_mesh(root, asset)
+    except (SceneFormatError, UnknownNameError) as e:
+        log.warning("stage mesh not used by the checks: %s", e)
+        return None
     R = geo.quat_to_matrix(rotation)
     v = np.asarray(m.vertices, float) @ R.T + np.asarray(position, float)
     scene = o3d.t.geometry.RaycastingScene()
@@ -241,6 +252,8 @@ def stage_distance(layout, pieces: list[np.ndarray]) -> float:
     if st.asset is None or root is None or not pieces:
         return float("inf")
     scene = _stage_scene(str(root), st.asset, tuple(st.position), tuple(st.rotation))
+    if scene is None:
+        return float("inf")
     pts = np.concatenate(pieces).astype(np.float32)
     d = scene.compute_distance(o3d.core.Tensor(pts)).numpy()
     return float(d.min()) if len(d) else float("inf")
@@ -254,6 +267,8 @@ def stage_drop(layout, point) -> float:
     if st.asset is None or root is None:
         return float("inf")
     scene = _stage_scene(str(root), st.asset, tuple(st.position), tuple(st.rotation))
+    if scene is None:
+        return float("inf")
     ray = np.array([[point[0], point[1], point[2], 0.0, 0.0, -1.0]], np.float32)
     t = float(scene.cast_rays(o3d.core.Tensor(ray))["t_hit"].numpy()[0])
     return t if np.isfinite(t) else float("inf")

@@ -78,6 +78,7 @@ from trimesh.visual import TextureVisuals
 from trimesh.visual.material import PBRMaterial
 
 from formats.errors import SceneFormatError
+from formats.lfs import LFS_HINT, LFS_POINTER_PREFIX, is_lfs_pointer  # noqa: F401 - re-exported for readers
 
 log = logging.getLogger(__name__)
 
@@ -98,21 +99,6 @@ __all__ = ["load_glb_parts", "glb_geometry", "check_glb", "pbr", "is_emissive", 
            "sample_base_color", "srgb_to_linear", "TEXTURE_TRANSFORM", "LFS_HINT"]
 
 TEXTURE_TRANSFORM = "KHR_texture_transform"
-LFS_POINTER_PREFIX = b"version https://git-lfs.github.com/spec/v1"
-LFS_HINT = "is a Git LFS pointer, not the file itself (run git lfs pull)"
-
-
-def is_lfs_pointer(data_or_path) -> bool:
-    """The bytes (or the file's first bytes) are a Git LFS pointer: text starting with the spec line."""
-    if isinstance(data_or_path, (bytes, bytearray, memoryview)):
-        head = bytes(data_or_path[: len(LFS_POINTER_PREFIX)])
-    else:
-        try:
-            with open(data_or_path, "rb") as f:
-                head = f.read(len(LFS_POINTER_PREFIX))
-        except OSError:
-            return False
-    return head == LFS_POINTER_PREFIX
 
 
 # --------------------------------------------------------------------------------------------

@@ -190,7 +190,7 @@ def render_asset(root: Path, config: Path, cfg: dict) -> Path:
     """The GLB a config's ``render_asset`` names (relative to the config's folder). SceneFormatError
     naming the config and ``render_asset`` when it does not exist, and naming the GLB when it is a
     Git LFS pointer (a clone made without ``git lfs``: "run git lfs pull")."""
-    from .gltf import LFS_HINT, is_lfs_pointer
+    from formats.lfs import LFS_HINT, is_lfs_pointer
 
     rel = string(config, cfg.get("render_asset"), "render_asset")
     glb = Path(os.path.normpath(config.parent / rel))

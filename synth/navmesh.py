@@ -57,6 +57,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from formats.lfs import LFS_HINT, is_lfs_pointer
 from scipy import ndimage
 
 from .habitat_format import Y_UP_TO_Z_UP, fail, mapping, read_json
@@ -291,8 +293,8 @@ def read_navmesh(path) -> NavMesh:
         b = path.read_bytes()
     except OSError as e:
         fail(path, None, f"cannot read: {e}")
-    if b.startswith(b"version https://git-lfs"):
-        fail(path, None, "is a Git LFS pointer, not the navmesh (run 'git lfs pull' in the dataset)")
+    if is_lfs_pointer(b):
+        fail(path, None, LFS_HINT)
     need = HEADER.size + PARAMS.size + SETTINGS.size
     if len(b) < need:
         fail(path, None, f"truncated navmesh: {len(b)} bytes, the header alone is {need}")

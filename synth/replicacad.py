@@ -60,6 +60,7 @@ Not supported
 from __future__ import annotations
 
 import logging
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -445,6 +446,22 @@ def infer_supports(objects: list[ObjectInstance], floor_z: float, root=None) -> 
     return [placed[o.id] for o in objects]
 
 
+def scene_objects(root, scene_path, doc: dict, allow_unknown: bool = True) -> list[ObjectInstance]:
+    """The objects of a scene as ``load_replicacad`` reads them (rigid objects, then articulated ones
+    from their URDFs, doors opened), without its stage, supports or lights: for tools that build a
+    stage around them (``tools/replicacad_standin.py``). Door leaves collide only with these objects."""
+    r = dataset_root(root, require_config=True)
+    classes = class_table()
+    semantics = read_semantics(r, Path(scene_path), doc, classes)
+    instances = _parse_instances(r, Path(scene_path), doc, classes, semantics)
+    objects = [_object(inst, k + 1, inst.cls or UNKNOWN_CLASS) for k, inst in enumerate(instances)]
+    from .urdf import load_articulated_instances
+
+    objects += load_articulated_instances(r, Path(scene_path), doc, len(objects) + 1, classes, allow_unknown=allow_unknown,
+                                          lexicon=semantics.table)
+    return open_doors(objects, r)
+
+
 def load_replicacad(root, scene: str, classes: ClassTable | None = None, allow_unknown: bool = False,
                     structure: bool = True) -> Layout:
     """Read ``<root>/configs/scenes/<scene>.scene_instance.json`` into a Layout (see the module docstring).
@@ -494,8 +511,6 @@ def load_replicacad(root, scene: str, classes: ClassTable | None = None, allow_u
                                               lexicon=semantics.table)
         if len(objects) > MAX_OBJECT_ID:
             fail(scene_path, "articulated_object_instances", f"{len(objects)} objects in all; at most {MAX_OBJECT_ID} are supported")
-        from .urdf import open_doors
-
         objects = infer_supports(open_doors(objects, r), stage.floor_z, r)
         meta["structure"] = report
     else:
@@ -511,3 +526,51 @@ def load_replicacad(root, scene: str, classes: ClassTable | None = None, allow_u
         layout.fixtures = fixtures_for_imported(layout, lights)
         meta["lighting_config"] = None if lighting is None else Path(os.path.relpath(lighting, r)).as_posix()
     return layout
+
+
+DOOR_STEP = math.radians(5.0)  # how far a door swings back per try when its open leaf would hit something
+
+
+def open_doors(objects: list[ObjectInstance], root) -> list[ObjectInstance]:
+    """Doors (``DOOR_CLASS``) opened by ``load_articulated_instances`` swing back towards closed, in
+    ``DOOR_STEP`` steps, until their leaf's collision shape interpenetrates no other object
+    (``synth.collision``): a door opens until it meets the bin behind it. The angle taken is recorded
+    in ``params["door_opening"]`` ("limit", "stopped" or "closed": no open angle was free)."""
+    from .collision import PENETRATION_TOL, penetration, world_pieces
+    from .scene import object_box
+    from .urdf import DOOR_CLASS, with_joint_state
+
+    others = [o for o in objects if o.cls != DOOR_CLASS]
+    out = []
+    for o in objects:
+        if o.cls != DOOR_CLASS or not o.params.get("articulated") or "door_opening" in o.params:
+            out.append(o)
+            continue
+        state = dict(o.params.get("joint_state") or {})
+        moving = {k: v for k, v in state.items() if v != 0.0}
+        if not moving:
+            out.append(o)
+            continue
+        steps = int(max(abs(v) for v in moving.values()) / DOOR_STEP) + 1
+        chosen, how = None, "closed"
+        for k in range(steps + 1):
+            f = max(0.0, 1.0 - k * DOOR_STEP / max(abs(v) for v in moving.values()))
+            cand = with_joint_state(o, root, {**state, **{j: v * f for j, v in moving.items()}})
+            box = object_box(cand)
+            mine = world_pieces(cand, root)
+            hit = False
+            for p in others:
+                pb = object_box(p)
+                if np.any(np.abs(np.asarray(pb.center) - np.asarray(box.center)) > (np.asarray(pb.size) + np.asarray(box.size)) / 2.0 * 1.5):
+                    continue
+                if penetration(mine, world_pieces(p, root)) >= PENETRATION_TOL:
+                    hit = True
+                    break
+            if not hit:
+                chosen, how = cand, "limit" if k == 0 else "stopped"
+                break
+        if chosen is None:
+            chosen = with_joint_state(o, root, {**state, **{j: 0.0 for j in moving}})
+        chosen.params["door_opening"] = how
+        out.append(chosen)
+    return out

@@ -135,16 +135,9 @@ def scene_objects(root: Path, scene_path: Path, doc: dict) -> list:
     """The objects of a scene as the importer reads them (``synth.replicacad``: rigid objects at their
     configs' bounds, articulated ones from their URDFs, doors opened) without reading its stage,
     which is what is being built."""
-    from synth import replicacad as rc
-    from synth.urdf import load_articulated_instances, open_doors
+    from synth.replicacad import scene_objects as read_scene_objects
 
-    r = rc.dataset_root(root, require_config=True)
-    classes = rc.class_table()
-    sem = rc.read_semantics(r, scene_path, doc, classes)
-    inst = rc._parse_instances(r, scene_path, doc, classes, sem)
-    objs = [rc._object(i, k + 1, i.cls or rc.UNKNOWN_CLASS) for k, i in enumerate(inst)]
-    objs += load_articulated_instances(r, scene_path, doc, len(objs) + 1, classes, allow_unknown=True, lexicon=sem.table)
-    return open_doors(objs, r)
+    return read_scene_objects(root, scene_path, doc)
 
 
 def object_footprints(root: Path, scenes: list[tuple[Path, dict]], floor_z: float, ceiling: float) -> tuple[list, list, list, list]:
