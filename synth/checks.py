@@ -139,7 +139,7 @@ def _support_problem(layout: Layout, o, box: geo.OrientedBox, by_id, boxes, piec
             # collision shape touches, within the two shapes' collision margins (synth.collision):
             # another object's shape, the floor, the stage mesh, or a derived wall (to STRUCTURE_TOL)
             mine, m = pieces[o.id], margin(o)
-            stage_margin = float((layout.meta.get("structure") or {}).get("margin", 0.0))
+            stage_margin = _stage_margin(layout)
             if min(float(v[:, 2].min()) for v in mine) - floor <= contact_gap(m, stage_margin):
                 return None
             reach = contact_gap(m, DEFAULT_MARGIN)
@@ -153,6 +153,11 @@ def _support_problem(layout: Layout, o, box: geo.OrientedBox, by_id, boxes, piec
     return f"unknown support '{o.support}'"
 
 
+def _stage_margin(layout: Layout) -> float:
+    """The stage's collision margin (its config's ``margin``, recorded by the importer; 0 if none)."""
+    return float((layout.meta.get("structure") or {}).get("margin", 0.0))
+
+
 def _on_the_stage(layout: Layout, o, box: geo.OrientedBox, pieces: dict) -> bool:
     """A physics-placed object above the floor that the stage mesh holds, so that the derived rooms
     (main-floor interiors) need not hold its footprint: it stands on the stage below it (the stairs'
@@ -163,7 +168,7 @@ def _on_the_stage(layout: Layout, o, box: geo.OrientedBox, pieces: dict) -> bool
     mine = pieces.get(o.id) if pieces else None
     if not mine or box.zmin - layout.stage.floor_z <= 0.05:
         return False
-    stage_margin = float((layout.meta.get("structure") or {}).get("margin", 0.0))
+    stage_margin = _stage_margin(layout)
     gap = contact_gap(margin(o), stage_margin)
     if stage_distance(layout, mine) > gap:
         return False
