@@ -353,15 +353,22 @@ def _slot_infos(mat) -> dict:
     return out
 
 
+def _material(doc: dict, index: int):
+    """glTF material ``index`` of ``doc``, or None when there is no such material."""
+    try:
+        return doc["materials"][index]
+    except (KeyError, IndexError, TypeError):
+        return None
+
+
 def _texture_transforms(path: Path, doc: dict, index: int) -> dict:
     """``{slot: {"offset", "rotation", "scale", "texCoord"}}``: the ``KHR_texture_transform`` of each
     texture slot of glTF material ``index`` that has one, glTF defaults filled in (``texCoord`` None
     when the extension does not override the slot's). SceneFormatError naming the field for bad values."""
     from .habitat_format import fail, mapping, number, numbers
 
-    try:
-        mat = doc["materials"][index]
-    except (KeyError, IndexError, TypeError):
+    mat = _material(doc, index)
+    if mat is None:
         return {}
     out = {}
     for slot, info in _slot_infos(mat).items():
@@ -385,9 +392,8 @@ def _texture_transforms(path: Path, doc: dict, index: int) -> dict:
 def _other_texcoord_sets(doc: dict, index: int, transforms: dict) -> dict:
     """``{slot: set}`` of the slots of material ``index`` that sample a texture coordinate set other
     than 0 (the transform's ``texCoord`` overrides the slot's own)."""
-    try:
-        mat = doc["materials"][index]
-    except (KeyError, IndexError, TypeError):
+    mat = _material(doc, index)
+    if mat is None:
         return {}
     out = {}
     for slot, info in _slot_infos(mat).items():
