@@ -597,7 +597,8 @@ def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, back
             from .storage import local_path
 
             session = ray_backend.connect(ray_address, ray_runtime_env, spec.device,  # out: kept out of the upload
-                                          plan.out if store is None else local_path(store.uri), spec.renderer)
+                                          plan.out if store is None else local_path(store.uri), spec.renderer,
+                                          progress=(lambda m: print(m, file=sys.stderr)) if progress else None)
         return _run_plan(plan, old, backend, workers, progress, t0, from_cli=from_cli)
     finally:
         if session is not None:
@@ -684,14 +685,15 @@ def _run_plan(plan: Plan, old: dict | None, backend: str, workers: int, progress
         for name, p in plan.tours.items()})
     if store is not None:  # the static files and the design, before any frame
         store.push_tree(plan.out)
-    todo = []
+    todo, missing_before = [], 0
     for c in plan.chunks:
-        if c.missing():
+        if m := c.missing():
             todo.append(c)
+            missing_before += len(m)
         else:
             state.doc["chunks"][c.id]["state"] = "done"
     state.save()
-    done_frames = plan.frames_total - sum(len(c.missing()) for c in todo)
+    done_frames = plan.frames_total - missing_before
     bar = _Bar(plan.frames_total, done_frames, progress, f"{spec.name}")
     work = plan.out / ".work"
     work.mkdir(parents=True, exist_ok=True)
@@ -704,7 +706,10 @@ def _run_plan(plan: Plan, old: dict | None, backend: str, workers: int, progress
         bar.close()
     counts = state.counts()
     wall = round(time.time() - t0, 2)
-    rendered = sum(len(c.frames) for c in todo)
+    # what is on disk now, not what was planned: a chunk that failed before it rendered counts nothing
+    missing_after = {c.id: len(c.missing()) for c in todo}
+    rendered = missing_before - sum(missing_after.values())
+    failed_ids = [cid for cid, c in state.doc["chunks"].items() if c["state"] == "failed"]
     for name, p in plan.tours.items():
         mine = [c for c in plan.chunks if c.tour == name or (p.geometry_dir and c.out_dir == str(p.geometry_dir))]
         meta = job_tour_meta(p, spec, state.devices(mine))
@@ -716,7 +721,9 @@ def _run_plan(plan: Plan, old: dict | None, backend: str, workers: int, progress
     summary = {"job": spec.name, "out": plan.where, "tours": len(plan.tours), "chunks": counts,
                "frames_total": plan.frames_total, "frames_rendered_now": rendered, "wall_time_s": wall,
                "frames_per_s": round(rendered / wall, 3) if wall > 0 else None, "backend": backend, "workers": workers,
-               "failed": {cid: c["error"] for cid, c in state.doc["chunks"].items() if c["state"] == "failed"}}
+               "frames_missing": sum(missing_after.values()),
+               "frames_failed": sum(missing_after.get(cid, 0) for cid in failed_ids), "chunks_failed": len(failed_ids),
+               "failed": {cid: state.doc["chunks"][cid]["error"] for cid in failed_ids}}
     write_json_atomic(plan.out / "job_summary.json", summary, indent=1)
     if store is not None:
         store.write_bytes(plan.out / "job_summary.json", (plan.out / "job_summary.json").read_bytes())
@@ -954,7 +961,8 @@ def cmd_render(args) -> int:
     s = run_job(spec, args.out, workers=args.workers, backend=args.backend,
                 ray_address=args.ray_address, ray_runtime_env=args.ray_runtime_env, resume=args.resume, progress=not args.quiet,
                 allow_clearance_breach=args.allow_clearance_breach, replicacad_root=args.replicacad_root)
-    print(f"{s['job']}: {s['tours']} tours, {s['frames_rendered_now']} frames rendered in {s['wall_time_s']:.1f} s "
+    failed = (f", {s['frames_failed']} frames failed in {s['chunks_failed']} chunk(s)" if s["chunks_failed"] else "")
+    print(f"{s['job']}: {s['tours']} tours, {s['frames_rendered_now']} frames rendered{failed} in {s['wall_time_s']:.1f} s "
           f"({s['frames_per_s']} frames/s), chunks {s['chunks']} -> {s['out']}")
     for cid, err in s["failed"].items():
         print(f"  FAILED {cid}: {err}", file=sys.stderr)

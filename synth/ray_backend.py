@@ -110,12 +110,16 @@ def requirements(renderer: str = "blender") -> list[str]:
     return out
 
 
+def resolve_mode(mode: str, address: str | None) -> str:
+    """``auto`` is ``full`` for a cluster address and ``none`` for the local instance."""
+    return ("full" if address else "none") if mode == "auto" else mode
+
+
 def runtime_env(mode: str, address: str | None, out: Path | None = None, renderer: str = "blender") -> dict | None:
     """The Ray ``runtime_env`` the driver connects with (``--ray-runtime-env``)."""
     if mode not in RUNTIME_ENV_MODES:
         raise UserError(f"--ray-runtime-env: expected one of {', '.join(RUNTIME_ENV_MODES)}, got {mode!r}")
-    if mode == "auto":
-        mode = "full" if address else "none"
+    mode = resolve_mode(mode, address)
     if mode == "none":
         return None
     root = _repo_root()
@@ -146,7 +150,7 @@ class Session:
 
 
 def connect(address: str | None, env_mode: str = "auto", device: str = "cpu", out: Path | None = None,
-            renderer: str = "blender") -> Session:
+            renderer: str = "blender", progress=None) -> Session:
     """Connect (or use the connection this process already has) and check the cluster can run the job.
 
     Writes nothing; every problem is a one-line UserError."""
@@ -161,6 +165,8 @@ def connect(address: str | None, env_mode: str = "auto", device: str = "cpu", ou
                 ray.init(address=address, runtime_env=env, log_to_driver=False, configure_logging=False)
             except (ConnectionError, TimeoutError) as e:
                 raise UserError(f"--ray-address {address}: {str(e).splitlines()[0] if str(e) else type(e).__name__}") from None
+            except Exception as e:  # e.g. the working_dir could not be packed or uploaded
+                raise UserError(f"--ray-address {address}: cannot start the job there: {failure_cause(e)}") from None
         else:  # a local instance on loopback only
             ray.init(_node_ip_address="127.0.0.1", include_dashboard=False, log_to_driver=False, runtime_env=env,
                      configure_logging=False)
@@ -172,10 +178,116 @@ def connect(address: str | None, env_mode: str = "auto", device: str = "cpu", ou
             raise UserError(f"{where} has no CPU to run chunks on")
         if device == "gpu" and res.get("GPU", 0) < 1:
             raise UserError(f"{where} has no GPU; the spec asks for device: gpu (add GPU nodes, or use device: cpu or auto)")
+        if session.started and address:  # a real cluster: every node builds the runtime env before a chunk is sent
+            preflight(ray, resolve_mode(env_mode, address), renderer, progress=progress)
     except BaseException:
         session.close()
         raise
     return session
+
+
+PREFLIGHT_TIMEOUT_S = 1800.0  # a bare node pip-installs the requirements first (docs/ray_cluster.md: minutes)
+_MODULES = {"opencv-python-headless": "cv2", "pyyaml": "yaml", "pillow": "PIL"}  # requirement -> module, where they differ
+_ERROR_LINE = re.compile(r"^(?:[\w]+\.)*(\w*(?:Error|Exception|Exit|Interrupt))\b:?\s*(.*)$")
+
+
+def failure_cause(e: BaseException) -> str:
+    """One line for a Ray error: the exception Ray wrapped (its last ``SomeError: message`` line, where
+    a ``RuntimeEnvSetupError`` carries the node's traceback), the node, and the last line of output
+    when it says more. ``str(e)`` whole goes into the chunk's log."""
+    text = str(e)
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    node = re.search(r"\[Node ([^\]]+)\]", text)
+    where = f" on node {node.group(1)}" if node else ""
+    cause = None
+    for ln in reversed(lines[1:]):
+        m = _ERROR_LINE.match(ln)
+        if m and m.group(2):
+            cause = f"{m.group(1)}: {m.group(2)}"
+            break
+    head = lines[0] if lines else ""
+    out = f"{type(e).__name__}{where}: {head}"
+    if cause:
+        out += f" ({cause}"
+        if lines and lines[-1] not in cause and not lines[-1].startswith(("File ", "^")):
+            out += f"; last output: {lines[-1]}"
+        out += ")"
+    return out[:600]
+
+
+def _module_names(renderer: str) -> list[str]:
+    names = ["synth", "formats"]
+    for req in requirements(renderer):
+        name = re.split(r"[<>=!~ \[;]", req, maxsplit=1)[0]
+        names.append(_MODULES.get(name.lower(), name))
+    return names
+
+
+def _hint(mode: str, cause: str) -> str:
+    if "virtualenv" in cause:
+        return ("Ray's pip runtime env needs the virtualenv package on every node: `python -m pip install virtualenv` "
+                "with the Python that runs Ray there, then `ray stop` and `ray start` again; or install the toolkit's "
+                "requirements on the nodes and use --ray-runtime-env code (docs/ray_cluster.md)")
+    if mode == "full":
+        return "see the node's runtime env log (/tmp/ray/session_latest/logs/runtime_env_setup-*.log) and docs/ray_cluster.md"
+    return "install them there, or use --ray-runtime-env full (docs/ray_cluster.md)"
+
+
+def preflight(ray, mode: str, renderer: str = "blender", progress=None, timeout: float = PREFLIGHT_TIMEOUT_S) -> list[dict]:
+    """Before any chunk is scheduled: on every node with a CPU, a tiny task in the job's runtime env.
+    The node builds the env (``full``: Ray's virtualenv and pip install; cached for later tasks) and
+    the task checks that the toolkit and its requirements import with the driver's Python version.
+    Any node that cannot is a one-line ``UserError``: the node, the cause, what to install."""
+    import platform
+    from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
+
+    names = _module_names(renderer)
+
+    def probe(modules):  # runs on the node (pickled by value: nothing of the toolkit's needed to unpickle it)
+        import importlib.util
+        import platform as pf
+        import socket as so
+        import sys as sy
+
+        return {"python": pf.python_version(), "executable": sy.executable, "host": so.gethostname(),
+                "missing": [m for m in modules if importlib.util.find_spec(m) is None]}
+
+    task = ray.remote(num_cpus=0, max_retries=0)(probe)
+    nodes = [n for n in ray.nodes() if n.get("Alive") and n.get("Resources", {}).get("CPU", 0) >= 1]
+    refs = {task.options(scheduling_strategy=NodeAffinitySchedulingStrategy(n["NodeID"], soft=False)).remote(names):
+            n.get("NodeManagerAddress", n["NodeID"][:8]) for n in nodes}
+    t0, said, results, problems = time.monotonic(), time.monotonic(), [], []
+    waiting = list(refs)
+    while waiting:
+        ready, waiting = ray.wait(waiting, num_returns=len(waiting), timeout=5.0)
+        for r in ready:
+            ip = refs[r]
+            try:
+                got = ray.get(r)
+            except ray.exceptions.RayError as e:
+                cause = failure_cause(e)
+                problems.append(f"node {ip} cannot set up the runtime env: {cause}; {_hint(mode, cause)}")
+                continue
+            results.append({"node": ip, **got})
+            if got["python"].rsplit(".", 1)[0] != platform.python_version().rsplit(".", 1)[0]:
+                problems.append(f"node {ip} runs Python {got['python']}, the driver {platform.python_version()} "
+                                "(bpy 4.5 is built for Python 3.11; docs/ray_cluster.md)")
+            elif got["missing"]:
+                problems.append(f"node {ip} lacks {', '.join(got['missing'])} (Python {got['executable']}); "
+                                f"{_hint(mode, '')}")
+        if problems:
+            for r in waiting:
+                ray.cancel(r, force=True)
+            raise UserError(f"--ray-runtime-env {mode}: " + problems[0] +
+                            (f" (and {len(problems) - 1} more node(s))" if len(problems) > 1 else ""))
+        if waiting and time.monotonic() - t0 > timeout:
+            raise UserError(f"--ray-runtime-env {mode}: {len(waiting)} node(s) did not set up the runtime env within "
+                            f"{timeout:.0f} s ({', '.join(refs[r] for r in waiting)}); see docs/ray_cluster.md")
+        if waiting and progress and time.monotonic() - said >= 30.0:
+            said = time.monotonic()
+            progress(f"ray: runtime env ({mode}) ready on {len(results)} of {len(refs)} node(s) after "
+                     f"{time.monotonic() - t0:.0f} s (a bare node pip-installs the requirements once: minutes)")
+    return results
 
 
 # ---------------------------------------------------------------------------------------------
@@ -470,6 +582,7 @@ def run(plan, state, todo: list, bar, work: Path, queue_cls, files_of) -> dict:
                 try:
                     packed = pack_chunk(c)
                 except OSError as e:  # e.g. a geometry frame that went missing
+                    write_text_atomic(log, f"cannot pack the chunk: {e}\n")
                     q.finished(c, 1, f"cannot pack the chunk: {_one_line(e)}", log)
                     continue
                 gen = task.remote(packed, box, token, BATCH_BYTES, BATCH_SECONDS)
@@ -488,8 +601,8 @@ def run(plan, state, todo: list, bar, work: Path, queue_cls, files_of) -> dict:
                 except StopIteration:
                     end(gen, a, 1, "the task ended without a result", {}, "")
                     continue
-                except ray.exceptions.RayError as e:  # its worker or node died, or its objects were lost
-                    end(gen, a, 1, f"the task failed: {_one_line(e)}", {}, "")
+                except ray.exceptions.RayError as e:  # its runtime env, worker or node failed, or its objects were lost
+                    end(gen, a, 1, f"the task failed: {failure_cause(e)}", {}, f"the task failed:\n{e}\n")
                     continue
                 if "files" in item:
                     land(a, item["files"])
