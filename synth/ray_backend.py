@@ -91,6 +91,11 @@ def _repo_root() -> Path:
     return REPO_ROOT
 
 
+def _requirement_name(req: str) -> str:
+    """``bpy>=4.5,<4.6`` -> ``bpy``."""
+    return re.split(r"[<>=!~ \[;]", req, maxsplit=1)[0]
+
+
 def requirements(renderer: str = "blender") -> list[str]:
     """The toolkit's requirements (pyproject.toml), pinned to the versions installed here: a node then
     renders with the same libraries as the driver (bpy only for Blender jobs)."""
@@ -100,7 +105,7 @@ def requirements(renderer: str = "blender") -> list[str]:
     doc = tomllib.loads((_repo_root() / "pyproject.toml").read_text())
     out = []
     for req in doc["project"]["dependencies"]:
-        name = re.split(r"[<>=!~ \[;]", req, maxsplit=1)[0]
+        name = _requirement_name(req)
         if name == "bpy" and renderer != "blender":
             continue
         try:
@@ -218,7 +223,7 @@ def failure_cause(e: BaseException) -> str:
 def _module_names(renderer: str) -> list[str]:
     names = ["synth", "formats"]
     for req in requirements(renderer):
-        name = re.split(r"[<>=!~ \[;]", req, maxsplit=1)[0]
+        name = _requirement_name(req)
         names.append(_MODULES.get(name.lower(), name))
     return names
 
