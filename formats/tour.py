@@ -12,7 +12,7 @@ A tour directory, as the renderers write it::
       previews/NNNNNN.png optional 8-bit sRGB previews
 
 ``Tour`` reads the small files up front and the frames lazily, one EXR at a time. The checker
-(``synth dataset check``) and the contact sheet (``synth dataset show``) are in ``synth.dataset``.
+(``synth dataset check``) and the contact sheet (``synth dataset show``) are in ``synth.datasets.check``.
 """
 
 from __future__ import annotations

@@ -25,7 +25,7 @@ def _write_json(path: Path, obj) -> None:
 
 
 def _load(name):
-    from .scene import load_layout
+    from .scene.model import load_layout
 
     return load_layout(name)
 
@@ -35,7 +35,7 @@ def _load(name):
 
 
 def cmd_list(args) -> int:
-    from .scene import list_layouts, load_layout
+    from .scene.model import list_layouts, load_layout
 
     names = list_layouts()
     if not names:
@@ -83,8 +83,8 @@ def cmd_show(args) -> int:
 
 
 def cmd_stats(args) -> int:
-    from .rearrange import target_ranges
-    from .stats import PAPER_RANGES, change_stats
+    from .layout.rearrange import target_ranges
+    from .scene.stats import PAPER_RANGES, change_stats
 
     ref = _load(args.ref)
     st = change_stats(ref, _load(args.var))
@@ -92,7 +92,7 @@ def cmd_stats(args) -> int:
         _print_json(st)
         return 0
     ranges = target_ranges(ref)
-    what = "paper" if ranges == PAPER_RANGES else "scaled"  # an imported flat of another size: synth.stats.scaled_ranges
+    what = "paper" if ranges == PAPER_RANGES else "scaled"  # an imported flat of another size: synth.scene.stats.scaled_ranges
     print(f"{st['variant']} against {st['reference']}:")
     for k, (lo, hi) in ranges.items():
         print(f"  {k:<16} {st[k]:>7}   {what} {lo}-{hi}  {'ok' if lo <= st[k] <= hi else 'OUT OF RANGE'}")
@@ -100,7 +100,7 @@ def cmd_stats(args) -> int:
 
 
 def cmd_check(args) -> int:
-    from .checks import check_layout
+    from .layout.validity import check_layout
 
     rep = check_layout(_load(args.name))
     if args.json:
@@ -124,7 +124,7 @@ def cmd_check(args) -> int:
 
 
 def cmd_export_boxes(args) -> int:
-    from .scene import boxes_document
+    from .scene.model import boxes_document
 
     check_output_file(args.out)
     doc = boxes_document(_load(args.name))
@@ -135,7 +135,7 @@ def cmd_export_boxes(args) -> int:
 
 
 def cmd_preview(args) -> int:
-    from .preview import plot_layout
+    from .scene.preview import plot_layout
 
     lay = _load(args.name)
     ref = _load(args.diff) if args.diff else None
@@ -148,10 +148,10 @@ def cmd_generate(args) -> int:
     """Regenerate the built-in layouts apt_0..apt_5 (deterministic)."""
     from tqdm import tqdm
 
-    from .apartment import DEFAULT_SEED, generate_apartment
+    from .layout.apartment import DEFAULT_SEED, generate_apartment
     from .resources import layouts_dir
-    from .rearrange import BUILTIN_VARIANTS, make_variant, reference_walkway
-    from .scene import save_layout
+    from .layout.rearrange import BUILTIN_VARIANTS, make_variant, reference_walkway
+    from .scene.model import save_layout
 
     out = Path(args.out_dir) if args.out_dir else layouts_dir()
     ref = generate_apartment(DEFAULT_SEED, "apt_0")
@@ -169,12 +169,12 @@ def cmd_build(args) -> int:
     """The scene pipeline: generate apt_0..apt_5, check them, print their change statistics, plot them."""
     from tqdm import tqdm
 
-    from .apartment import DEFAULT_SEED, generate_apartment
-    from .checks import check_layout
-    from .preview import plot_layout
-    from .rearrange import BUILTIN_VARIANTS, make_variant, reference_walkway
-    from .scene import boxes_document, save_layout
-    from .stats import change_stats
+    from .layout.apartment import DEFAULT_SEED, generate_apartment
+    from .layout.validity import check_layout
+    from .scene.preview import plot_layout
+    from .layout.rearrange import BUILTIN_VARIANTS, make_variant, reference_walkway
+    from .scene.model import boxes_document, save_layout
+    from .scene.stats import change_stats
 
     out = Path(args.out)
     (out / "layouts").mkdir(parents=True, exist_ok=True)
@@ -202,7 +202,7 @@ def cmd_build(args) -> int:
 def _print_stats_table(rows, ranges: dict | None = None) -> None:
     """Objects, check and change statistics per layout against the paper's ranges, or ``ranges``
     (scaled for an imported flat) (rows: (layout, report, stats|None))."""
-    from .stats import PAPER_RANGES
+    from .scene.stats import PAPER_RANGES
 
     ranges = ranges or PAPER_RANGES
     label = "paper" if ranges == PAPER_RANGES else "target"
@@ -226,10 +226,10 @@ def _check_out_file(out: Path, suffixes=(".yaml", ".yml")) -> None:
 
 def cmd_rearrange(args) -> int:
     """A new rearranged variant of BASE from a seed: the operator, ranges and checks of apt_1..apt_5."""
-    from .checks import check_layout
-    from .rearrange import NoVariantFound, RearrangePlan, VariantSpec, make_variant, new_problems, reference_walkway, target_ranges
-    from .scene import save_layout
-    from .stats import PAPER_RANGES, change_stats
+    from .layout.validity import check_layout
+    from .layout.rearrange import NoVariantFound, RearrangePlan, VariantSpec, make_variant, new_problems, reference_walkway, target_ranges
+    from .scene.model import save_layout
+    from .scene.stats import PAPER_RANGES, change_stats
 
     out = Path(args.out)
     if args.seed < 0:
@@ -258,8 +258,8 @@ def cmd_rearrange(args) -> int:
     print(f"{var.name}: rearranged from {ref.name} (seed {args.seed}, attempt {var.meta['attempt']}), "
           f"{len(var.objects)} objects")
     _print_stats_table([(ref, ref_rep, None), (var, rep, st)], target_ranges(ref))
-    from .rearrange import is_imported
-    from .stats import change_table, scale_note
+    from .layout.rearrange import is_imported
+    from .scene.stats import change_table, scale_note
 
     print()
     if is_imported(ref):
@@ -271,8 +271,8 @@ def cmd_rearrange(args) -> int:
 
 
 def cmd_import_replicacad(args) -> int:
-    from .replicacad import load_replicacad
-    from .scene import save_layout
+    from .replicacad.importer import load_replicacad
+    from .scene.model import save_layout
 
     lay = load_replicacad(args.root, args.scene, allow_unknown=args.allow_unknown, structure=not args.no_structure)
     out = save_layout(lay, args.out)
@@ -283,7 +283,7 @@ def cmd_import_replicacad(args) -> int:
 
 
 def cmd_tour_render(args) -> int:
-    from .tour import TourSpec, render_tour
+    from .render.render_tour import TourSpec, render_tour
 
     w, h = _size(args.size)
     spec = TourSpec(layout=args.layout, path=args.path, out=args.out, lighting=args.lighting, renderer=args.renderer,
@@ -385,7 +385,10 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--quiet", action="store_true")
     a.set_defaults(fn=cmd_tour_render)
     # stages with their own subcommands register them here
-    from . import bench, dataset, jobs, trainset
+    from .render import bench
+    from .datasets import check as dataset
+    from .jobs import job as jobs
+    from .datasets import trainset
     from .paths import cli as paths_cli
 
     paths_cli.register_cli(sub)  # synth path plan|show|check|preview|generate

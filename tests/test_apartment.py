@@ -7,12 +7,12 @@ from collections import Counter
 
 import pytest
 
-from synth.apartment import DEFAULT_SEED, generate_apartment
-from synth.checks import check_layout
+from synth.layout.apartment import DEFAULT_SEED, generate_apartment
+from synth.layout.validity import check_layout
 from synth.cli import main as synth_main
-from synth.rearrange import BUILTIN_VARIANTS, RearrangePlan, rearrange
-from synth.scene import layout_to_dict, load_layout, object_box
-from synth.stats import PAPER_RANGES, change_stats
+from synth.layout.rearrange import BUILTIN_VARIANTS, RearrangePlan, rearrange
+from synth.scene.model import layout_to_dict, load_layout, object_box
+from synth.scene.stats import PAPER_RANGES, change_stats
 
 VARIANTS = [v.name for v in BUILTIN_VARIANTS]
 ALL = ["apt_0"] + VARIANTS

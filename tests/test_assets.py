@@ -1,4 +1,4 @@
-"""Tests for synth/assets.py: procedural object meshes in the object's local frame."""
+"""Tests for synth/assets/procedural.py: procedural object meshes in the object's local frame."""
 from __future__ import annotations
 
 import math
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from synth import assets
-from synth.assets import (
+from synth.assets import procedural as assets
+from synth.assets.procedural import (
     MATERIALS,
     Part,
     Surface,

@@ -20,8 +20,8 @@ from formats.camera import write_tum
 from formats.frames import FrameFileError, read_channels
 from formats.tour import Tour
 from synth.cli import main as synth_main
-from synth.scene import boxes_document, load_layout
-from synth.tour import TourSpec, render_tour
+from synth.scene.model import boxes_document, load_layout
+from synth.render.render_tour import TourSpec, render_tour
 
 
 W, H, N = 64, 48, 30

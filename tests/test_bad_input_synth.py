@@ -26,15 +26,15 @@ from reloc.cli import main as reloc_main
 from formats.errors import SceneFormatError
 from formats.frames import FrameFileError, write_frame
 from formats.tour import Tour
-from synth.checks import check_layout
+from synth.layout.validity import check_layout
 from synth.cli import main as synth_main
-from synth.dataset import check_tour
+from synth.datasets.check import check_tour
 from synth.paths.clearance import path_clearance
 from synth.paths.files import load_path, save_path
 from synth.paths.model import CameraPath
-from synth.scene import load_layout, object_box, save_layout
-from synth.stats import PAPER_RANGES, change_stats
-from synth.tour import TourSpec, render_tour
+from synth.scene.model import load_layout, object_box, save_layout
+from synth.scene.stats import PAPER_RANGES, change_stats
+from synth.render.render_tour import TourSpec, render_tour
 
 W, H = 32, 24
 VARIANT_SEED = 12345  # the trial's variant: the query path passes 0.225 m from an object near frame 2817
@@ -226,7 +226,7 @@ def test_spec_unwritable_out_names_spec_file_and_field(tmp_path, capsys):
 @pytest.fixture(scope="module")
 def variant(tmp_path_factory):
     """The trial's variant of apt_0 (seed 12345), made from Python as the trial had to."""
-    from synth.rearrange import RearrangePlan, VariantSpec, make_variant, reference_walkway
+    from synth.layout.rearrange import RearrangePlan, VariantSpec, make_variant, reference_walkway
 
     ref = load_layout("apt_0")
     var = make_variant(ref, VariantSpec("apt_x", VARIANT_SEED, RearrangePlan()), walkway=reference_walkway(ref))
@@ -255,7 +255,7 @@ def test_rearrange_makes_a_checked_variant_in_the_paper_ranges(variant, tmp_path
 
 
 def test_rearrange_refuses_unwritable_out_before_work(tmp_path, capsys, monkeypatch):
-    import synth.rearrange as rearrange
+    from synth.layout import rearrange
 
     def boom(*a, **k):
         raise AssertionError("work started")

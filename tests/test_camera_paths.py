@@ -20,7 +20,7 @@ from synth.paths.mapping import plan_mapping_path
 from synth.paths.model import CameraPath
 from synth.paths.query import plan_query_path
 from synth.paths.shipped import replan
-from synth.scene import load_layout, object_box
+from synth.scene.model import load_layout, object_box
 
 
 BUILTIN = [f"apt_{i}" for i in range(6)]

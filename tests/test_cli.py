@@ -34,7 +34,7 @@ def test_preview_cli_writes_png(tmp_path, capsys):
 
 
 def test_check_exit_status_on_problems(tmp_path, capsys):
-    from synth.scene import load_layout, save_layout
+    from synth.scene.model import load_layout, save_layout
 
     lay = load_layout("apt_0")
     a, b = [o for o in lay.objects if o.cls == "chair"][:2]

@@ -18,7 +18,7 @@ from formats import camera as cam
 from formats.frames import write_frame
 from formats.tour import tonemap
 from synth.cli import main as synth_main
-from synth.dataset import DARK_P99_LUMINANCE, check_tour, format_report, frame_brightness
+from synth.datasets.check import DARK_P99_LUMINANCE, check_tour, format_report, frame_brightness
 
 W, H = 48, 36
 INTR = cam.Intrinsics.from_fov(W, H, 70.0)

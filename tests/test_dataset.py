@@ -19,7 +19,7 @@ from formats import camera as cam
 from formats.errors import SceneFormatError, UserError
 from formats.frames import FrameFileError, write_frame
 from synth.cli import main as synth_main
-from synth.dataset import (
+from synth.datasets.check import (
     Tour,
     check_tour,
     choose_pairs,
@@ -374,7 +374,7 @@ def test_shape_and_channel_problems(tour_dir):
 
 
 def test_bad_pose_rotation_is_flagged():
-    from synth.dataset import _pose_problem
+    from synth.datasets.check import _pose_problem
 
     T = cam.pose_from_ypr((1, 2, 1.5), 0.3)
     assert _pose_problem(T) is None

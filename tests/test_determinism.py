@@ -17,15 +17,15 @@ import pytest
 
 import formats.camera
 import formats.yamlfile
-import synth.apartment
-import synth.geometry
-import synth.placement
-import synth.rearrange
-import synth.scene
-from synth.apartment import DEFAULT_SEED, generate_apartment
-from synth.rearrange import BUILTIN_VARIANTS, make_variant, reference_walkway
+import synth.layout.apartment
+import synth.scene.geometry
+import synth.layout.placement
+import synth.layout.rearrange
+import synth.scene.model
+from synth.layout.apartment import DEFAULT_SEED, generate_apartment
+from synth.layout.rearrange import BUILTIN_VARIANTS, make_variant, reference_walkway
 from synth.resources import layouts_dir
-from synth.scene import (
+from synth.scene.model import (
     ObjectInstance,
     boxes_document,
     load_layout,
@@ -80,10 +80,10 @@ def one_ulp_off(monkeypatch):
         fake_math = types.SimpleNamespace(**{k: getattr(math, k) for k in dir(math) if not k.startswith("_")})
         for name in ("sin", "cos", "atan2", "hypot", "sqrt"):
             setattr(fake_math, name, _nudged(getattr(math, name)))
-        for mod in (synth.apartment, synth.placement, synth.rearrange, synth.geometry, synth.scene, formats.camera):
+        for mod in (synth.layout.apartment, synth.layout.placement, synth.layout.rearrange, synth.scene.geometry, synth.scene.model, formats.camera):
             monkeypatch.setattr(mod, "math", fake_math)
         for name in ("yaw_to_quat", "matrix_to_quat", "rot_z", "quat_to_matrix", "quat_yaw"):
-            monkeypatch.setattr(synth.geometry, name, _nudged(getattr(synth.geometry, name)))
+            monkeypatch.setattr(synth.scene.geometry, name, _nudged(getattr(synth.scene.geometry, name)))
         real_rng = np.random.default_rng
         monkeypatch.setattr(np.random, "default_rng", lambda *a, **k: _NudgedRng(real_rng(*a, **k)))
         _Counter.calls = 0

@@ -1,4 +1,4 @@
-"""ReplicaCAD meshes with their own glTF materials, in both renderers (synth.gltf, synth.meshes,
+"""ReplicaCAD meshes with their own glTF materials, in both renderers (synth.replicacad.gltf, synth.render.meshes,
 synth.blender).
 
 A tiny dataset is built here with trimesh: a box whose baseColorTexture has four coloured
@@ -35,8 +35,8 @@ from formats.boxes import CEILING_ID_BASE, FLOOR_ID_BASE, WALL_ID_BASE
 from formats.camera import Intrinsics, pose_from_ypr, write_tum
 from formats.errors import SceneFormatError
 from formats.tour import Tour
-from synth.classes import class_table
-from synth.scene import LightFixture, Room, Wall, load_layout, save_layout
+from synth.scene.classes import class_table
+from synth.scene.model import LightFixture, Room, Wall, load_layout, save_layout
 
 REPO = Path(__file__).resolve().parents[1]
 C = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # habitat (Y up) -> ours (Z up), by hand
@@ -154,7 +154,7 @@ def make_dataset(root: Path) -> Path:
 
 
 def load_test_layout(root: Path, fixture: bool = True):
-    from synth.replicacad import load_replicacad
+    from synth.replicacad.importer import load_replicacad
 
     lay = load_replicacad(root, SCENE, allow_unknown=True, structure=False)
     if fixture:
@@ -163,7 +163,7 @@ def load_test_layout(root: Path, fixture: bool = True):
 
 
 def glb_chunks(path: Path) -> tuple[dict, bytes]:
-    """(JSON, BIN) of a GLB, read here by hand (independent of synth.gltf)."""
+    """(JSON, BIN) of a GLB, read here by hand (independent of synth.replicacad.gltf)."""
     data = path.read_bytes()
     n = struct.unpack_from("<I", data, 12)[0]
     doc = json.loads(data[20:20 + n])
@@ -207,7 +207,7 @@ def layout(dataset):
     return load_test_layout(dataset)
 
 
-# ---- synth.gltf: frames, UVs, materials, node transforms ----------------------------------------
+# ---- synth.replicacad.gltf: frames, UVs, materials, node transforms ----------------------------------------
 
 
 def test_the_fixture_glb_holds_what_the_test_says(dataset):
@@ -219,7 +219,7 @@ def test_the_fixture_glb_holds_what_the_test_says(dataset):
 
 
 def test_load_glb_parts_converts_to_z_up_and_keeps_uvs_and_material(dataset):
-    from synth.gltf import glb_geometry, load_glb_parts, pbr
+    from synth.replicacad.gltf import glb_geometry, load_glb_parts, pbr
 
     path = dataset / "objects/tex_box.glb"
     doc, binary = glb_chunks(path)
@@ -258,7 +258,7 @@ def test_load_glb_parts_converts_to_z_up_and_keeps_uvs_and_material(dataset):
 
 
 def test_node_transforms_instancing_and_normals(tmp_path):
-    from synth.gltf import load_glb_parts
+    from synth.replicacad.gltf import load_glb_parts
 
     box = plain_box(0.2, (0.5, 0.5, 0.5))
     ang = 0.7
@@ -294,7 +294,7 @@ def test_node_transforms_instancing_and_normals(tmp_path):
 
 
 def test_undecodable_texture_warns_once_and_falls_back_to_the_factor(tmp_path, caplog):
-    from synth import gltf
+    from synth.replicacad import gltf
 
     src = tmp_path / "src.glb"
     write_glb(src, [textured_box()])
@@ -303,7 +303,7 @@ def test_undecodable_texture_warns_once_and_falls_back_to_the_factor(tmp_path, c
     doc["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] = [0.5, 0.25, 0.125, 1.0]
     bad = tmp_path / "ktx2.glb"
     write_glb_chunks(bad, doc, binary)
-    with caplog.at_level("WARNING", logger="synth.gltf"):
+    with caplog.at_level("WARNING", logger="synth.replicacad.gltf"):
         (p,) = gltf.load_glb_parts(bad)
         gltf.clear_cache()
         gltf.load_glb_parts(bad)
@@ -332,7 +332,7 @@ def external_texture_glb(tmp_path: Path, uri: str) -> Path:
 
 
 def test_missing_external_texture_names_the_glb_and_the_field(tmp_path):
-    from synth.gltf import check_glb, load_glb_parts, pbr
+    from synth.replicacad.gltf import check_glb, load_glb_parts, pbr
 
     path, png = external_texture_glb(tmp_path, "textures/red%20box.png")
     for fn in (check_glb, load_glb_parts):
@@ -352,7 +352,7 @@ def test_missing_texture_is_reported_when_the_scene_loads(tmp_path):
     root = make_dataset(tmp_path / "ds")
     path, _ = external_texture_glb(tmp_path / "tmp", "gone.png")
     (root / "objects/tex_box.glb").write_bytes(path.read_bytes())
-    from synth.replicacad import load_replicacad
+    from synth.replicacad.importer import load_replicacad
 
     with pytest.raises(SceneFormatError) as e:
         load_replicacad(root, SCENE, allow_unknown=True, structure=False)
@@ -360,7 +360,7 @@ def test_missing_texture_is_reported_when_the_scene_loads(tmp_path):
 
 
 def test_broken_and_empty_glbs(tmp_path):
-    from synth.gltf import check_glb, load_glb_parts
+    from synth.replicacad.gltf import check_glb, load_glb_parts
 
     junk = tmp_path / "junk.glb"
     junk.write_bytes(b"not a glb at all, just some bytes")
@@ -374,7 +374,7 @@ def test_broken_and_empty_glbs(tmp_path):
         load_glb_parts(empty)
 
 
-# ---- synth.meshes: parts of ReplicaCAD objects, articulated objects and the stage ------------------
+# ---- synth.render.meshes: parts of ReplicaCAD objects, articulated objects and the stage ------------------
 
 
 def world_bounds(parts) -> tuple[np.ndarray, np.ndarray]:
@@ -383,7 +383,7 @@ def world_bounds(parts) -> tuple[np.ndarray, np.ndarray]:
 
 
 def test_object_parts_are_textured_and_placed(layout):
-    from synth.meshes import GLTF_MATERIAL, layout_parts
+    from synth.render.meshes import GLTF_MATERIAL, layout_parts
 
     parts = layout_parts(layout)
     by_obj = {}
@@ -403,7 +403,7 @@ def test_object_parts_are_textured_and_placed(layout):
 
 
 def test_emitters_follow_the_nearest_fixture(layout):
-    from synth.meshes import layout_parts
+    from synth.render.meshes import layout_parts
 
     parts = {p.instance_id: p for p in layout_parts(layout) if p.instance_id in (1, 2, 3, 4)}
     assert parts[3].emissive and parts[3].fixture == "C0"  # 0.55 m from its box centre
@@ -418,7 +418,7 @@ def test_emitters_follow_the_nearest_fixture(layout):
 
 
 def test_fast_renderer_draws_textured_parts(layout):
-    from synth.fast_render import FastRenderer
+    from synth.render.fast_render import FastRenderer
 
     intr = Intrinsics.from_fov(64, 48, 30.0)
     T = pose_from_ypr((-0.5, 0.5, 3.0), yaw=0.0, pitch=-np.pi / 2)  # straight down onto the textured box
@@ -445,8 +445,8 @@ URDF = """<?xml version="1.0"?>
 
 
 def test_articulated_object_parts(tmp_path, layout):
-    from synth.meshes import layout_parts
-    from synth.scene import ObjectInstance
+    from synth.render.meshes import layout_parts
+    from synth.scene.model import ObjectInstance
 
     root = Path(layout.meta["root"])
     d = root / "urdf" / "cabinet"
@@ -484,7 +484,7 @@ def test_stage_is_split_per_triangle_into_walls_and_floors(layout, monkeypatch):
     triangle's normal and height, and leaves the wall tops unclassified)."""
     import types
 
-    from synth.meshes import instance_classes, layout_parts
+    from synth.render.meshes import instance_classes, layout_parts
 
     calls = []
 
@@ -498,10 +498,10 @@ def test_stage_is_split_per_triangle_into_walls_and_floors(layout, monkeypatch):
         ids[side & (centroids[:, 1] > 2.85) & (centroids[:, 0] > -2.92) & (centroids[:, 2] > 0.0)] = WALL_ID_BASE
         return ids  # left at 0: wall tops (z = 2.5), the north wall's west end, all of the west wall
 
-    monkeypatch.setitem(sys.modules, "synth.stage_structure", types.SimpleNamespace(face_ids=face_ids))
-    import synth.meshes
+    monkeypatch.setitem(sys.modules, "synth.replicacad.stage_structure", types.SimpleNamespace(face_ids=face_ids))
+    import synth.render.meshes
 
-    monkeypatch.setattr(synth.meshes, "STAGE_MAX_EDGE", 100.0)  # no splitting of big floor triangles here (next test)
+    monkeypatch.setattr(synth.render.meshes, "STAGE_MAX_EDGE", 100.0)  # no splitting of big floor triangles here (next test)
     lay = hand_structure(layout)
     parts = [p for p in layout_parts(lay) if p.name.startswith("stage")]
     assert calls == [36]  # one call with every stage triangle
@@ -525,7 +525,7 @@ def test_stage_is_split_per_triangle_into_walls_and_floors(layout, monkeypatch):
 
 def test_stage_split_keeps_uvs(tmp_path):
     """Splitting a textured primitive keeps each triangle's UVs."""
-    from synth.gltf import load_glb_parts, submesh
+    from synth.replicacad.gltf import load_glb_parts, submesh
 
     path = tmp_path / "t.glb"
     write_glb(path, [textured_box()])
@@ -547,14 +547,14 @@ SCRIPT = textwrap.dedent(r'''
     import bpy
     from mathutils import Matrix
     from formats.camera import Intrinsics
-    from synth.scene import load_layout
-    from synth.meshes import layout_parts
-    from synth.lighting import load_lighting, resolve_lighting
-    from synth.render_settings import quality
+    from synth.scene.model import load_layout
+    from synth.render.meshes import layout_parts
+    from synth.scene.lighting import load_lighting, resolve_lighting
+    from synth.render.settings import quality
     from synth.blender import scene_builder as sb
     from synth.blender import materials as M
     from synth.blender.worker import read_blender_exr
-    from synth.gltf import load_glb_parts, pbr
+    from synth.replicacad.gltf import load_glb_parts, pbr
 
     args = json.loads(sys.argv[1])
     out = args["out"]
@@ -641,7 +641,7 @@ SCRIPT = textwrap.dedent(r'''
     res["probe"] = read_blender_exr(f"{out}/probe.exr")["Combined"][..., :3].reshape(-1, 3).mean(0).tolist()
 
     # a GLB with smooth normals: they become custom normals of the Blender mesh
-    from synth.meshes import RenderPart
+    from synth.render.meshes import RenderPart
     scene = sb.reset_scene()
     (sph,) = load_glb_parts(args["sphere"])
     sb.add_parts(scene, [RenderPart("sphere", 1, 1, "gltf", sph, np.eye(4))], with_materials=True)
@@ -705,9 +705,9 @@ def run_blender_script(args: dict) -> dict:
 def renders(tmp_path_factory, dataset, layout):
     """Tours of the test scene (Blender with day light, and the fast renderer), plus the script's
     renders: the pipeline, the old plain materials, Blender's glTF importer; and timings."""
-    from synth.fast_render import FastRenderer
-    from synth.meshes import layout_parts
-    from synth.tour import TourSpec, render_tour
+    from synth.render.fast_render import FastRenderer
+    from synth.render.meshes import layout_parts
+    from synth.render.render_tour import TourSpec, render_tour
 
     base = tmp_path_factory.mktemp("gltf_renders")
     layout_file = save_layout(layout, base / f"{SCENE}.yaml")
@@ -800,7 +800,7 @@ def test_blender_gltf_importer_gives_the_same_colours(renders):
 
 @pytest.mark.blender
 def test_gltf_emission_is_switched_by_its_fixture(renders):
-    from synth.lighting import CEILING_EMISSION, kelvin_to_rgb, load_lighting
+    from synth.scene.lighting import CEILING_EMISSION, kelvin_to_rgb, load_lighting
 
     rep = renders["report"]
     em = rep["emission"]
@@ -853,7 +853,7 @@ def fixture_module():
 
 @pytest.fixture(scope="module")
 def rcad(tmp_path_factory):
-    from synth.replicacad import load_replicacad
+    from synth.replicacad.importer import load_replicacad
 
     F = fixture_module()
     root = F.make_fixture(tmp_path_factory.mktemp("rcad"))
@@ -879,9 +879,9 @@ def test_fixture_stage_split_matches_its_construction(rcad):
     """Every stage pixel of the fast renderer has the semantic class of the surface the fixture built
     there (floor at z = 0, ceiling at z = 2.5, the hand-made wall boxes), and a wall pixel lies in
     the derived box of the wall whose id it carries."""
-    from synth.fast_render import FastRenderer
-    from synth.meshes import layout_parts
-    from synth.scene import structure_boxes
+    from synth.render.fast_render import FastRenderer
+    from synth.render.meshes import layout_parts
+    from synth.scene.model import structure_boxes
 
     F, root, lay = rcad
     assert lay.stage.walls and lay.stage.rooms
@@ -925,7 +925,7 @@ def test_fixture_stage_split_matches_its_construction(rcad):
 
 @pytest.fixture(scope="module")
 def rcad_tours(tmp_path_factory, rcad):
-    from synth.tour import TourSpec, render_tour
+    from synth.render.render_tour import TourSpec, render_tour
 
     F, root, lay = rcad
     base = tmp_path_factory.mktemp("rcad_tours")
@@ -971,12 +971,12 @@ def test_fixture_textures_show_in_the_rgb(rcad_tours):
 
 
 def test_floor_triangles_spanning_rooms_are_split_per_room(tmp_path):
-    """One floor quad under two rooms: after splitting (synth.meshes.STAGE_MAX_EDGE) each room's floor
+    """One floor quad under two rooms: after splitting (synth.render.meshes.STAGE_MAX_EDGE) each room's floor
     id covers its own room (checked against the room rectangles), and the UVs are interpolated."""
     from replicacad_fixture import ROOMS, make_fixture
 
-    from synth.meshes import STAGE_MAX_EDGE, layout_parts
-    from synth.replicacad import load_replicacad
+    from synth.render.meshes import STAGE_MAX_EDGE, layout_parts
+    from synth.replicacad.importer import load_replicacad
 
     lay = load_replicacad(make_fixture(tmp_path / "rc"), "apt_0")
     floors = [p for p in layout_parts(lay) if FLOOR_ID_BASE <= p.instance_id < CEILING_ID_BASE]

@@ -20,13 +20,14 @@ import pytest
 import trimesh
 
 from formats.errors import SceneFormatError
-from synth import geometry as geo
-from synth.apartment import layout_fixtures
-from synth.checks import check_layout
-from synth.lighting import kelvin_to_rgb
-from synth.habitat_lighting import assign_lights, color_temperature, fixtures_for_imported, parse_lighting_config, read_lighting_config
-from synth.placement import Placer, mesh_top_coverage, placed_copy
-from synth.rearrange import (
+from synth.scene import geometry as geo
+from synth.scene.fixtures import layout_fixtures
+from synth.layout.validity import check_layout
+from synth.scene.lighting import kelvin_to_rgb
+from synth.replicacad.habitat_lighting import assign_lights, color_temperature, fixtures_for_imported, parse_lighting_config, read_lighting_config
+from synth.layout.placement import Placer, placed_copy
+from synth.replicacad.surfaces import mesh_top_coverage
+from synth.layout.rearrange import (
     RearrangePlan,
     VariantSpec,
     make_variant,
@@ -38,8 +39,8 @@ from synth.rearrange import (
     scaled_plan,
     template_pool,
 )
-from synth.scene import Layout, ObjectInstance, Room, Stage, layout_to_dict, load_layout, object_box
-from synth.stats import PAPER_RANGES, change_stats, flat_mean_distance, scaled_ranges
+from synth.scene.model import Layout, ObjectInstance, Room, Stage, layout_to_dict, load_layout, object_box
+from synth.scene.stats import PAPER_RANGES, change_stats, flat_mean_distance, scaled_ranges
 
 C = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # by hand, not imported
 
@@ -223,7 +224,7 @@ def test_surfaces_of_mesh_objects(rc, tmp_path):
     assert s.clearance == math.inf
     (s,) = p.surfaces(by_cls["bookshelf"][0])  # x[-0.4,0.4] y[-0.15,0.15] z[0,1.2]
     assert (s.z, s.xmin, s.xmax, s.ymin, s.ymax) == pytest.approx((1.2, -0.38, 0.38, -0.13, 0.13))
-    # seats: the level below the top, without the strip under the backrest (a 9 x 9 grid: synth.placement
+    # seats: the level below the top, without the strip under the backrest (a 9 x 9 grid: synth.layout.placement
     # LEVEL_GRID), 2 cm inside; clearance up to the box top, as a procedural chair's seat has one
     (s,) = p.surfaces(by_cls["chair"][0])  # seat top 0.46, x/y [-0.22, 0.22], backrest over y [0.18, 0.22]
     ymax = -0.22 + 8 * 0.44 / 9 - 0.02  # the last of 9 cells is under the backrest
@@ -507,7 +508,7 @@ def test_malformed_lighting_json(tmp_path):
 
 
 def test_color_temperature_of_black_bodies():
-    # McCamy's fit against Helland's black-body colours (synth.lighting): within 5 %; white is D65
+    # McCamy's fit against Helland's black-body colours (synth.scene.lighting): within 5 %; white is D65
     for kelvin in (2000.0, 2700.0, 4000.0, 6500.0, 9000.0):
         assert color_temperature(kelvin_to_rgb(kelvin)) == pytest.approx(kelvin, rel=0.05)
     assert color_temperature((1.0, 1.0, 1.0)) == pytest.approx(6504.0, abs=10)
@@ -622,7 +623,7 @@ def _fixture_module():
 @pytest.fixture(scope="module")
 def fx_layout(tmp_path_factory):
     F = _fixture_module()
-    from synth.replicacad import load_replicacad
+    from synth.replicacad.importer import load_replicacad
 
     root = F.make_fixture(tmp_path_factory.mktemp("rcad_fixture"))
     lay = load_replicacad(root, "apt_0")

@@ -16,7 +16,7 @@ import pytest
 from jobspecs import write_spec
 
 from formats.tour import Tour
-from synth import jobs
+from synth.jobs import job as jobs
 from synth.cli import main as synth_main
 from synth.resources import REPO_ROOT
 
@@ -202,10 +202,10 @@ def test_ray_backend_on_loopback_renders_the_smoke_spec(tmp_path):
 @pytest.mark.blender
 def test_fast_geometry_with_sparse_rgb_renders_a_checked_tour(tmp_path):
     """Depth and ids of every frame from the fast renderer, Cycles RGB on every 3rd frame only."""
-    from synth.dataset import check_tour
-    from synth.fast_render import FastRenderer
-    from synth.scene import load_layout
-    from synth.tour import resolve_layout_path
+    from synth.datasets.check import check_tour
+    from synth.render.fast_render import FastRenderer
+    from synth.scene.model import load_layout
+    from synth.render.render_tour import resolve_layout_path
 
     spec = write_spec(tmp_path, geometry="fast", chunk_size=4, designs=[
         {"layouts": ["apt_0"], "lightings": ["night"], "path": {"name": "query", "frames": 7}, "rgb_every": 3}])
@@ -236,7 +236,7 @@ def test_dry_run_prints_plan_and_estimate_writes_nothing(tmp_path, capsys):
 def test_spec_document_of_a_plain_spec_is_unchanged_by_the_replicacad_key():
     """A job started before specs could name a ReplicaCAD root resumes: the state document of a spec
     without replicacad: holds no such key (job_state.json compares documents)."""
-    from synth.jobs import spec_document
+    from synth.jobs.job import spec_document
 
     plain = spec_document(jobs.load_spec(REPO_ROOT / "render_jobs" / "demo.yaml"))
     assert "replicacad" not in plain

@@ -10,8 +10,8 @@ import pytest
 
 from jobspecs import write_spec
 
-from synth import cluster_estimate as ce
-from synth import jobs
+from synth.jobs import estimate as ce
+from synth.jobs import job as jobs
 from synth.cli import main as synth_main
 
 NO_SETUP: dict = {}

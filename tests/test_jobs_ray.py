@@ -15,7 +15,8 @@ import pytest
 from jobspecs import write_spec
 
 from formats import frames as fr
-from synth import jobs, ray_backend
+from synth.jobs import job as jobs
+from synth.jobs import ray_backend
 from synth.cli import main as synth_main
 from synth.resources import REPO_ROOT
 

@@ -1,4 +1,4 @@
-"""The job folder on a storage URI (``synth render SPEC --out URI --backend ray``, ``synth.storage``):
+"""The job folder on a storage URI (``synth render SPEC --out URI --backend ray``, ``synth.jobs.storage``):
 file:// and memory://, atomic writes, resume from what is stored, and refusals that write nothing."""
 
 from __future__ import annotations
@@ -12,7 +12,9 @@ import pytest
 
 from jobspecs import write_spec
 
-from synth import jobs, ray_backend, storage
+from synth.jobs import job as jobs
+from synth.jobs import ray_backend
+from synth.jobs import storage
 from synth.cli import main as synth_main
 
 SKIP = {"job_state.json", "job_summary.json"}  # the job's bookkeeping: times, backend, paths

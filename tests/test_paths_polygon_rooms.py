@@ -19,7 +19,7 @@ from synth.paths.clearance import clearance_report, path_clearance, wall_segment
 from synth.paths.files import load_path
 from synth.paths.mapping import plan_mapping_path
 from synth.paths.query import plan_query_path
-from synth.scene import Layout, ObjectInstance, Opening, Room, Stage, Wall, object_box, save_layout
+from synth.scene.model import Layout, ObjectInstance, Opening, Room, Stage, Wall, object_box, save_layout
 
 L_SHAPE = ((0.0, 0.0), (6.0, 0.0), (6.0, 2.5), (2.5, 2.5), (2.5, 6.0), (0.0, 6.0))
 TOL = 1e-3

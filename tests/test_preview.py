@@ -1,4 +1,4 @@
-"""Top-down layout previews (synth.preview): files, pixel sizes, diffs, degenerate layouts."""
+"""Top-down layout previews (synth.scene.preview): files, pixel sizes, diffs, degenerate layouts."""
 
 from __future__ import annotations
 
@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from formats.errors import UserError
-from synth import geometry as geo
-from synth.classes import class_table
-from synth.preview import class_color, diff_layouts, figure_size, plot_layout
-from synth.scene import Layout, ObjectInstance, Opening, Room, Stage, Wall
+from synth.scene import geometry as geo
+from synth.scene.classes import class_table
+from synth.scene.preview import class_color, diff_layouts, figure_size, plot_layout
+from synth.scene.model import Layout, ObjectInstance, Opening, Room, Stage, Wall
 
 
 

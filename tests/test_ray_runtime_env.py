@@ -13,7 +13,8 @@ from pathlib import Path
 import pytest
 
 import ray_loopback
-from synth import jobs, ray_backend
+from synth.jobs import job as jobs
+from synth.jobs import ray_backend
 from synth.cli import main as synth_main
 from synth.resources import REPO_ROOT
 

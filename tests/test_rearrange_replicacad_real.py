@@ -1,7 +1,7 @@
 """``synth scene rearrange`` on the real-format ReplicaCAD fixture (tests/replicacad_real_fixture.py):
 the real apt_0 scene instance (box GLBs at the real bounds, the stand-in stage from the navmesh).
 
-A variant of apt_0 must fall inside the scaled ranges (synth.stats.scaled_ranges), be the same for
+A variant of apt_0 must fall inside the scaled ranges (synth.scene.stats.scaled_ranges), be the same for
 the same seed, add no check problem to the reference's, and move what stands on a moved object --
 or rests on it without a named support (``free``: cushions on the sofa, shoes in the rack) -- along
 with it.
@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 
 from replicacad_real_fixture import write_real_fixture
-from synth.checks import check_layout
-from synth.rearrange import RearrangePlan, VariantSpec, free_rests, make_variant, new_problems, reference_walkway
-from synth.replicacad import load_replicacad
-from synth.scene import layout_to_dict
-from synth.stats import PAPER_RANGES, change_stats, change_table, moved_distances, scaled_ranges
+from synth.layout.validity import check_layout
+from synth.layout.rearrange import RearrangePlan, VariantSpec, free_rests, make_variant, new_problems, reference_walkway
+from synth.replicacad.importer import load_replicacad
+from synth.scene.model import layout_to_dict
+from synth.scene.stats import PAPER_RANGES, change_stats, change_table, moved_distances, scaled_ranges
 
 SEED = 3
 

@@ -263,7 +263,7 @@ def test_manhattan_is_extent_weighted():
 
 
 def test_gt_map_of_apt0_is_small_and_complete(tmp_path):
-    from synth.scene import boxes_document, load_layout
+    from synth.scene.model import boxes_document, load_layout
 
     d = boxes_document(load_layout("apt_0"))
     p = tmp_path / "map.json"

@@ -1,7 +1,7 @@
 """FPFH-ICP, the dense geometric clip-rigid control (reloc/fpfh_icp.py).
 
 Ground truth is independent of the code under test: depth comes from the fast ray-casting renderer
-of apt_0 (``synth.fast_render``) along the shipped mapping and query camera paths, written as real
+of apt_0 (``synth.render.fast_render``) along the shipped mapping and query camera paths, written as real
 tour directories, and the clip frame is an arbitrary rigid transform X of the world.
 """
 
@@ -19,9 +19,9 @@ from formats import camera as cam
 from formats.errors import UserError
 from formats.frames import write_frame
 from formats.tour import Tour
-from synth.fast_render import FastRenderer
+from synth.render.fast_render import FastRenderer
 from synth.paths.files import load_path
-from synth.scene import load_layout
+from synth.scene.model import load_layout
 
 INTR = cam.Intrinsics.from_fov(96, 72, 75.0)
 FPS = 30.0

@@ -18,8 +18,8 @@ from reloc.map.boxmap import BoxMap
 from reloc.experiments.units import format_units, run_units
 
 from formats.tour import Tour
-from synth.scene import boxes_document, load_layout
-from synth.tour import TourSpec, render_tour
+from synth.scene.model import boxes_document, load_layout
+from synth.render.render_tour import TourSpec, render_tour
 
 
 W, H = 160, 120

@@ -24,7 +24,7 @@ from reloc.map.boxmap import BoxMap
 from reloc.map.build import build_map
 from reloc.map.cli import register_cli
 from reloc.map.document import map_from_tour
-from synth.scene import boxes_document, load_layout
+from synth.scene.model import boxes_document, load_layout
 from reloc.map.fitting import fit_box
 from reloc.map.scoring import box_errors
 from reloc.map.segmentation import _moments, _reduce, voxel_keys

@@ -132,7 +132,7 @@ def test_bad_sensor_specs_are_one_line_exit_2(tmp_path, capsys, changes, file, m
 def sensor_design(tmp_path_factory):
     """Two 150-frame geometry-only query tours (apt_0, apt_1) and a 30-frame mapping tour, 64x48;
     an experiment reading them through the ideal sensor and a user-defined one."""
-    from synth.jobs import load_spec, run_job
+    from synth.jobs.job import load_spec, run_job
 
     root = tmp_path_factory.mktemp("sensor_design")
     render = {"name": "fast", "out": str(root / "tours"), "renderer": "fast", "size": [64, 48], "chunk_size": 600,

@@ -1,4 +1,4 @@
-"""synth.replicacad: a tiny ReplicaCAD-shaped dataset built here, expected values worked out by hand.
+"""synth.replicacad.importer: a tiny ReplicaCAD-shaped dataset built here, expected values worked out by hand.
 
 These tests cover the conversion of scene instances, poses, scales and frames, so they import with
 ``structure=False`` (the stage stays one mesh, articulated objects are skipped); the full import
@@ -20,9 +20,9 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from formats.errors import SceneFormatError, UnknownNameError
-from synth.classes import parse_class_table
-from synth.replicacad import Y_UP_TO_Z_UP, list_scenes, load_asset_mesh, load_replicacad
-from synth.scene import load_layout, object_box, save_layout
+from synth.scene.classes import parse_class_table
+from synth.replicacad.importer import Y_UP_TO_Z_UP, list_scenes, load_asset_mesh, load_replicacad
+from synth.scene.model import load_layout, object_box, save_layout
 
 
 
@@ -276,7 +276,7 @@ def test_world_vertices_agree(layout, dataset, index, mesh, com):
     got = (local * np.asarray(o.scale)) @ _rot(o.rotation).T + np.asarray(o.position)
     assert len(got) == len(expected)
     d = np.linalg.norm(expected[:, None, :] - got[None, :, :], axis=2)
-    # layouts store positions at 0.1 mm (synth.scene.LENGTH_DECIMALS): at most 0.05 mm per axis
+    # layouts store positions at 0.1 mm (synth.scene.model.LENGTH_DECIMALS): at most 0.05 mm per axis
     assert d.min(axis=1).max() < 1e-4 and d.min(axis=0).max() < 1e-4
 
 

@@ -23,12 +23,12 @@ from replicacad_fixture import (
     make_fixture,
 )
 
-from synth.checks import check_layout
+from synth.layout.validity import check_layout
 from synth.cli import main as synth_main
-from synth.jobs import load_spec
-from synth.replicacad import load_replicacad
-from synth.replicacad_job import prepare
-from synth.scene import load_layout, object_box, structure_boxes
+from synth.jobs.job import load_spec
+from synth.replicacad.importer import load_replicacad
+from synth.replicacad.job import prepare
+from synth.scene.model import load_layout, object_box, structure_boxes
 
 
 @pytest.fixture(scope="module")
@@ -301,7 +301,7 @@ def test_replicacad_root_option_needs_a_replicacad_spec(root, capsys):
 
 def test_shipped_replicacad_spec_plans_the_paper_design(root, tmp_path):
     """render_jobs/replicacad_apt_6x3.yaml on the fixture: 18 query tours of 4,000 frames + the 6,000-frame mapping tour."""
-    from synth.jobs import expand
+    from synth.jobs.job import expand
 
     spec = load_spec(Path(__file__).resolve().parents[1] / "render_jobs" / "replicacad_apt_6x3.yaml")
     ready = prepare(spec, tmp_path / "job", cli_root=str(root), progress=lambda m: None)
@@ -372,7 +372,7 @@ def test_pipeline_render_map_run_eval_on_the_fixture(root, tmp_path, capsys):
     """Blender RGB + fast geometry from a ReplicaCAD root, a map built from the mapping tour, VideoReloc
     on the query tours of the reference and of the authored variant apt_1, recall from reloc eval."""
     from reloc.cli import main as reloc_main
-    from synth.dataset import check_tour
+    from synth.datasets.check import check_tour
 
     job = tmp_path / "job"
     spec = tmp_path / "spec.yaml"

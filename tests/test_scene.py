@@ -10,9 +10,9 @@ import pytest
 import yaml
 
 from formats.errors import SceneFormatError, UnknownNameError
-from synth import geometry as geo
+from synth.scene import geometry as geo
 from synth.cli import main as synth_main
-from synth.scene import (
+from synth.scene.model import (
     FLOOR_ID_BASE,
     WALL_ID_BASE,
     Layout,
@@ -198,7 +198,7 @@ def test_malformed_yaml_and_missing_file_exit_2(tmp_path, capsys):
 
 
 def test_unknown_class_lookup_names_it():
-    from synth.classes import class_table
+    from synth.scene.classes import class_table
 
     with pytest.raises(UnknownNameError, match="'lamp_post'"):
         class_table().get("lamp_post")

@@ -19,8 +19,8 @@ from reloc.frontend.detection_learned import LearnedDetector
 from reloc.frontend.detector_base import FrameData
 from synth.paths.files import save_path
 from synth.paths.views import plan_views
-from synth.scene import load_layout
-from synth.tour import TourSpec, render_tour
+from synth.scene.model import load_layout
+from synth.render.render_tour import TourSpec, render_tour
 
 MODEL = Path(__file__).resolve().parents[1] / "models" / "detector_160x120.onnx"
 FLOORS = {"day": (0.82, 0.52), "night": (0.76, 0.45)}  # pixel accuracy, mean best mask IoU

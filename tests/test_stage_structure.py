@@ -1,4 +1,4 @@
-"""synth.stage_structure: structure (floor, ceiling, walls, openings, rooms) from one stage mesh.
+"""synth.replicacad.stage_structure: structure (floor, ceiling, walls, openings, rooms) from one stage mesh.
 
 Every stage here is built by the test from boxes or quads in our frame (Z up), and every expected
 number is written out by hand from that construction (the same two-room stage as the ReplicaCAD
@@ -21,8 +21,8 @@ import trimesh
 
 from formats.boxes import CEILING_ID_BASE, FLOOR_ID_BASE, WALL_ID_BASE
 from formats.errors import SceneFormatError
-from synth.scene import Stage, structure_boxes
-from synth.stage_structure import DEFAULT_THICKNESS, derive_structure, face_ids
+from synth.scene.model import Stage, structure_boxes
+from synth.replicacad.stage_structure import DEFAULT_THICKNESS, derive_structure, face_ids
 
 TOL = 0.05  # m
 YAW_TOL = math.radians(2.0)
@@ -153,7 +153,7 @@ def test_yawed_and_translated_stage(caplog):
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = R, shift
     mesh.apply_transform(T)
-    with caplog.at_level(logging.WARNING, logger="synth.stage_structure"):
+    with caplog.at_level(logging.WARNING, logger="synth.replicacad.stage_structure"):
         s = derive_structure(mesh, "yawed.glb")
     assert abs(s.floor_z - 0.25) <= 1e-6 and abs(s.ceiling_height - 2.5) <= 1e-6
     expected = {n: (tuple(move(cen) + [0, 0, 0.25]), size, y + yaw) for n, (cen, size, y) in WALL_BOXES.items()}
@@ -379,9 +379,9 @@ def test_stage_without_a_ceiling_takes_the_top_of_the_mesh():
 
 
 def test_derived_stage_serves_layout_checks_and_path_walls():
-    from synth.checks import check_layout
+    from synth.layout.validity import check_layout
     from synth.paths.clearance import wall_segments
-    from synth.scene import Layout
+    from synth.scene.model import Layout
 
     stage = _stage(derive_structure(two_room_stage(), "two_room.glb"))
     rep = check_layout(Layout("derived", stage))
@@ -465,7 +465,7 @@ def test_stairs_and_a_landing_are_not_walls_a_half_height_wall_is():
 def test_without_the_stairs_rule_the_landing_fronts_would_be_walls(monkeypatch):
     """The stage above exercises the rule: the landing's fronts are 1.02 m high (taller than
     MIN_WALL_HEIGHT) and long enough, so without it they come out as two more walls."""
-    import synth.stage_structure as ss
+    from synth.replicacad import stage_structure as ss
 
     monkeypatch.setattr(ss, "_drop_platform_sides", lambda pieces, *a, **k: pieces)
     s = derive_structure(stairs_room(), "stairs.glb")
@@ -505,7 +505,7 @@ def _ccw(q) -> bool:
 
 
 def test_l_shaped_room_is_a_polygon_its_floor_fills(caplog):
-    with caplog.at_level(logging.WARNING, logger="synth.stage_structure"):
+    with caplog.at_level(logging.WARNING, logger="synth.replicacad.stage_structure"):
         s = derive_structure(l_room(), "l.glb")
     assert len(s.walls) == 6 and len(s.rooms) == 1
     r = s.rooms[0]

@@ -85,9 +85,9 @@ def import_cycles() -> list[list[str]]:
 
 def test_the_scan_sees_imports():
     mods = _modules()
-    assert "synth.scene" in mods and "reloc.cli" in mods
+    assert "synth.scene.model" in mods and "reloc.cli" in mods
     # relative, absolute and function-level imports are all edges
-    assert "synth.geometry" in _imports("synth.scene", mods["synth.scene"], mods)
+    assert "synth.scene.geometry" in _imports("synth.scene.model", mods["synth.scene.model"], mods)
     assert "formats.errors" in _imports("reloc.cli", mods["reloc.cli"], mods)
 
 

@@ -1,4 +1,4 @@
-"""synth.urdf: URDFs and GLBs written here, expected positions worked out by hand.
+"""synth.replicacad.urdf: URDFs and GLBs written here, expected positions worked out by hand.
 
 Frames: a URDF is in habitat coordinates (Y up, like its GLBs); ours is Z up. C maps habitat
 (x, y, z) to ours (x, -z, y). Every expected number below is derived in the comments.
@@ -15,10 +15,10 @@ import pytest
 import trimesh
 
 from formats.errors import SceneFormatError, UnknownNameError
-from synth import geometry as geo
-from synth.classes import parse_class_table
-from synth.scene import object_box
-from synth.urdf import find_urdf, load_articulated_instances, parse_urdf, urdf_geometry, urdf_visuals
+from synth.scene import geometry as geo
+from synth.scene.classes import parse_class_table
+from synth.scene.model import object_box
+from synth.replicacad.urdf import find_urdf, load_articulated_instances, parse_urdf, urdf_geometry, urdf_visuals
 
 CLASSES = parse_class_table(
     {

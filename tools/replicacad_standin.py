@@ -7,7 +7,7 @@ config, URDF, navmesh and 89 of the 92 object GLBs, but no ``stages/*.glb``. Thi
 to OUT (files are copied, not linked: OUT may be edited without touching SRC) and writes:
 
 * for every ``configs/stages/*.stage_config.json`` whose ``render_asset`` is missing, a **stand-in
-  stage** built from the stage's navmeshes (``synth.navmesh.standin_stage``): the navmeshes of every
+  stage** built from the stage's navmeshes (``synth.replicacad.navmesh.standin_stage``): the navmeshes of every
   scene instance that uses the stage, walkable areas united (``frl_apartment_stage``: its scenes all
   name ``empty_stage_navmesh``, i.e. ``navmeshes/empty_stage.navmesh``, built without furniture;
   ``Stage_v3_scK_staging``: the 21 ``v3_scK_staging_NN`` navmeshes, each built with its furniture, so
@@ -57,8 +57,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from formats.errors import UserError  # noqa: E402
-from synth.habitat_format import hab_matrix, mapping, read_json  # noqa: E402
-from synth.navmesh import (  # noqa: E402
+from synth.replicacad.habitat_format import hab_matrix, mapping, read_json  # noqa: E402
+from synth.replicacad.navmesh import (  # noqa: E402
     NavMesh, StandinSpec, navmesh_for_scene, read_navmesh, standin_stage, write_standin_glb,
 )
 
@@ -101,8 +101,8 @@ def stage_scenes(root: Path) -> dict[str, list[tuple[Path, dict]]]:
 
 def object_bottoms(root: Path, scenes: list[tuple[Path, dict]]) -> list[float]:
     """World heights (habitat y) of the lowest vertex of every rigid object with a GLB in the scenes."""
-    from synth.gltf import glb_geometry
-    from synth.habitat_format import Y_UP_TO_Z_UP as C
+    from synth.replicacad.gltf import glb_geometry
+    from synth.replicacad.habitat_format import Y_UP_TO_Z_UP as C
 
     cache: dict[str, tuple[np.ndarray, np.ndarray | None] | None] = {}
     out = []
@@ -132,10 +132,10 @@ def object_bottoms(root: Path, scenes: list[tuple[Path, dict]]) -> list[float]:
 
 
 def scene_objects(root: Path, scene_path: Path, doc: dict) -> list:
-    """The objects of a scene as the importer reads them (``synth.replicacad``: rigid objects at their
+    """The objects of a scene as the importer reads them (``synth.replicacad.importer``: rigid objects at their
     configs' bounds, articulated ones from their URDFs, doors opened) without reading its stage,
     which is what is being built."""
-    from synth.replicacad import scene_objects as read_scene_objects
+    from synth.replicacad.importer import scene_objects as read_scene_objects
 
     return read_scene_objects(root, scene_path, doc)
 
@@ -144,7 +144,7 @@ def object_footprints(root: Path, scenes: list[tuple[Path, dict]], floor_z: floa
     """XY footprints (4, 2) of the boxes of every object of the scenes that stands in the storey (its
     box's bottom between 0.1 m below the floor and the ceiling: on the floor, on furniture, on a
     wall), their tops and bottoms (z), and (scene, object id, class) of each, in the same order."""
-    from synth.scene import object_box
+    from synth.scene.model import object_box
 
     quads, tops, bottoms, who = [], [], [], []
     for p, doc in scenes:
@@ -199,8 +199,8 @@ def sibling_glb(glb: Path) -> Path | None:
 
 def glb_bounds_habitat(path: Path) -> np.ndarray:
     """Bounds of a GLB in its own (Y-up) frame, through the importer's reading (node transforms)."""
-    from synth.gltf import glb_geometry
-    from synth.habitat_format import Y_UP_TO_Z_UP as C
+    from synth.replicacad.gltf import glb_geometry
+    from synth.replicacad.habitat_format import Y_UP_TO_Z_UP as C
 
     v = glb_geometry(path).vertices @ C
     return np.stack([v.min(0), v.max(0)])

@@ -1,7 +1,7 @@
 """Procedural Cycles materials: shader nodes only, no image textures.
 
 One entry point, :func:`get_material`, builds (and caches) a material for every name of
-``synth.assets.MATERIALS`` and of :data:`STAGE_MATERIALS` (the apartment shell).
+``synth.assets.procedural.MATERIALS`` and of :data:`STAGE_MATERIALS` (the apartment shell).
 
 Design rules
 
@@ -36,7 +36,7 @@ still see glass surfaces, as with any other mesh.
 glTF materials (mesh assets: ReplicaCAD)
 
 :func:`get_gltf_material` builds a Principled BSDF from a part's glTF PBR material
-(``synth.gltf.pbr``), once per (glTF file, material index) and emission key:
+(``synth.replicacad.gltf.pbr``), once per (glTF file, material index) and emission key:
 
 * base colour = ``baseColorTexture`` (sRGB image, UV map "UVMap", linear filtering, repeat)
   x ``baseColorFactor``; alpha = texture alpha x factor alpha for ``alphaMode`` BLEND, the same
@@ -50,7 +50,7 @@ glTF materials (mesh assets: ReplicaCAD)
   ``emissiveFactor`` x the colour of an RGB node named ``"emission_light"`` (the light's colour,
   white by default; :func:`set_emission` and the scene builder set it);
 * ``KHR_texture_transform`` of a slot (``params["texture_transforms"]``): a UV Map node ("UVMap")
-  and a Mapping node (POINT, values from ``synth.gltf.blender_mapping``, as Blender's own glTF
+  and a Mapping node (POINT, values from ``synth.replicacad.gltf.blender_mapping``, as Blender's own glTF
   importer sets them) feed that slot's Image Texture node;
 * occlusion maps, vertex colours and samplers are ignored; IOR 1.5 (glTF's).
 
@@ -70,7 +70,7 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from ..assets import MATERIALS
+from ..assets.procedural import MATERIALS
 
 __all__ = [
     "STAGE_MATERIALS",
@@ -179,7 +179,7 @@ def _load_packed(suffix: str, write) -> bpy.types.Image:
 def _bpy_image(pil, colorspace: str, label: str, source: dict | None = None):
     """A packed Blender image (once per image and colour space), or None.
 
-    With ``source`` (``synth.gltf.pbr(...)["sources"][slot]``) the file's own encoded bytes are
+    With ``source`` (``synth.replicacad.gltf.pbr(...)["sources"][slot]``) the file's own encoded bytes are
     loaded as they are (no re-encoding); otherwise the PIL image is saved as PNG first."""
     if pil is None:
         return None
@@ -193,7 +193,7 @@ def _bpy_image(pil, colorspace: str, label: str, source: dict | None = None):
             except ReferenceError:
                 pass
         try:
-            from ..gltf import read_image_source
+            from ..replicacad.gltf import read_image_source
 
             blob = read_image_source(source)
             img = _load_packed(source["suffix"], lambda path: Path(path).write_bytes(blob))
@@ -229,7 +229,7 @@ def _bpy_image(pil, colorspace: str, label: str, source: dict | None = None):
 
 
 def get_gltf_material(params: dict, emissive: bool = False, key: str | None = None) -> bpy.types.Material:
-    """The Cycles material of a glTF PBR material (``params`` = ``synth.gltf.pbr(mesh)``).
+    """The Cycles material of a glTF PBR material (``params`` = ``synth.replicacad.gltf.pbr(mesh)``).
 
     Built once per (``params["key"]``, emissive, ``key``); ``key`` (the light fixture) gives an
     emitter a material of its own. The "emission" node exists when ``emissive`` is true (and the
@@ -261,7 +261,7 @@ def _build_gltf(params: dict, emissive: bool, key: str | None) -> bpy.types.Mate
         node = t.add("ShaderNodeTexImage", image=img, interpolation="Linear", extension="REPEAT")
         tt = transforms.get(what + "Texture")
         if tt is not None:  # KHR_texture_transform: UV map -> Mapping -> this image
-            from ..gltf import blender_mapping
+            from ..replicacad.gltf import blender_mapping
 
             m = blender_mapping(tt)
             uvmap = t.add("ShaderNodeUVMap", uv_map="UVMap")

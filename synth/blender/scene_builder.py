@@ -1,6 +1,6 @@
 """Translate a layout's render parts, a resolved lighting and a camera into a Blender scene.
 
-Everything here is translation of plain data (``synth.meshes``, ``synth.lighting``,
+Everything here is translation of plain data (``synth.render.meshes``, ``synth.scene.lighting``,
 ``formats.camera``); the conventions are decided there. The one conversion made here is the
 camera's: an OpenCV camera-to-world pose becomes Blender's camera matrix (looking down -Z, +Y up)
 through ``formats.camera.blender_from_opencv``, and the intrinsics become lens and shift.
@@ -14,7 +14,7 @@ from mathutils import Matrix, Vector
 
 from formats.camera import Intrinsics, blender_from_opencv
 
-from ..lighting import ResolvedLighting
+from ..scene.lighting import ResolvedLighting
 
 
 def reset_scene() -> bpy.types.Scene:
@@ -27,19 +27,19 @@ def reset_scene() -> bpy.types.Scene:
 def add_parts(scene, parts, with_materials: bool) -> dict[str, bpy.types.Material]:
     """One Blender object per part, mesh in the part's local frame, ``pass_index`` = instance id.
 
-    With materials, a part whose material is ``"gltf"`` (``synth.meshes.GLTF_MATERIAL``) gets its
+    With materials, a part whose material is ``"gltf"`` (``synth.render.meshes.GLTF_MATERIAL``) gets its
     UVs (a UV map "UVMap", per loop), its glTF normals when the file has them (custom normals on
     smooth faces) and a material built from its glTF PBR material
     (``synth.blender.materials.get_gltf_material``); the geometry pass (no materials) builds the
     same plain meshes as for procedural parts.
 
     Returns the materials of emitting parts by fixture id (for the lighting to switch)."""
-    from ..meshes import GLTF_MATERIAL
+    from ..render.meshes import GLTF_MATERIAL
 
     emitters: dict[str, list] = {}
     coll = scene.collection
     if with_materials:
-        from ..gltf import pbr
+        from ..replicacad.gltf import pbr
         from .materials import get_gltf_material, get_material
     for p in parts:
         gltf = with_materials and p.material == GLTF_MATERIAL

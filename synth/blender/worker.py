@@ -1,6 +1,6 @@
 """Render one chunk of frames in this (fresh) Blender process: ``python -m synth.blender.worker JOB.json``.
 
-A job is a JSON file (see ``synth.tour.ChunkJob``)::
+A job is a JSON file (see ``synth.render.render_tour.ChunkJob``)::
 
     {"pass": "geometry" | "rgb", "layout": "<layout file>", "lighting": "<preset name or file>",
      "poses": "<TUM file>", "frames": [i, ...], "intrinsics": {...}, "quality": "preview",
@@ -26,7 +26,7 @@ import numpy as np
 
 from formats import frames as fr
 
-from ..chunks import emit, worker_main
+from ..render.chunks import emit, worker_main
 
 
 def read_blender_exr(path: str) -> dict[str, np.ndarray]:
@@ -51,10 +51,10 @@ def run(job: dict) -> int:
     import bpy
 
     from formats.camera import Intrinsics, read_tum
-    from ..lighting import load_lighting, resolve_lighting
-    from ..meshes import instance_classes, layout_parts
-    from ..render_settings import quality
-    from ..scene import load_layout
+    from ..scene.lighting import load_lighting, resolve_lighting
+    from ..render.meshes import instance_classes, layout_parts
+    from ..render.settings import quality
+    from ..scene.model import load_layout
     from . import scene_builder as sb
 
     mode = job["pass"]

@@ -47,7 +47,7 @@ Planning (both kinds)
 
 The built-in layouts and 0.3 m
     Rearranged variants put furniture where the reference has free floor, so the free space the
-    six built-in layouts share is small. ``synth.rearrange`` therefore keeps every variant out of
+    six built-in layouts share is small. ``synth.layout.rearrange`` therefore keeps every variant out of
     a walkway through all rooms of the reference (planned with 0.35 m): the shared space always
     holds a route through every room, and the shipped query path keeps 0.3 m from every object
     in all six layouts. If the layouts given leave no such route, ``plan_query_path`` raises a

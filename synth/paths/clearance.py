@@ -2,7 +2,7 @@
 
 ``path_clearance`` measures (the clearance rule is in ``synth.paths``); ``clearance_report``,
 ``render_clearance_problem`` and ``replan_command`` serve ``synth path check`` and the refused
-renders (``synth.tour``, ``synth.jobs``). The free space is defined here once (``inside_free``,
+renders (``synth.render.render_tour``, ``synth.jobs.job``). The free space is defined here once (``inside_free``,
 ``wall_segments``, ``wall_clearance``, ``room_index``: rooms by ``Room.outline`` / ``Room.contains``, so
 polygon rooms and rect rooms alike); the planning grid (``synth.paths.space``) uses exactly these
 functions and the footprints and distances defined here, so a planned path checks as planned.
@@ -18,7 +18,7 @@ import numpy as np
 
 from formats.errors import UserError
 
-from ..scene import Layout, Stage, object_box
+from ..scene.model import Layout, Stage, object_box
 from .model import BAND, CameraPath
 
 __all__ = [
@@ -160,7 +160,7 @@ def inside_free(stage: Stage, pts: np.ndarray) -> np.ndarray:
     """Points in the free space: inside a room's free interior (``Room.contains``: its polygon, else
     its rect) or an interior door gap. The one inside test of planner and checker."""
     from matplotlib.path import Path as MplPath
-    from ..placement import opening_box
+    from ..scene.openings import opening_box
 
     pts = np.asarray(pts, float).reshape(-1, 2)
     inside = np.zeros(len(pts), bool)
@@ -397,7 +397,7 @@ def replan_command(path: CameraPath, layout_args: list[str]) -> str:
 
 def planned_on(path: CameraPath, layout_file) -> bool:
     """Whether ``layout_file`` is one of the layouts the path was planned on (``meta['layouts']``)."""
-    from ..scene import resolve_layout_path
+    from ..scene.model import resolve_layout_path
 
     target = Path(layout_file).resolve()
     for n in path.meta.get("layouts") or []:

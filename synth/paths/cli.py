@@ -22,7 +22,7 @@ __all__ = ["register_cli"]
 
 
 def _layout(name):
-    from ..scene import load_layout
+    from ..scene.model import load_layout
 
     return load_layout(name)
 
@@ -32,7 +32,7 @@ def _layout_ref(arg: str) -> str:
     given, a file by its absolute path. A layout file keeps its own name inside (an imported
     ReplicaCAD ``apt_0`` is called ``apt_0``), so recording that name would make ``synth path
     check``, replanning and the render checks read the built-in layout of the same name instead."""
-    from ..scene import layouts_dir, resolve_layout_path
+    from ..scene.model import layouts_dir, resolve_layout_path
 
     f = resolve_layout_path(arg)
     if Path(arg).suffix == "" and not Path(arg).exists() and f == layouts_dir() / f"{arg}.yaml":
@@ -157,7 +157,7 @@ def _cmd_check(args) -> int:
         for rg in r["ranges"]:
             print(f"  {_range_text(rg)}")
         if r["frames_outside"] and not args.layout:
-            from ..scene import resolve_layout_path
+            from ..scene.model import resolve_layout_path
 
             print(f"  {r['frames_outside']} frames lie outside every room of {resolve_layout_path(arg)}: if the path was "
                   f"planned on another layout named '{r['layout']}' (an imported one), give its file with --layout")

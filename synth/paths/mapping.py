@@ -11,10 +11,9 @@ import numpy as np
 from formats import camera
 from formats.errors import UserError
 
-from ..scene import Layout
+from ..scene.model import Layout
 from .curves import _arc, _continuous, _final_yaw, _poses, _rate_limit, _resample_track, _smooth_noise, _smooth_valid, _travel_yaw, _turn_loops
-from .model import (BOB, DS, M_HEIGHT_VAR, M_HEIGHTS, M_LOOK, M_MIN_RUN, M_PITCH, M_PITCH_VAR, M_ROLL, M_SMOOTH, M_SPACING,
-                    MARGIN, STEP_HZ, CameraPath)
+from .model import BOB, DS, M_HEIGHT_VAR, M_HEIGHTS, M_LOOK, M_MIN_RUN, M_PITCH, M_PITCH_VAR, M_ROLL, M_SMOOTH, M_SPACING, MARGIN, STEP_HZ, CameraPath
 from .space import Space, _check_args, _line, _meta, _require_rooms, _start_cell
 
 __all__ = ["plan_mapping_path"]

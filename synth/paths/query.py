@@ -11,7 +11,7 @@ import numpy as np
 from formats import camera
 from formats.errors import UserError
 
-from ..scene import Layout
+from ..scene.model import Layout
 from .curves import _arc, _final_yaw, _polyline_resample, _poses, _resample_track, _smooth_noise, _smooth_valid, _travel_yaw, _turn_loops
 from .model import BOB, DS, Q_HEIGHT, Q_HEIGHT_VAR, Q_LOOK, Q_PITCH, Q_PITCH_VAR, Q_ROLL, Q_SMOOTH, STEP_HZ, CameraPath
 from .space import Space, _check_args, _meta, _require_rooms, _start_cell

@@ -10,7 +10,7 @@ from typing import Any
 from formats import camera
 from formats.errors import UserError
 
-from ..scene import Layout
+from ..scene.model import Layout
 from .files import paths_dir, save_path
 from .mapping import plan_mapping_path
 from .model import CameraPath
@@ -42,7 +42,7 @@ def plan_path(kind: str, layouts: list[Layout], frames: int, seed: int = 0, fps:
 
 def replan(path: CameraPath) -> CameraPath:
     """Plan a saved path again from the inputs its metadata records (to check for drift)."""
-    from ..scene import load_layout
+    from ..scene.model import load_layout
 
     m = path.meta
     pl = m.get("planner") or {}
@@ -56,7 +56,7 @@ def replan(path: CameraPath) -> CameraPath:
 
 def generate_shipped(out_dir=None, names=None) -> list[Path]:
     """(Re)write the shipped paths (``SHIPPED``) into ``out_dir`` (default scenes/paths)."""
-    from ..scene import load_layout
+    from ..scene.model import load_layout
 
     out_dir = Path(out_dir) if out_dir else paths_dir()
     written = []

@@ -11,7 +11,7 @@ import numpy as np
 
 from formats.errors import UserError
 
-from ..scene import Layout
+from ..scene.model import Layout
 from .clearance import Boxes, _object_boxes, _seg_dist, inside_free, path_clearance, room_index, wall_segments
 from .model import BAND, CURVE_MARGIN, DCAP, GRID, MARGIN, MAX_YAW_RATE, PREFER
 

@@ -10,7 +10,7 @@ import numpy as np
 
 from formats.errors import UserError
 
-from ..scene import Layout
+from ..scene.model import Layout
 from .clearance import path_clearance
 from .model import CameraPath
 
@@ -57,7 +57,7 @@ def plot_path(path: CameraPath, layout: Layout, out_path, dpi: float = 150, tick
     from matplotlib.collections import LineCollection
     from matplotlib.figure import Figure
 
-    from .. import preview as pv
+    from ..scene import preview as pv
 
     out = Path(out_path)
     fmt = out.suffix.lower().lstrip(".") or "png"

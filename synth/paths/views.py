@@ -21,7 +21,7 @@ import numpy as np
 from formats import camera
 from formats.errors import UserError
 
-from ..scene import Layout
+from ..scene.model import Layout
 from .curves import _poses
 from .model import BOB, Q_HEIGHT, Q_HEIGHT_VAR, Q_PITCH, Q_PITCH_VAR, Q_ROLL, CameraPath
 from .space import Space, _require_rooms

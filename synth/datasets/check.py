@@ -1,0 +1,767 @@
+"""Rendered tours on disk: check them, look at one frame (the reader is ``formats.tour.Tour``).
+
+A tour directory, as the renderers write it (the format is ``formats.tour``)::
+
+    TOUR/
+      camera.json    {"width", "height", "K", "fx", "fy", "cx", "cy", "fps", + formats.camera.CAMERA_DOC keys}
+      poses.txt      TUM, camera-to-world, OpenCV axes; frame index = round(t * fps); one line per frame
+      objects.json   ground-truth boxes of the tour's layout (``formats.boxes``: videoreloc-boxes/1)
+      meta.json      {"toolkit", "layout", "lighting" (null: geometry-only tour), "path", "renderer", "seed",
+                      "settings", "frames": [first, last], "wall_time_s", ...}
+      frames/NNNNNN.exr   one per frame (formats.frames: R, G, B half; Z; instance; semantic)
+      previews/NNNNNN.png optional 8-bit sRGB previews
+
+``check_tour``
+is ``synth dataset check``: completeness, readability, channels, sizes, depth values, ids against
+objects.json, pose sanity and a multi-view depth consistency test between neighbouring frames
+(it catches shifted or wrong poses, camera axes in the wrong convention and depth stored as ray
+length instead of planar z; it does not catch a wrong focal length, which small camera motions
+hardly reveal), and a brightness test: a lit tour whose RGB frames are nearly black fails (the
+median over its RGB frames of each frame's 99th-percentile luminance, in linear RGB at exposure 1
+as ``formats.tour.tonemap(rgb, 1.0)`` shows it, below ``DARK_P99_LUMINANCE``; a scene lit only
+through windows it does not have, or a night preset without lamps, renders like that). ``contact_sheet`` is
+``synth dataset show``: RGB, depth, instance and semantic images of one frame in one PNG.
+
+No Blender here; this module imports without bpy.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from formats import frames as fr
+from formats.boxes import STRUCTURE_CLASSES, STRUCTURE_ID_MAX, STRUCTURE_ID_MIN
+from formats.camera import Intrinsics
+from formats.errors import UserError
+from formats.tour import (CAMERA_FILE, FRAMES_DIR, META_FILE, OBJECTS_FILE, POSES_FILE, PREVIEWS_DIR, Tour,
+                          images_from_channels, ranges_text, read_split_channels, scan_dir, tonemap)
+
+# depth consistency between neighbouring frames
+CONSISTENCY_ABS_TOL_M = 0.02  # a pixel agrees within max(2 cm, 1 % of its depth)
+CONSISTENCY_REL_TOL = 0.01
+OCCLUSION_ABS_M = 0.05  # frame j sees something this much (or 5 %) in front: occluded, not compared
+OCCLUSION_REL = 0.05
+MIN_AGREEMENT = 0.9  # pairs below this are flagged ...
+MIN_OVERLAP_PIXELS = 1000  # ... when they have at least this many compared pixels
+PAIR_MAX_STEP = 5  # neighbours are i, i + k with k in 1..5
+PAIR_MIN_MOVE_M, PAIR_MIN_TURN_DEG = 0.02, 1.0  # the camera moved ...
+PAIR_GOOD_MOVE_M, PAIR_GOOD_TURN_DEG = 0.1, 5.0  # ... preferably this much ...
+PAIR_MAX_MOVE_M, PAIR_MAX_TURN_DEG = 1.0, 30.0  # ... but the views still overlap
+CLASS_MISMATCH_FRACTION = 0.005  # instance/semantic pairs disagreeing with objects.json on > 0.5 % of a frame
+ROTATION_TOL = 1e-4
+# a lit tour is nearly black when the median over its RGB frames of each frame's 99th-percentile
+# luminance (Rec. 709 weights, as formats.tour.tonemap; linear RGB at exposure 1) is below this:
+# 0.01 is sRGB 25/255 at exposure 1, i.e. the brightest 1 % of the frame is darker than a dim grey and
+# auto exposure would have to scale the frame by about 90 to show it. The toolkit's renders lie far
+# above (built-in apartment by day about 1.3; ReplicaCAD apt_0 with the stand-in stage: see README)
+DARK_P99_LUMINANCE = 0.01
+DARK_PERCENTILE = 99.0
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)  # formats.tour.tonemap's weights
+PROBLEM_LINES_PER_KIND = 20  # text report: at most this many lines per kind of problem
+
+
+def _pose_problem(T: np.ndarray) -> str | None:
+    T = np.asarray(T, dtype=float)
+    if not np.isfinite(T).all():
+        return "non-finite values"
+    if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
+        return f"last row is {T[3].tolist()}, not [0, 0, 0, 1]"
+    R = T[:3, :3]
+    err = float(np.abs(R.T @ R - np.eye(3)).max())
+    if err > ROTATION_TOL:
+        return f"rotation is not orthonormal (max |R^T R - I| = {err:.2g})"
+    det = float(np.linalg.det(R))
+    if det < 0:
+        return f"rotation is a reflection (det {det:.3f})"
+    return None
+
+
+def _relative_motion(Ta: np.ndarray, Tb: np.ndarray) -> tuple[float, float]:
+    """(translation m, rotation deg) between two camera-to-world poses."""
+    t = float(np.linalg.norm(Tb[:3, 3] - Ta[:3, 3]))
+    R = Ta[:3, :3].T @ Tb[:3, :3]
+    ang = math.degrees(math.acos(float(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
+    return t, ang
+
+
+def choose_pairs(poses: np.ndarray, usable, n: int, max_step: int = PAIR_MAX_STEP) -> list[tuple[int, int]]:
+    """Up to ``n`` pairs (a, a + k) of positions in ``poses`` spread over the tour, k in 1..max_step.
+
+    k is the smallest step over which the camera moved enough for a telling comparison (10 cm or
+    5 deg), else the largest step over which it moved at all (2 cm or 1 deg), never so far that the
+    views stop overlapping (1 m or 30 deg); a still camera gives the nearest usable neighbour. Only
+    ``usable`` positions (frames with readable, valid depth and a proper pose) take part.
+    """
+    usable = np.asarray(usable, dtype=bool)
+    N = len(poses)
+    if n <= 0 or N < 2:
+        return []
+    pairs: list[tuple[int, int]] = []
+    for anchor in np.unique(np.linspace(0, N - 2, min(n, N - 1)).round().astype(int)):
+        a = int(anchor)
+        while a < N - 1 and not usable[a]:
+            a += 1
+        if a >= N - 1:
+            continue
+        target = moved = nearest = None
+        for b in range(a + 1, min(a + max_step, N - 1) + 1):
+            if not usable[b]:
+                continue
+            move, turn = _relative_motion(poses[a], poses[b])
+            if move > PAIR_MAX_MOVE_M or turn > PAIR_MAX_TURN_DEG:
+                break
+            nearest = b if nearest is None else nearest
+            if move >= PAIR_MIN_MOVE_M or turn >= PAIR_MIN_TURN_DEG:
+                moved = b
+            if move >= PAIR_GOOD_MOVE_M or turn >= PAIR_GOOD_TURN_DEG:
+                target = b
+                break
+        b = next((x for x in (target, moved, nearest) if x is not None), None)
+        if b is not None and (a, b) not in pairs:
+            pairs.append((a, b))
+    return pairs
+
+
+def _warp_compare(depth_i, T_i, depth_j, T_j, intr: Intrinsics, rays: np.ndarray) -> dict:
+    """Back-project frame i's depth to the world, project it into frame j and compare with j's depth.
+
+    Returns counts: ``compared`` (lands inside j on a surface, not occluded), ``agree``,
+    ``occluded``, and the absolute differences of the compared pixels.
+    """
+    H, W = depth_i.shape
+    d = depth_i.reshape(-1).astype(np.float64)
+    valid = np.isfinite(d) & (d > 0)
+    p_cam = rays.reshape(-1, 3)[valid] * d[valid, None]
+    # camera i -> world -> camera j
+    R_ji = T_j[:3, :3].T @ T_i[:3, :3]
+    t_ji = T_j[:3, :3].T @ (T_i[:3, 3] - T_j[:3, 3])
+    q = p_cam @ R_ji.T + t_ji
+    z = q[:, 2]
+    front = z > 1e-6
+    q, z = q[front], z[front]
+    u = intr.fx * q[:, 0] / z + intr.cx
+    v = intr.fy * q[:, 1] / z + intr.cy
+    inside = (u >= 0) & (u <= W - 1) & (v >= 0) & (v <= H - 1)
+    u, v, z = u[inside], v[inside], z[inside]
+    u0 = np.minimum(np.floor(u).astype(np.int64), W - 2) if W > 1 else np.zeros(len(u), np.int64)
+    v0 = np.minimum(np.floor(v).astype(np.int64), H - 2) if H > 1 else np.zeros(len(v), np.int64)
+    du, dv = u - u0, v - v0
+    dj = depth_j.astype(np.float64)
+    u1, v1 = np.minimum(u0 + 1, W - 1), np.minimum(v0 + 1, H - 1)
+    nb = np.stack([dj[v0, u0], dj[v0, u1], dj[v1, u0], dj[v1, u1]], axis=1)  # 2x2 neighbours
+    nb_ok = np.isfinite(nb) & (nb > 0)
+    # bilinear interpolation of inverse depth (exact on planes) where all four neighbours hit
+    all_ok = nb_ok.all(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = np.where(nb_ok, 1.0 / np.where(nb_ok, nb, 1.0), 0.0)
+        wts = np.stack([(1 - du) * (1 - dv), du * (1 - dv), (1 - du) * dv, du * dv], axis=1)
+        interp = np.where(all_ok, 1.0 / np.maximum((inv * wts).sum(axis=1), 1e-12), np.nan)
+    cand = np.concatenate([nb, interp[:, None]], axis=1)
+    cand_ok = np.concatenate([nb_ok, all_ok[:, None]], axis=1)
+    any_ok = cand_ok.any(axis=1)
+    diff = np.where(cand_ok, cand - z[:, None], np.inf)
+    best = np.take_along_axis(diff, np.abs(diff).argmin(axis=1)[:, None], axis=1)[:, 0]
+    best, zz = best[any_ok], z[any_ok]
+    occluded = best < -np.maximum(OCCLUSION_ABS_M, OCCLUSION_REL * zz)
+    cmp_diff = np.abs(best[~occluded])
+    tol = np.maximum(CONSISTENCY_ABS_TOL_M, CONSISTENCY_REL_TOL * zz[~occluded])
+    return {
+        "in_view": int(any_ok.sum()),
+        "occluded": int(occluded.sum()),
+        "compared": int(len(cmp_diff)),
+        "agree": int((cmp_diff <= tol).sum()),
+        "abs_diff": cmp_diff,
+    }
+
+
+def depth_consistency(depth_i, T_i, depth_j, T_j, intr: Intrinsics, rays: np.ndarray | None = None) -> dict:
+    """Agreement of two depth maps of the same static scene, warped both ways (i -> j and j -> i).
+
+    A pixel agrees when the warped depth is within max(2 cm, 1 % of depth) of what the other
+    frame sees there; pixels where the other frame sees something clearly in front are occluded
+    and not compared. Checking both directions makes a wrong pose show up whichever way it errs.
+    """
+    rays = intr.pixel_rays() if rays is None else rays
+    a = _warp_compare(depth_i, T_i, depth_j, T_j, intr, rays)
+    b = _warp_compare(depth_j, T_j, depth_i, T_i, intr, rays)
+    compared = a["compared"] + b["compared"]
+    in_view = a["in_view"] + b["in_view"]
+    diffs = np.concatenate([a["abs_diff"], b["abs_diff"]])
+    return {
+        "compared_pixels": compared,
+        "agreement": round((a["agree"] + b["agree"]) / compared, 4) if compared else None,
+        "median_abs_diff_m": round(float(np.median(diffs)), 4) if compared else None,
+        "occluded_fraction": round((a["occluded"] + b["occluded"]) / in_view, 4) if in_view else None,
+    }
+
+
+def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -> dict:
+    """Check a rendered tour (``synth dataset check``); returns a JSON-serialisable report.
+
+    Unusable input (no directory, no or bad camera.json / poses.txt / meta.json) raises
+    ``UserError``; everything else is reported: ``ok`` is True when ``problems`` is empty, and
+    ``problems`` has one readable line per problem. Frames are read one at a time.
+    """
+    from tqdm import tqdm
+
+    tour = Tour(root, strict=False)
+    intr = tour.intrinsics
+    H, W = intr.height, intr.width
+    N = len(tour)
+    rep: dict = {
+        "tour": str(tour.root),
+        "ok": False,
+        "problems": [],
+        "problem_counts": {},
+        "problem_total": 0,
+        "frames_expected": N,
+        "frames_found": 0,
+        "frame_files": 0,
+        "missing": [],
+        "extra_frames": [],
+        "unreadable": [],
+        "stray_temp_files": [],
+        "channels": [],
+        "missing_channels": [],
+        "shape_mismatch": [],
+        "bad_depth": [],
+        "bad_rgb": [],
+        "unknown_ids": [],
+        "class_mismatch": [],
+        "bad_poses": [],
+        "consistency": {},
+        "brightness": {},
+        "errors": [],
+        "warnings": [],
+    }
+    problems: list[str] = rep["problems"]
+
+    # -- files on disk -------------------------------------------------------------------------
+    expected = {int(i) for i in tour.frame_indices}
+    present: set[int] = set()
+    for d in (tour.root, tour.frames_dir, tour.root / PREVIEWS_DIR):
+        for e in scan_dir(d):
+            if e.name.startswith(".") and e.name.endswith(".tmp"):
+                rep["stray_temp_files"].append(str(Path(e.path).relative_to(tour.root)))
+            elif d == tour.root and e.name.startswith(".jobs_") and e.is_dir():
+                rep["warnings"].append(f"{e.name}/: render jobs and logs left by a failed render (see synth.render.render_tour)")
+            elif d == tour.frames_dir and e.name.endswith(".exr") and e.name[:-4].isdigit():
+                present.add(int(e.name[:-4]))
+    rep["stray_temp_files"].sort()
+    if not tour.frames_dir.is_dir():
+        rep["errors"].append(f"{tour.frames_dir}: frames folder not found")
+    rep["missing"] = sorted(expected - present)
+    rep["extra_frames"] = sorted(present - expected)
+    rep["frames_found"] = len(expected & present)
+    rep["frame_files"] = len(present)
+
+    meta_frames = tour.meta.get("frames")
+    fi = tour.frame_indices
+    if isinstance(meta_frames, list) and len(meta_frames) == 2 and list(meta_frames) != [int(fi.min()), int(fi.max())]:
+        rep["warnings"].append(f"{META_FILE}: frames is {meta_frames}, poses.txt spans [{int(fi.min())}, {int(fi.max())}]")
+
+    # -- objects.json --------------------------------------------------------------------------
+    known_inst = known_sem = None
+    inst_to_sem: dict[int, int] = {}
+    try:
+        objs = tour.objects()
+        classes = {k: int(v) for k, v in objs["classes"].items()}
+        known_inst = {int(b["id"]) for b in objs["boxes"]}
+        known_sem = set(classes.values()) | {0}
+        for b in objs["boxes"]:
+            if b.get("class") in classes:
+                inst_to_sem[int(b["id"])] = classes[b["class"]]
+        inst_to_sem[0] = 0
+    except UserError as e:
+        rep["errors"].append(str(e))
+        classes = {}
+
+    # -- poses ---------------------------------------------------------------------------------
+    for i, T in zip(tour.frame_indices, tour.poses):
+        why = _pose_problem(T)
+        if why:
+            rep["bad_poses"].append({"frame": int(i), "why": why})
+
+    # -- frames, one at a time -----------------------------------------------------------------
+    expect_rgb = (tour.meta.get("lighting") is not None) if "lighting" in tour.meta else None
+    channels: set[str] = set()
+    frame_channels: dict[int, frozenset] = {}
+    depth_ok = np.zeros(N, dtype=bool)
+    rgb_p99: dict[int, float] = {}  # frame -> 99th-percentile linear luminance
+    if progress is None:
+        progress = sys.stderr.isatty()
+    for k, idx in enumerate(tqdm(tour.frame_indices, desc=f"checking {tour.name}", unit="frame", disable=not progress)):
+        idx = int(idx)
+        if idx not in present:
+            continue
+        path = tour.frame_path(idx)
+        try:
+            ch = read_split_channels(path)
+        except fr.FrameFileError as e:
+            rep["unreadable"].append({"frame": idx, "file": str(path), "error": str(e)})
+            continue
+        names = frozenset(ch)
+        channels |= names
+        frame_channels[idx] = names
+        shapes = {tuple(a.shape[:2]) for a in ch.values()}
+        if shapes != {(H, W)}:
+            rep["shape_mismatch"].append({"frame": idx, "shape": [list(s) for s in sorted(shapes)], "expected": [H, W]})
+            continue
+        img = images_from_channels(ch)
+        del ch
+        # depth
+        if img.depth is not None:
+            d = img.depth
+            why = []
+            nonfinite = int((~np.isfinite(d)).sum())
+            if nonfinite:
+                why.append(f"{nonfinite} NaN/inf pixels")
+            neg = int((d < 0).sum())
+            if neg:
+                why.append(f"{neg} negative pixels")
+            kinds = (["nonfinite"] if nonfinite else []) + (["negative"] if neg else [])
+            if not (d > 0).any():
+                why.append("all zero (no surface hit)")
+                kinds.append("all_zero")
+            if why:
+                rep["bad_depth"].append({"frame": idx, "why": "; ".join(why), "kinds": kinds})
+            else:
+                depth_ok[k] = True
+        if img.rgb is not None:
+            nonfinite = int((~np.isfinite(img.rgb)).sum())
+            if nonfinite:
+                rep["bad_rgb"].append({"frame": idx, "why": f"{nonfinite} NaN/inf values"})
+            rgb_p99[idx] = frame_brightness(img.rgb)
+        # ids against objects.json
+        if known_inst is not None:
+            entry: dict = {}
+            if img.instance is not None:
+                ids = np.unique(img.instance)
+                bad = [int(x) for x in ids if x != 0 and int(x) not in known_inst and not STRUCTURE_ID_MIN <= x <= STRUCTURE_ID_MAX]
+                if bad:
+                    entry["instance"] = bad
+            if img.semantic is not None:
+                bad = [int(x) for x in np.unique(img.semantic) if int(x) not in known_sem]
+                if bad:
+                    entry["semantic"] = bad
+            if entry:
+                rep["unknown_ids"].append({"frame": idx, **entry})
+            if img.instance is not None and img.semantic is not None:
+                mm = _class_mismatch(img.instance, img.semantic, inst_to_sem, classes)
+                if mm is not None:
+                    rep["class_mismatch"].append({"frame": idx, **mm})
+        del img
+
+    rep["channels"] = sorted(channels)
+    # channels every frame should have: depth, ids and (for lit tours) RGB
+    want = {fr.DEPTH_CHANNEL, fr.INSTANCE_CHANNEL, fr.SEMANTIC_CHANNEL}
+    if expect_rgb is None:
+        expect_rgb = any(set(fr.RGB_CHANNELS) <= c for c in frame_channels.values())
+    every = tour.rgb_every
+    for idx, names in sorted(frame_channels.items()):
+        lack = sorted(want - names)
+        if expect_rgb and idx % every == 0:
+            lack = sorted((want | set(fr.RGB_CHANNELS)) - names)
+        if lack:
+            rep["missing_channels"].append({"frame": idx, "missing": lack})
+    if expect_rgb is False and any(set(fr.RGB_CHANNELS) <= c for c in frame_channels.values()):
+        rep["warnings"].append(f"{META_FILE}: lighting is null (geometry-only) but frames have R, G, B")
+
+    # -- multi-view depth consistency ------------------------------------------------------------
+    rep["consistency"] = _consistency(tour, depth_ok, consistency_pairs)
+
+    # -- brightness: a lit tour must not be black -------------------------------------------------
+    rep["brightness"] = _brightness(rgb_p99)
+
+    # -- summary lines -------------------------------------------------------------------------
+    def capped(kind_lines: list[str]) -> None:
+        problems.extend(kind_lines[:PROBLEM_LINES_PER_KIND])
+        if len(kind_lines) > PROBLEM_LINES_PER_KIND:
+            problems.append(f"... and {len(kind_lines) - PROBLEM_LINES_PER_KIND} more like the above")
+
+    problems.extend(rep["errors"])
+    if rep["missing"]:
+        problems.append(f"missing frames ({len(rep['missing'])} of {N}, no EXR in {FRAMES_DIR}/): {ranges_text(rep['missing'])}")
+    if rep["extra_frames"]:
+        problems.append(f"frames not in {POSES_FILE} ({len(rep['extra_frames'])}): {ranges_text(rep['extra_frames'])}")
+    n_meta = tour.disagreeing_n_frames()
+    meta_count_bad = n_meta is not None
+    if meta_count_bad:
+        problems.append(f"{POSES_FILE} has {N} poses, but {META_FILE} says the tour has {n_meta} frames (n_frames)")
+    capped([f"unreadable frame {u['frame']}: {u['error']}" for u in rep["unreadable"]])
+    capped([f"stray temporary file (interrupted write?): {p}" for p in rep["stray_temp_files"]])
+    capped([f"frame {m['frame']}: missing channel(s) {', '.join(m['missing'])}" for m in rep["missing_channels"]])
+    capped([f"frame {s['frame']}: size {' / '.join('x'.join(map(str, sh[::-1])) for sh in s['shape'])}, "
+            f"{CAMERA_FILE} says {W}x{H}" for s in rep["shape_mismatch"]])
+    capped([f"frame {b['frame']}: bad depth: {b['why']}" for b in rep["bad_depth"]])
+    capped([f"frame {b['frame']}: bad RGB: {b['why']}" for b in rep["bad_rgb"]])
+    lines = []
+    for u in rep["unknown_ids"]:
+        what = []
+        if "instance" in u:
+            what.append(f"instance ids {u['instance']} (not in {OBJECTS_FILE}, not structure {STRUCTURE_ID_MIN}-{STRUCTURE_ID_MAX})")
+        if "semantic" in u:
+            what.append(f"semantic ids {u['semantic']} (not in {OBJECTS_FILE} classes)")
+        lines.append(f"frame {u['frame']}: unknown " + "; ".join(what))
+    capped(lines)
+    capped([f"frame {m['frame']}: instance/semantic disagree with {OBJECTS_FILE} on {m['fraction']:.1%} of pixels "
+            f"(instance, semantic, expected): {m['pairs']}" for m in rep["class_mismatch"]])
+    capped([f"frame {b['frame']}: bad pose: {b['why']}" for b in rep["bad_poses"]])
+    br = rep["brightness"]
+    if br.get("dark"):
+        light = tour.meta.get("lighting")
+        problems.append(f"tour {tour.name} ({f'lighting {light}' if light is not None else 'lighting unknown'}) is nearly black: "
+                        f"median 99th-percentile luminance {br['median_p99_luminance']:.3g} over its {br['rgb_frames']} RGB "
+                        f"frames (linear, exposure 1), below {DARK_P99_LUMINANCE:g} (no light reaches the camera: "
+                        "windows or lamps missing?)")
+    capped([f"frames {p['frames'][0]} -> {p['frames'][1]}: depth inconsistent with poses: "
+            f"{p['agreement']:.1%} of {p['compared_pixels']} pixels agree (need {MIN_AGREEMENT:.0%}), "
+            f"median |diff| {p['median_abs_diff_m'] * 100:.1f} cm" for p in rep["consistency"]["pairs"] if p["flagged"]])
+
+    # -- how many problems of each kind (the text lines above are capped per kind) -------------
+    depth_kinds = {"all_zero": "frames with all-zero depth", "nonfinite": "frames with NaN/inf depth",
+                   "negative": "frames with negative depth"}
+    counts = {
+        "errors reading the tour's files": len(rep["errors"]),
+        "missing frames": len(rep["missing"]),
+        f"frame files without a pose in {POSES_FILE}": len(rep["extra_frames"]),
+        f"{META_FILE} frame count disagreeing with {POSES_FILE}": int(meta_count_bad),
+        "unreadable frames": len(rep["unreadable"]),
+        "stray temporary files": len(rep["stray_temp_files"]),
+        "frames missing channels": len(rep["missing_channels"]),
+        "frames of the wrong size": len(rep["shape_mismatch"]),
+        **{label: sum(k in b["kinds"] for b in rep["bad_depth"]) for k, label in depth_kinds.items()},
+        "frames with NaN/inf RGB": len(rep["bad_rgb"]),
+        f"frames with ids unknown to {OBJECTS_FILE}": len(rep["unknown_ids"]),
+        f"frames whose instance/semantic ids disagree with {OBJECTS_FILE}": len(rep["class_mismatch"]),
+        "bad poses": len(rep["bad_poses"]),
+        "nearly black tours": int(bool(br.get("dark"))),
+        "frame pairs with depth inconsistent with the poses": len(rep["consistency"]["flagged"]),
+    }
+    rep["problem_counts"] = {k: v for k, v in counts.items() if v}
+    rep["problem_total"] = sum(rep["problem_counts"].values())
+    rep["ok"] = not problems
+    return rep
+
+
+def frame_brightness(rgb) -> float:
+    """The 99th-percentile luminance of linear RGB (exposure 1, ``formats.tour.tonemap``'s weights)."""
+    rgb = np.nan_to_num(np.asarray(rgb, dtype=np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+    lum = rgb.reshape(-1, 3) @ LUMINANCE
+    return float(np.percentile(lum, DARK_PERCENTILE)) if lum.size else 0.0
+
+
+def _brightness(rgb_p99: dict[int, float]) -> dict:
+    """The brightness summary of the tour's RGB frames; ``dark`` when the median is below the threshold."""
+    if not rgb_p99:
+        return {"rgb_frames": 0}
+    v = np.array(list(rgb_p99.values()))
+    med = float(np.median(v))
+    return {"rgb_frames": len(v), "median_p99_luminance": round(med, 6), "min_p99_luminance": round(float(v.min()), 6),
+            "max_p99_luminance": round(float(v.max()), 6), "threshold": DARK_P99_LUMINANCE,
+            "dark": bool(med < DARK_P99_LUMINANCE)}
+
+
+def _class_mismatch(instance, semantic, inst_to_sem: dict[int, int], classes: dict[str, int]) -> dict | None:
+    """Pixels whose (instance, semantic) pair contradicts objects.json, if more than a sliver of the frame."""
+    key = (instance.astype(np.uint64) << np.uint64(32)) | semantic.astype(np.uint64)
+    pairs, counts = np.unique(key, return_counts=True)
+    bad_px, bad_pairs = 0, []
+    for p, c in zip(pairs, counts):
+        inst, sem = int(p >> np.uint64(32)), int(p & np.uint64(0xFFFFFFFF))
+        exp = inst_to_sem.get(inst)
+        if exp is None and STRUCTURE_ID_MIN <= inst <= STRUCTURE_ID_MAX:
+            for base, cls in STRUCTURE_CLASSES:
+                if base <= inst < base + 1000:
+                    exp = classes.get(cls)
+        if exp is not None and exp != sem:
+            bad_px += int(c)
+            bad_pairs.append((int(c), [inst, sem, exp]))
+    frac = bad_px / instance.size
+    if frac <= CLASS_MISMATCH_FRACTION:
+        return None
+    bad_pairs.sort(key=lambda x: -x[0])
+    return {"pixels": bad_px, "fraction": round(frac, 4), "pairs": [p for _, p in bad_pairs[:5]]}
+
+
+def _consistency(tour: Tour, depth_ok: np.ndarray, n_pairs: int) -> dict:
+    intr = tour.intrinsics
+    rays = intr.pixel_rays()
+    pose_ok = np.array([_pose_problem(T) is None for T in tour.poses])
+    pairs = choose_pairs(tour.poses, depth_ok & pose_ok, n_pairs)
+    out = []
+    for a, b in pairs:
+        ia, ib = int(tour.frame_indices[a]), int(tour.frame_indices[b])
+        try:
+            da = tour.frame(ia, rgb=False, instance=False, semantic=False).depth
+            db = tour.frame(ib, rgb=False, instance=False, semantic=False).depth
+        except UserError:
+            continue  # reported by the frame pass
+        res = depth_consistency(da, tour.poses[a], db, tour.poses[b], intr, rays)
+        move, turn = _relative_motion(tour.poses[a], tour.poses[b])
+        flagged = bool(res["compared_pixels"] >= MIN_OVERLAP_PIXELS and res["agreement"] < MIN_AGREEMENT)
+        out.append({"frames": [ia, ib], "baseline_m": round(move, 4), "rotation_deg": round(turn, 3), **res,
+                    "flagged": flagged})
+    agreements = [p["agreement"] for p in out if p["agreement"] is not None]
+    return {
+        "tolerance": f"max({CONSISTENCY_ABS_TOL_M * 100:g} cm, {CONSISTENCY_REL_TOL:.0%} of depth)",
+        "min_agreement": MIN_AGREEMENT,
+        "pairs": out,
+        "flagged": [p["frames"] for p in out if p["flagged"]],
+        "worst_agreement": min(agreements) if agreements else None,
+    }
+
+
+def format_report(rep: dict) -> str:
+    """The text form of a check report: a summary, then one line per problem."""
+    n, files, found = rep["frames_expected"], rep.get("frame_files", rep["frames_found"]), rep["frames_found"]
+    count = f"{found}/{n} frames" if files == found == n else f"{n} poses for {files} frame files"
+    lines = [f"{rep['tour']}: {count}, channels {' '.join(rep['channels']) or '-'}"]
+    c = rep.get("consistency") or {}
+    pairs = c.get("pairs") or []
+    if pairs:
+        ag = [p["agreement"] for p in pairs if p["agreement"] is not None]
+        med = [p["median_abs_diff_m"] for p in pairs if p["median_abs_diff_m"] is not None]
+        lines.append(f"  depth consistency: {len(pairs)} frame pairs, agreement within {c['tolerance']}: "
+                     f"worst {min(ag):.1%}" + (f", median |diff| up to {max(med) * 100:.1f} cm" if med else "")
+                     if ag else f"  depth consistency: {len(pairs)} frame pairs without overlap")
+    else:
+        lines.append("  depth consistency: no usable frame pairs")
+    b = rep.get("brightness") or {}
+    if b.get("rgb_frames"):
+        lines.append(f"  brightness: 99th-percentile luminance (linear, exposure 1) median {b['median_p99_luminance']:.3g} "
+                     f"over {b['rgb_frames']} RGB frames (min {b['min_p99_luminance']:.3g}, max {b['max_p99_luminance']:.3g}; "
+                     f"nearly black below {b['threshold']:g})")
+    for w in rep.get("warnings", []):
+        lines.append(f"  warning: {w}")
+    for p in rep["problems"]:
+        lines.append(f"  {p}")
+    if rep["ok"]:
+        lines.append("  OK")
+    else:
+        counts = rep.get("problem_counts") or {}
+        total = rep.get("problem_total", len(rep["problems"]))
+        lines.append(f"  PROBLEMS FOUND ({total}): " + ", ".join(f"{v} {k}" for k, v in counts.items())
+                     if counts else f"  PROBLEMS FOUND ({len(rep['problems'])})")
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------
+# contact sheet
+
+
+def id_colors(ids, salt: int = 0) -> np.ndarray:
+    """A stable pseudo-random colour per integer id ((n, 3) in [0, 1]); id 0 is black."""
+    from matplotlib.colors import hsv_to_rgb
+
+    ids = np.asarray(ids, dtype=np.uint64)
+    h = (ids + np.uint64(salt)) * np.uint64(0x9E3779B97F4A7C15)
+    h ^= h >> np.uint64(29)
+    h *= np.uint64(0xBF58476D1CE4E5B9)
+    h ^= h >> np.uint64(32)
+    hue = (h & np.uint64(0xFFFF)).astype(np.float64) / 65536.0
+    sat = 0.55 + 0.4 * ((h >> np.uint64(16)) & np.uint64(0xFF)).astype(np.float64) / 255.0
+    val = 0.7 + 0.3 * ((h >> np.uint64(24)) & np.uint64(0xFF)).astype(np.float64) / 255.0
+    rgb = hsv_to_rgb(np.stack([hue, sat, val], axis=-1))
+    rgb[ids == 0] = 0.0
+    return rgb
+
+
+def class_colors(ids) -> np.ndarray:
+    """A fixed colour per semantic class id ((n, 3) in [0, 1]): a 60-colour qualitative palette, 0 black."""
+    import matplotlib
+
+    pal = []
+    for name in ("tab20", "tab20b", "tab20c"):
+        c = np.asarray(matplotlib.colormaps[name].colors)[:, :3]
+        pal.append(np.concatenate([c[0::2], c[1::2]]))  # strong colours first, their light twins after
+    pal = np.concatenate(pal)
+    ids = np.asarray(ids, dtype=np.int64)
+    out = pal[(ids - 1) % len(pal)]
+    out[ids == 0] = 0.0
+    return out
+
+
+def _colorize_ids(img: np.ndarray, salt: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    ids, inv, counts = np.unique(img, return_inverse=True, return_counts=True)
+    lut = id_colors(ids, salt)
+    return lut[inv.reshape(img.shape)], ids, counts
+
+
+def contact_sheet(tour: Tour, index: int, out, exposure: float | None = None, dpi: float = 110) -> Path:
+    """One PNG with the frame's RGB, depth, instance and semantic images (written atomically)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Patch
+
+    out = Path(out)
+    fmt = out.suffix.lower().lstrip(".") or "png"
+    f = tour.frame(index)
+    H, W = f.depth.shape if f.depth is not None else (tour.intrinsics.height, tour.intrinsics.width)
+    panel_w = 5.2
+    panel_h = panel_w * H / W
+    fig = Figure(figsize=(2 * panel_w + 2.6, 2 * panel_h + 1.5), dpi=dpi)
+    canvas = FigureCanvasAgg(fig)
+    if fmt not in canvas.get_supported_filetypes():
+        raise UserError(f"{out}: cannot write '.{fmt}' images; use .png")
+    gs = fig.add_gridspec(2, 2, left=0.03, right=0.8, top=1 - 1.0 / fig.get_figheight(), bottom=0.03,
+                          wspace=0.28, hspace=0.14)
+    axes = [fig.add_subplot(gs[r, c]) for r in range(2) for c in range(2)]
+    for ax in axes:
+        ax.set_xticks([])
+        ax.set_yticks([])
+    ax_rgb, ax_d, ax_i, ax_s = axes
+    blank = np.zeros((H, W, 3), np.float32)
+
+    def missing(ax, text):
+        ax.imshow(blank + 0.15)
+        ax.text(0.5, 0.5, text, transform=ax.transAxes, ha="center", va="center", color="white", fontsize=11)
+
+    # RGB
+    if f.rgb is not None:
+        img, scale = tonemap(f.rgb, exposure)
+        ax_rgb.imshow(img, interpolation="nearest")
+        ax_rgb.set_title(f"RGB (linear x {scale:.3g}, sRGB)", fontsize=10)
+    else:
+        missing(ax_rgb, "no RGB (geometry-only tour)")
+        ax_rgb.set_title("RGB", fontsize=10)
+    # depth
+    if f.depth is not None:
+        import matplotlib
+
+        d = np.ma.masked_where(~(np.isfinite(f.depth) & (f.depth > 0)), f.depth)
+        cmap = matplotlib.colormaps["turbo"].with_extremes(bad="black")
+        vals = d.compressed()
+        vmin, vmax = (float(vals.min()), float(np.percentile(vals, 99.5))) if vals.size else (0.0, 1.0)
+        im = ax_d.imshow(d, cmap=cmap, vmin=vmin, vmax=max(vmax, vmin + 1e-3), interpolation="nearest")
+        cb = fig.colorbar(im, cax=ax_d.inset_axes((1.02, 0.0, 0.035, 1.0)))  # outside: panels keep one size
+        cb.set_label("depth (m)", fontsize=9)
+        cb.ax.tick_params(labelsize=8)
+        nohit = float(d.mask.mean()) if d.mask is not np.ma.nomask else 0.0
+        ax_d.set_title(f"planar depth, {vals.min() if vals.size else 0:.2f}-{vals.max() if vals.size else 0:.2f} m"
+                       + (f", no hit {nohit:.0%} (black)" if nohit else ""), fontsize=10)
+    else:
+        missing(ax_d, "no depth channel")
+        ax_d.set_title("depth", fontsize=10)
+    names = tour.class_names()
+    box_class = {}
+    try:
+        box_class = {int(b["id"]): str(b.get("class", "")) for b in tour.objects()["boxes"]}
+    except UserError:
+        pass
+    # instance
+    if f.instance is not None:
+        col, ids, counts = _colorize_ids(f.instance, salt=0)
+        ax_i.imshow(col, interpolation="nearest")
+        from scipy.ndimage import distance_transform_edt
+
+        shown = 0
+        for k in np.argsort(-counts):
+            iid = int(ids[k])
+            if iid == 0 or counts[k] < 0.005 * f.instance.size or shown >= 25:
+                continue
+            # label at the instance's most interior pixel (farthest from its outline and the image border)
+            dist = distance_transform_edt(np.pad(f.instance == iid, 1))[1:-1, 1:-1]
+            v, u = np.unravel_index(int(dist.argmax()), dist.shape)
+            label = f"{iid} {box_class[iid]}" if box_class.get(iid) else str(iid)
+            ax_i.text(u, v, label, fontsize=7, ha="center", va="center", color="white",
+                      bbox={"boxstyle": "round,pad=0.15", "fc": "black", "alpha": 0.55, "lw": 0})
+            shown += 1
+        ax_i.set_title(f"instance ids ({int((ids != 0).sum())} visible, 0 black)", fontsize=10)
+    else:
+        missing(ax_i, "no instance channel")
+        ax_i.set_title("instance ids", fontsize=10)
+    # semantic
+    if f.semantic is not None:
+        ids, inv, counts = np.unique(f.semantic, return_inverse=True, return_counts=True)
+        lut = class_colors(ids)
+        ax_s.imshow(lut[inv.reshape(f.semantic.shape)], interpolation="nearest")
+        handles = [Patch(facecolor=lut[k], edgecolor="none", label=f"{int(s)} {names.get(int(s), '?')}")
+                   for k, s in sorted(enumerate(ids), key=lambda x: -counts[x[0]]) if s != 0][:30]
+        if handles:
+            ax_s.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=7, frameon=False,
+                        title="classes", title_fontsize=8, handlelength=1.0, borderaxespad=0.0)
+        ax_s.set_title(f"semantic classes ({len(handles)} present)", fontsize=10)
+    else:
+        missing(ax_s, "no semantic channel")
+        ax_s.set_title("semantic", fontsize=10)
+
+    p = f.position
+    meta = tour.meta
+    sub = ", ".join(f"{k} {meta[k]}" for k in ("layout", "lighting", "renderer") if meta.get(k) is not None)
+    if meta.get("lighting") is None and "lighting" in meta:
+        sub = ", ".join(x for x in (sub, "geometry only") if x)
+    fig.suptitle(f"{tour.name}  |  frame {index}  |  camera at ({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f}) m"
+                 + (f"\n{sub}" if sub else ""), fontsize=12, y=1 - 0.1 / fig.get_figheight(), va="top")
+
+    from formats.atomic import save_figure
+
+    return save_figure(fig, out, dpi)
+
+
+# ---------------------------------------------------------------------------------------------
+# command line
+
+
+def cmd_check(args) -> int:
+    rep = check_tour(args.dir, consistency_pairs=args.pairs)
+    if args.json:
+        print(json.dumps(rep, indent=2))
+    else:
+        print(format_report(rep))
+    return 0 if rep["ok"] else 1
+
+
+def cmd_show(args) -> int:
+    tour = Tour(args.dir)
+    index = int(tour.frame_indices[0]) if args.frame is None else args.frame
+    out = contact_sheet(tour, index, args.out, exposure=args.exposure)
+    print(f"wrote {out}")
+    return 0
+
+
+def cmd_export(args) -> int:
+    from formats import export
+
+    m = export.export_tour(args.dir, args.format, args.out, role=args.role, exposure=args.exposure,
+                           progress=not args.quiet and sys.stderr.isatty(), sensor=args.sensor,
+                           sensor_seed=args.sensor_seed)
+    print(export.summary_line(m, args.out))
+    return 0
+
+
+def register_cli(subparsers) -> None:
+    """Add the ``dataset`` command group to ``synth``'s subparsers."""
+    g = subparsers.add_parser("dataset", help="rendered tours: check them, look at frames")
+    ds = g.add_subparsers(dest="cmd", required=True)
+    a = ds.add_parser("check", help="completeness, channels, depth, ids and pose/depth consistency of a tour "
+                                    "(exit 1 if problems are found)")
+    a.add_argument("dir", help="tour directory (holds camera.json, poses.txt, frames/)")
+    a.add_argument("--json", action="store_true", help="print the full report as JSON")
+    a.add_argument("--pairs", type=int, default=8, help="neighbouring frame pairs for the depth consistency test")
+    a.set_defaults(fn=cmd_check)
+    a = ds.add_parser("show", help="contact sheet of one frame: RGB, depth, instance, semantic")
+    a.add_argument("dir", help="tour directory")
+    a.add_argument("--frame", type=int, help="frame index (default: the first)")
+    a.add_argument("--out", required=True, help="output image (.png)")
+    a.add_argument("--exposure", type=float, help="linear RGB scale (default: automatic)")
+    a.set_defaults(fn=cmd_show)
+    a = ds.add_parser("export", help="write a tour in a layout other relocalizers read: 7scenes (DSAC*, ACE, hloc), "
+                                     "ace (ACE/DSAC* train|test), tum-rgbd (RGB-D SLAM, evo), colmap (hloc)")
+    a.add_argument("dir", help="tour directory")
+    a.add_argument("--format", required=True, help="7scenes | ace | tum-rgbd | colmap")
+    a.add_argument("--out", required=True, help="export folder (new or empty; the same export again resumes "
+                                                "or does nothing)")
+    a.add_argument("--role", default="query", help="mapping (ACE train/, 7-Scenes train split) | query (default)")
+    a.add_argument("--exposure", default="auto", help="auto (per frame, default) | fixed (one factor per tour: "
+                                                      "the median auto factor) | FACTOR (linear RGB scale)")
+    a.add_argument("--sensor", help="export the frames as this RGB-D camera measures them: a formats/sensor_presets "
+                                    "name (ideal, structured_light, tof) or a sensor YAML file (default: ideal)")
+    a.add_argument("--sensor-seed", type=int, default=0, help="seed of the sensor noise (formats.sensors.frame_seed)")
+    a.add_argument("--quiet", action="store_true", help="no progress bar")
+    a.set_defaults(fn=cmd_export)

@@ -1,0 +1,108 @@
+"""The chunk protocol: how a render pass is cut into chunks and run, one worker process each.
+
+Both sides live here. The parent (``synth tour render`` and the job runner, local or Ray) writes a
+chunk's job as JSON and starts a worker: ``python -m synth.blender.worker JOB.json`` for the Blender
+passes (``geometry``, ``rgb``), ``python -m synth.render.chunk_worker JOB.json`` for the rest (``fast``,
+``copy``). The worker skips frames already on disk and reports on stdout, one JSON object a line:
+``start``, ``ready`` (device), ``frame`` (index, seconds, cpu: the worker's CPU seconds over all its
+threads), ``error``; everything else it prints
+goes to the chunk's log.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+from formats import frames as fr
+
+
+
+BLENDER_PASSES = ("geometry", "rgb")
+PLAIN_PASSES = ("fast", "copy")
+
+
+def missing_frames(frames_dir: Path, frame_ids) -> list[int]:
+    return [i for i in frame_ids if not (Path(frames_dir) / fr.frame_name(i)).exists()]
+
+
+def split(ids: list[int], size: int) -> list[list[int]]:
+    return [ids[k : k + size] for k in range(0, len(ids), size)]
+
+
+def chunk_job(p, kind: str, frames: list[int], out_dir: Path | None = None) -> dict:
+    """The job of one chunk of pass ``kind`` of the prepared tour ``p`` (``synth.render.render_tour.Prepared``).
+
+    ``out_dir`` defaults to the tour's frames (the geometry cache for ``geometry``). Paths are
+    absolute, so a worker can run anywhere the files are."""
+    if kind not in BLENDER_PASSES + PLAIN_PASSES:
+        raise ValueError(f"unknown pass {kind!r}")
+    if out_dir is None:
+        out_dir = p.geometry_dir if kind == "geometry" else p.out / "frames"
+    job = {"pass": kind, "layout": str(p.layout_file.resolve()), "poses": str((p.out / "poses.txt").resolve()),
+           "fps": p.path_fps, "frames": list(frames), "intrinsics": p.intr.to_dict(), "out_dir": str(Path(out_dir).resolve()),
+           "geometry_dir": str(p.geometry_dir.resolve()) if p.geometry_dir else None}
+    if kind in BLENDER_PASSES:
+        s = p.spec
+        job.update({"lighting": s.lighting, "quality": s.quality, "seed": s.seed, "device": s.device, "threads": s.threads,
+                    "previews_dir": str((p.out / "previews").resolve()) if s.previews else None})
+    return job
+
+
+def run_chunk_process(chunk_kind: str, job: dict, job_file: str, log_file: str, on_frame=None,
+                      env: dict | None = None) -> tuple[int, str | None, dict]:
+    """Run one chunk in a fresh process; returns (exit status, error, info). Used by every runner.
+
+    ``env``: the worker's environment (default: this process's); the Ray backend points
+    ``SYNTH_SCENES_DIR`` at the scene files it shipped with the chunk."""
+    Path(job_file).write_text(json.dumps(job))
+    worker = "synth.blender.worker" if chunk_kind in BLENDER_PASSES else "synth.render.chunk_worker"
+    info: dict = {}
+    err = None
+    with open(log_file, "w") as log:
+        proc = subprocess.Popen([sys.executable, "-m", worker, job_file], stdout=subprocess.PIPE, stderr=log, text=True, bufsize=1,
+                                env=env)
+        for line in proc.stdout:
+            if not line.startswith("{"):
+                log.write(line)
+                continue
+            try:
+                ev = json.loads(line)
+            except json.JSONDecodeError:
+                continue
+            e = ev.get("event")
+            if e == "frame" and on_frame:
+                on_frame(ev)
+            elif e == "start":
+                info["blender"] = ev.get("blender")
+            elif e == "ready":
+                info["device"] = ev.get("device")
+            elif e == "error":
+                err = ev.get("error")
+        rc = proc.wait()
+    if rc != 0 and err is None:
+        err = f"exit status {rc}" + (" (killed)" if rc < 0 else "")
+    return rc, err, info
+
+
+# -- the worker's side ----------------------------------------------------------------------------
+
+
+def emit(**event) -> None:
+    """One progress event to the parent."""
+    print(json.dumps(event), flush=True)
+
+
+def worker_main(module: str, run, argv=None) -> int:
+    """``python -m MODULE JOB.json``: run the chunk; an exception is reported as an ``error`` event, then raised."""
+    argv = sys.argv[1:] if argv is None else argv
+    if len(argv) != 1:
+        print(f"usage: python -m {module} JOB.json", file=sys.stderr)
+        return 2
+    try:
+        return run(json.loads(Path(argv[0]).read_text()))
+    except Exception as e:  # the parent records it in the job state
+        emit(event="error", error=f"{type(e).__name__}: {e}")
+        raise

@@ -1,0 +1,228 @@
+"""Reading habitat-sim / ReplicaCAD files: the frame conversion, typed field checks whose errors
+name the file and the field, dataset paths and config lookup. Shared by ``synth.replicacad.importer``
+(scene instances, objects, stages), ``synth.replicacad.urdf`` (articulated objects) and
+``synth.replicacad.habitat_lighting``; no Blender here.
+
+Frames: habitat-sim (and glTF) is right-handed with +Y up and -Z forward; ours is right-handed with
++Z up. ``Y_UP_TO_Z_UP`` (C) maps habitat coordinates to ours, ``(x, y, z) -> (x, -z, y)``, a proper
+rotation (+90 deg about X). A habitat pose ``T_h`` becomes ``C T_h C^T``, a vertex ``v_h`` becomes
+``C v_h``, a quaternion ``(w, x, y, z)`` becomes ``(w, x, -z, y)`` (``convert_quat``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from formats.errors import SceneFormatError
+
+from ..scene.model import GLB_ASSET_PREFIX, URDF_ASSET_PREFIX
+
+Y_UP_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+"""Maps ReplicaCAD/habitat world coordinates (Y up, -Z forward) to ours (Z up): (x, y, z) -> (x, -z, y)."""
+
+ASSET_PREFIX = GLB_ASSET_PREFIX  # a GLB, relative to the dataset root (names: synth.scene.model)
+URDF_PREFIX = URDF_ASSET_PREFIX  # an articulated object's URDF, relative to the dataset root (synth.replicacad.urdf)
+MOTION_TYPES = ("STATIC", "KINEMATIC", "DYNAMIC")
+UNKNOWN_CLASS = "other"
+MIN_EXTENT = 1e-3  # metres; flat meshes (pictures, rugs) get boxes at least this thick
+
+_DEFAULT_UP = (0.0, 1.0, 0.0)
+_DEFAULT_FRONT = (0.0, 0.0, -1.0)
+_C = Y_UP_TO_Z_UP
+
+# --------------------------------------------------------------------------------------------
+# field checks: every error names the file and the field
+
+
+def fail(file, field: str | None, msg: str):
+    raise SceneFormatError(file, field, msg)
+
+
+def number(file, v, field: str, positive: bool = False) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
+        fail(file, field, f"expected a finite number, got {v!r}")
+    if positive and v <= 0:
+        fail(file, field, f"must be > 0, got {v!r}")
+    return float(v)
+
+
+def numbers(file, v, field: str, n: int, what: str = "", positive: bool = False) -> np.ndarray:
+    ok = isinstance(v, list) and len(v) == n and all(
+        not isinstance(x, bool) and isinstance(x, (int, float)) and math.isfinite(float(x)) for x in v
+    )
+    if not ok:
+        fail(file, field, f"expected {n} numbers{what}, got {v!r}")
+    if positive and any(x <= 0 for x in v):
+        fail(file, field, f"expected {n} numbers > 0{what}, got {v!r}")
+    return np.array([float(x) for x in v])
+
+
+def quat(file, v, field: str) -> np.ndarray:
+    q = numbers(file, v, field, 4, " (w, x, y, z)")
+    n = float(np.linalg.norm(q))
+    if abs(n - 1.0) > 1e-3:
+        fail(file, field, f"expected a unit quaternion (w, x, y, z), got {v!r} (norm {n:.4f})")
+    return q / n
+
+
+def string(file, v, field: str) -> str:
+    if not isinstance(v, str) or not v:
+        fail(file, field, f"expected a non-empty string, got {v!r}")
+    return v
+
+
+def mapping(file, v, field: str | None) -> dict:
+    if not isinstance(v, dict):
+        fail(file, field, f"expected a JSON object, got {type(v).__name__}")
+    return v
+
+
+def read_json(path: Path):
+    if not path.is_file():
+        fail(path, None, "file not found")
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as e:
+        problem = f"cannot read: {e}"
+    except ValueError as e:  # json.JSONDecodeError
+        problem = f"malformed JSON: {e}"
+    fail(path, None, problem)
+
+
+def check_frame(file, cfg: dict) -> None:
+    """Accept only the glTF default frame (up +Y, front -Z), given or implied."""
+    up = numbers(file, cfg["up"], "up", 3) if "up" in cfg else np.array(_DEFAULT_UP)
+    front = numbers(file, cfg["front"], "front", 3) if "front" in cfg else np.array(_DEFAULT_FRONT)
+    for field, vec, ref in (("up", up, _DEFAULT_UP), ("front", front, _DEFAULT_FRONT)):
+        n = np.linalg.norm(vec)
+        if n == 0 or not np.allclose(vec / n, ref, atol=1e-6):
+            fail(file, field, f"only the default frame (up {list(_DEFAULT_UP)}, front {list(_DEFAULT_FRONT)}) "
+                               f"is supported, got {cfg.get(field)!r}")
+
+
+def translation_origin(file, v, field: str) -> str | None:
+    """'asset_local', 'COM' or None (unknown / not given)."""
+    if v is None:
+        return None
+    s = string(file, v, field).lower()
+    if s == "asset_local":
+        return "asset_local"
+    if s == "com":
+        return "COM"
+    if s == "unknown":
+        return None
+    fail(file, field, f"expected 'asset_local' or 'COM', got {v!r}")
+
+
+# --------------------------------------------------------------------------------------------
+# dataset paths
+
+
+DATASET_CONFIG_GLOB = "*.scene_dataset_config.json"
+
+
+def dataset_root(root, require_config: bool = False) -> Path:
+    """The dataset folder, resolved. SceneFormatError when it is not a folder, and with
+    ``require_config`` when it holds no ``*.scene_dataset_config.json`` (:func:`dataset_config_path`)."""
+    p = Path(root).expanduser()
+    if not p.is_dir():
+        fail(p, None, "ReplicaCAD dataset folder not found")
+    p = p.resolve()
+    if require_config:
+        dataset_config_path(p)
+    return p
+
+
+def dataset_config_path(root, required: bool = True) -> Path | None:
+    """``<root>/*.scene_dataset_config.json``, the scene dataset config habitat-sim is pointed at
+    (ReplicaCAD's is ``replicaCAD.scene_dataset_config.json``). None when there is none and not
+    ``required``; SceneFormatError naming the folder when there is none (and it is required) or
+    when there are several (which one habitat would load is the user's choice, not ours)."""
+    r = Path(root)
+    configs = sorted(r.glob(DATASET_CONFIG_GLOB))
+    if not configs:
+        if not required:
+            return None
+        fail(r, None, f"no {DATASET_CONFIG_GLOB} in the ReplicaCAD folder (the dataset's root holds "
+                      "replicaCAD.scene_dataset_config.json next to configs/ and objects/)")
+    if len(configs) > 1:
+        fail(r, None, f"several scene dataset configs ({', '.join(c.name for c in configs)}); keep one")
+    return configs[0]
+
+
+class ConfigFinder:
+    """Template name -> config file, the way habitat-sim matches handles against registered configs."""
+
+    def __init__(self, root: Path, folder: str, suffix: str):
+        self.root, self.folder, self.suffix = root, folder, suffix
+        self._index: dict[str, list[Path]] | None = None
+
+    def find(self, template: str) -> Path | None:
+        t = template.replace("\\", "/").strip("/")
+        if t.endswith(self.suffix):
+            t = t[: -len(self.suffix)]
+        base = t.rsplit("/", 1)[-1]
+        configs = self.root / "configs"
+        for cand in (configs / f"{t}{self.suffix}", configs / self.folder / f"{base}{self.suffix}"):
+            if cand.is_file():
+                return cand
+        if self._index is None:
+            self._index = {}
+            for p in sorted((configs / self.folder).rglob("*" + self.suffix)):
+                self._index.setdefault(p.name[: -len(self.suffix)], []).append(p)
+        hits = self._index.get(base, [])
+        for p in hits:
+            if p.as_posix()[: -len(self.suffix)].endswith("/" + t):
+                return p
+        return hits[0] if hits else None
+
+
+def asset_name(root: Path, glb: Path) -> str:
+    return ASSET_PREFIX + Path(os.path.relpath(glb, root)).as_posix()
+
+
+def render_asset(root: Path, config: Path, cfg: dict) -> Path:
+    """The GLB a config's ``render_asset`` names (relative to the config's folder). SceneFormatError
+    naming the config and ``render_asset`` when it does not exist, and naming the GLB when it is a
+    Git LFS pointer (a clone made without ``git lfs``: "run git lfs pull")."""
+    from formats.lfs import LFS_HINT, is_lfs_pointer
+
+    rel = string(config, cfg.get("render_asset"), "render_asset")
+    glb = Path(os.path.normpath(config.parent / rel))
+    if not glb.is_file():
+        fail(config, "render_asset", f"GLB not found: {glb}")
+    if is_lfs_pointer(glb):
+        fail(glb, None, f"cannot read GLB: {LFS_HINT} (named by {config}: render_asset)")
+    return glb
+
+
+# --------------------------------------------------------------------------------------------
+# poses
+
+
+def convert_quat(q) -> tuple[float, float, float, float]:
+    """Habitat (w, x, y, z) -> ours: the rotation C R C^T, i.e. (w, x, -z, y), with w >= 0."""
+    w, x, y, z = (float(v) for v in q)
+    out = np.array([w, x, -z, y])
+    out /= np.linalg.norm(out)
+    if out[0] < 0:
+        out = -out
+    return tuple(float(v) + 0.0 for v in out)  # + 0.0: no negative zeros in the files
+
+
+def hab_matrix(q) -> np.ndarray:
+    w, x, y, z = q
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def vec(v) -> tuple[float, float, float]:
+    return tuple(float(x) + 0.0 for x in v)

@@ -1,0 +1,285 @@
+"""Lighting presets (``scenes/lighting/NAME.yaml``) and their resolution against a layout.
+
+A preset says what is on: the sky (world background), the sun, and per fixture kind (ceiling
+lights, lamps) whether they shine, how warm and how strong. ``resolve_lighting`` turns it into
+concrete lights for one layout, as plain data: the Blender code only translates it.
+
+Fixtures come from the layout (``Layout.fixtures``): a lamp's light sits in its shade, a ceiling
+light's just below its diffuser, windows get light portals. ``count: N`` on lamps keeps N lamps:
+the lowest-id lamp of each room first (rooms ordered by that id), then the next ones, so the
+same lamps stay on in every variant of a layout as long as they exist.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from formats.errors import SceneFormatError, UnknownNameError
+from formats.yamlfile import read_yaml
+
+from ..resources import scenes_dir
+from .model import Layout
+
+
+def lighting_dir() -> Path:
+    return scenes_dir() / "lighting"
+
+
+def list_lighting() -> list[str]:
+    d = lighting_dir()
+    return sorted(p.stem for p in d.glob("*.yaml")) if d.exists() else []
+
+
+def kelvin_to_rgb(kelvin: float) -> tuple[float, float, float]:
+    """Linear Rec.709 colour of a black body at ``kelvin``, normalised to max 1.
+
+    Tanner Helland's fit of the CIE black-body sRGB values, converted from sRGB to linear.
+    """
+    t = min(max(kelvin, 1000.0), 40000.0) / 100.0
+    if t <= 66:
+        r = 255.0
+        g = 99.4708025861 * math.log(t) - 161.1195681661
+        b = 0.0 if t <= 19 else 138.5177312231 * math.log(t - 10) - 305.0447927307
+    else:
+        r = 329.698727446 * (t - 60) ** -0.1332047592
+        g = 288.1221695283 * (t - 60) ** -0.0755148492
+        b = 255.0
+    srgb = np.clip(np.array([r, g, b]) / 255.0, 0.0, 1.0)
+    lin = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+    lin = lin / lin.max()
+    return tuple(float(v) for v in lin)
+
+
+@dataclass(frozen=True)
+class FixtureSetting:
+    on: bool = False
+    color_temperature: float = 3000.0
+    power: float = 60.0  # Blender watts per fixture
+    count: int | None = None  # lamps only: how many stay on
+
+
+@dataclass(frozen=True)
+class LightingPreset:
+    name: str
+    description: str
+    sky_color: tuple[float, float, float]
+    sky_strength: float
+    sun: dict | None  # strength, elevation_deg, azimuth_deg, color_temperature, angle_deg
+    window_portals: bool
+    ceiling: FixtureSetting
+    lamp: FixtureSetting
+    source: str = ""
+
+
+def _num(v, src, field, lo=None):
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise SceneFormatError(src, field, f"expected a number, got {v!r}")
+    if lo is not None and v < lo:
+        raise SceneFormatError(src, field, f"must be >= {lo}, got {v}")
+    return float(v)
+
+
+def parse_preset(doc, source: str) -> LightingPreset:
+    if not isinstance(doc, dict):
+        raise SceneFormatError(source, None, "expected a mapping")
+    allowed = {"name", "description", "sky", "sun", "window_portals", "fixtures"}
+    unknown = set(doc) - allowed
+    if unknown:
+        raise SceneFormatError(source, None, f"unknown key(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
+    sky = doc.get("sky") or {}
+    if not isinstance(sky, dict) or set(sky) - {"color", "strength"}:
+        raise SceneFormatError(source, "sky", "expected {color: [r, g, b], strength: s}")
+    color = sky.get("color", [0.0, 0.0, 0.0])
+    if not isinstance(color, list) or len(color) != 3:
+        raise SceneFormatError(source, "sky.color", f"expected 3 numbers, got {color!r}")
+    sky_color = tuple(_num(c, source, "sky.color", 0.0) for c in color)
+    sun = doc.get("sun")
+    if sun is not None:
+        keys = {"strength", "elevation_deg", "azimuth_deg", "color_temperature", "angle_deg"}
+        if not isinstance(sun, dict) or set(sun) - keys:
+            raise SceneFormatError(source, "sun", f"expected a mapping with keys {sorted(keys)} or null")
+        sun = {k: _num(sun.get(k, d), source, f"sun.{k}") for k, d in
+               (("strength", 3.0), ("elevation_deg", 35.0), ("azimuth_deg", 200.0), ("color_temperature", 5600.0), ("angle_deg", 1.0))}
+    fx = doc.get("fixtures") or {}
+    if not isinstance(fx, dict) or set(fx) - {"ceiling", "lamp"}:
+        raise SceneFormatError(source, "fixtures", "expected a mapping with keys ceiling, lamp")
+
+    def setting(kind):
+        d = fx.get(kind) or {}
+        if not isinstance(d, dict) or set(d) - {"enabled", "color_temperature", "power", "count"}:
+            bad = sorted(map(str, set(d) - {"enabled", "color_temperature", "power", "count"})) if isinstance(d, dict) else d
+            raise SceneFormatError(source, f"fixtures.{kind}", f"expected keys enabled, color_temperature, power, count; got {bad}")
+        on = d.get("enabled", False)
+        if not isinstance(on, bool):
+            raise SceneFormatError(source, f"fixtures.{kind}.enabled", f"expected true or false, got {on!r}")
+        count = d.get("count")
+        if count is not None and (isinstance(count, bool) or not isinstance(count, int) or count < 0):
+            raise SceneFormatError(source, f"fixtures.{kind}.count", f"expected a non-negative integer, got {count!r}")
+        return FixtureSetting(on, _num(d.get("color_temperature", 3000.0), source, f"fixtures.{kind}.color_temperature", 1000.0),
+                              _num(d.get("power", 60.0), source, f"fixtures.{kind}.power", 0.0), count)
+
+    name = doc.get("name") or Path(source).stem
+    return LightingPreset(
+        name=str(name), description=str(doc.get("description", "")), sky_color=sky_color,
+        sky_strength=_num(sky.get("strength", 1.0), source, "sky.strength", 0.0), sun=sun,
+        window_portals=bool(doc.get("window_portals", False)), ceiling=setting("ceiling"), lamp=setting("lamp"), source=source,
+    )
+
+
+def lighting_file(name_or_file) -> Path:
+    """The file of a preset name (``day``) or the given file."""
+    p = Path(name_or_file)
+    if p.suffix not in (".yaml", ".yml") and not p.exists():
+        p = lighting_dir() / f"{name_or_file}.yaml"
+        if not p.exists():
+            raise UnknownNameError(f"unknown lighting preset '{name_or_file}'; known: {', '.join(list_lighting()) or 'none'}")
+    return p
+
+
+def load_lighting(name_or_file) -> LightingPreset:
+    p = lighting_file(name_or_file)
+    return parse_preset(read_yaml(p), str(p))
+
+
+def preset_document(preset: LightingPreset) -> dict:
+    """The YAML document of a preset (what ``parse_preset`` reads back to an equal preset)."""
+    def fixture(f: FixtureSetting) -> dict:
+        d = {"enabled": f.on, "color_temperature": f.color_temperature, "power": f.power}
+        if f.count is not None:
+            d["count"] = f.count
+        return d
+
+    return {"name": preset.name, "description": preset.description,
+            "sky": {"color": [float(c) for c in preset.sky_color], "strength": preset.sky_strength},
+            "sun": dict(preset.sun) if preset.sun is not None else None, "window_portals": preset.window_portals,
+            "fixtures": {"ceiling": fixture(preset.ceiling), "lamp": fixture(preset.lamp)}}
+
+
+@dataclass(frozen=True)
+class LightingJitter:
+    """How far ``jitter_preset`` moves a preset (training data: the detector must not learn one light)."""
+
+    sun_azimuth_deg: float = 60.0  # +- uniform
+    sun_elevation_deg: float = 15.0  # +- uniform, kept within [5, 80]
+    strength_log2: float = 0.7  # sun, sky and fixture power times 2**U(-x, x)
+    sky_tint: float = 0.15  # each sky colour channel times 1 + U(-x, x)
+    temperature_k: float = 500.0  # colour temperatures +- uniform, kept within [1800, 9000] K
+    lamps_extra: int = 2  # a preset keeping N lamps keeps N + U{0..x}
+
+
+def jitter_preset(preset: LightingPreset, seed: int, jitter: LightingJitter = LightingJitter()) -> LightingPreset:
+    """A seeded variation of ``preset``: the same lights on and off, moved in direction, strength
+    and colour (``jitter``). Exposure is not a property of the light: it belongs to the camera,
+    which applies it to the linear frames later. Same preset and seed, same result."""
+    rng = np.random.default_rng([int(seed), 11])
+
+    def gain() -> float:
+        return float(2.0 ** rng.uniform(-jitter.strength_log2, jitter.strength_log2))
+
+    def temp(t: float) -> float:
+        return round(float(np.clip(t + rng.uniform(-jitter.temperature_k, jitter.temperature_k), 1800.0, 9000.0)), 1)
+
+    sun = None
+    if preset.sun is not None:
+        sun = dict(preset.sun)
+        sun["azimuth_deg"] = round((sun["azimuth_deg"] + rng.uniform(-jitter.sun_azimuth_deg, jitter.sun_azimuth_deg)) % 360.0, 3)
+        sun["elevation_deg"] = round(float(np.clip(sun["elevation_deg"] + rng.uniform(-jitter.sun_elevation_deg,
+                                                                                       jitter.sun_elevation_deg), 5.0, 80.0)), 3)
+        sun["strength"] = round(sun["strength"] * gain(), 4)
+        sun["color_temperature"] = temp(sun["color_temperature"])
+    sky_color = tuple(round(float(c * (1.0 + rng.uniform(-jitter.sky_tint, jitter.sky_tint))), 4) for c in preset.sky_color)
+
+    def fixture(f: FixtureSetting) -> FixtureSetting:
+        count = f.count if f.count is None else f.count + int(rng.integers(0, jitter.lamps_extra + 1))
+        return FixtureSetting(f.on, temp(f.color_temperature), round(f.power * gain(), 3), count)
+
+    return LightingPreset(
+        name=f"{preset.name}_j{int(seed)}", description=f"{preset.name}, jittered with seed {int(seed)}",
+        sky_color=sky_color, sky_strength=round(preset.sky_strength * gain(), 4), sun=sun,
+        window_portals=preset.window_portals, ceiling=fixture(preset.ceiling), lamp=fixture(preset.lamp))
+
+
+@dataclass
+class Light:
+    kind: str  # point | area | sun | portal
+    name: str
+    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    direction: tuple[float, float, float] = (0.0, 0.0, -1.0)  # where the light shines (area, sun)
+    up: tuple[float, float, float] = (0.0, 0.0, 1.0)  # in-plane orientation of area lights / portals
+    size: tuple[float, float] = (0.1, 0.1)  # area / portal width and height; point: radius in [0]
+    color: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    power: float = 0.0  # W (point, area); W/m2 (sun)
+    angle: float = 0.0  # sun angular diameter (rad)
+
+
+@dataclass
+class ResolvedLighting:
+    preset: str
+    sky_color: tuple[float, float, float]
+    sky_strength: float
+    lights: list[Light] = field(default_factory=list)
+    emission: dict[str, tuple[tuple[float, float, float], float]] = field(default_factory=dict)  # fixture -> (colour, strength)
+
+
+LAMP_EMISSION = 6.0  # emission strength of a lit lamp shade (the light itself is a point light inside)
+CEILING_EMISSION = 8.0
+
+
+def chosen_lamps(layout: Layout, count: int | None) -> list[str]:
+    lamps = sorted((f for f in layout.fixtures if f.kind == "lamp"), key=lambda f: (f.object or 0, f.id))
+    if count is None:
+        return [f.id for f in lamps]
+    first_per_room, rest, seen = [], [], set()
+    for f in lamps:
+        (rest if f.room in seen else first_per_room).append(f)
+        seen.add(f.room)
+    return [f.id for f in (first_per_room + rest)[:count]]
+
+
+def resolve_lighting(preset: LightingPreset, layout: Layout) -> ResolvedLighting:
+    out = ResolvedLighting(preset.name, preset.sky_color, preset.sky_strength)
+    if preset.sun is not None and preset.sun["strength"] > 0:
+        el, az = math.radians(preset.sun["elevation_deg"]), math.radians(preset.sun["azimuth_deg"])
+        to_sun = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
+        out.lights.append(Light("sun", "sun", direction=tuple(-to_sun), color=kelvin_to_rgb(preset.sun["color_temperature"]),
+                                power=preset.sun["strength"], angle=math.radians(preset.sun["angle_deg"])))
+    objs = layout.by_id()
+    if preset.ceiling.on:
+        col = kelvin_to_rgb(preset.ceiling.color_temperature)
+        for f in layout.fixtures:
+            if f.kind != "ceiling":
+                continue
+            o = objs.get(f.object)
+            z = (o.position[2] - 0.02) if o is not None else layout.stage.floor_z + layout.stage.ceiling_height - 0.1
+            w = max(0.1, min(o.size[0], o.size[1]) * 0.9) if o is not None else 0.3
+            out.lights.append(Light("area", f.id, (f.position[0], f.position[1], z), (0.0, 0.0, -1.0), size=(w, w),
+                                    color=col, power=preset.ceiling.power))
+            out.emission[f.id] = (col, CEILING_EMISSION)
+    if preset.lamp.on:
+        col = kelvin_to_rgb(preset.lamp.color_temperature)
+        on = set(chosen_lamps(layout, preset.lamp.count))
+        for f in layout.fixtures:
+            if f.kind == "lamp" and f.id in on:
+                out.lights.append(Light("point", f.id, tuple(f.position), size=(0.04, 0.04), color=col, power=preset.lamp.power))
+                out.emission[f.id] = (col, LAMP_EMISSION)
+    if preset.window_portals:
+        st = layout.stage
+        for op in st.openings:
+            if op.kind != "window":
+                continue
+            w = st.wall(op.wall)
+            c = op.center_xy(w)
+            n = np.array([-w.direction[1], w.direction[0], 0.0])
+            # the portal faces into the room the window belongs to
+            if op.rooms:
+                r = st.room(op.rooms[0])
+                centre = np.array([(r.rect[0] + r.rect[2]) / 2, (r.rect[1] + r.rect[3]) / 2, 0.0])
+                if n @ (centre - np.array([c[0], c[1], 0.0])) < 0:
+                    n = -n
+            pos = (float(c[0]), float(c[1]), st.floor_z + op.bottom + op.height / 2)
+            out.lights.append(Light("portal", op.id, pos, tuple(n), up=(0.0, 0.0, 1.0), size=(op.width, op.height)))
+    return out
