@@ -24,6 +24,7 @@ SCRIPT = textwrap.dedent(r'''
     import bpy
     import numpy as np
     from synth.blender import materials as M
+    from synth.blender.shading import set_emission
 
     out = sys.argv[1]
     res = {"materials": {}}
@@ -56,11 +57,11 @@ SCRIPT = textwrap.dedent(r'''
     l2 = M.get_material("lamp_shade", key="L2")
     l1.node_tree.nodes["emission"].inputs["Strength"].default_value = 3.0
     l3 = M.get_material("diffuser", key="L3")
-    M.set_emission(l3, 7.0, (1.0, 0.5, 0.25))
+    set_emission(l3, 7.0, (1.0, 0.5, 0.25))
     em3 = l3.node_tree.nodes["emission"]
     res["set_emission"] = [em3.inputs["Strength"].default_value] + list(em3.inputs["Color"].default_value)[:3]
     try:
-        M.set_emission(M.get_material("plastic"), 1.0)
+        set_emission(M.get_material("plastic"), 1.0)
         res["set_emission_plain_raises"] = False
     except ValueError:
         res["set_emission_plain_raises"] = True

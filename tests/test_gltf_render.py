@@ -552,7 +552,8 @@ SCRIPT = textwrap.dedent(r'''
     from synth.scene.lighting import load_lighting, resolve_lighting
     from synth.render.settings import quality
     from synth.blender import scene_builder as sb
-    from synth.blender import materials as M
+    from synth.blender.gltf_materials import get_gltf_material
+    from synth.blender.shading import set_emission
     from synth.blender.worker import read_blender_exr
     from synth.replicacad.gltf import load_glb_parts, pbr
 
@@ -625,8 +626,8 @@ SCRIPT = textwrap.dedent(r'''
     # emission, measured: a plane with the bulb's material, lit by nothing, seen head-on
     scene = sb.reset_scene()
     (bulb,) = load_glb_parts(args["bulb"])
-    mat = M.get_gltf_material(pbr(bulb), emissive=True, key="probe")
-    M.set_emission(mat, 5.0, (1.0, 0.5, 0.25))
+    mat = get_gltf_material(pbr(bulb), emissive=True, key="probe")
+    set_emission(mat, 5.0, (1.0, 0.5, 0.25))
     bpy.ops.mesh.primitive_plane_add(size=4.0)
     bpy.context.object.data.materials.append(mat)
     world = bpy.data.worlds.new("w"); scene.world = world; world.use_nodes = True
@@ -668,7 +669,7 @@ SCRIPT = textwrap.dedent(r'''
         metallicRoughnessTexture=Image.fromarray(mr, "RGB"), normalTexture=Image.fromarray(nrm, "RGB"),
         metallicFactor=1.0, roughnessFactor=1.0))
     scene = sb.reset_scene()
-    mat = M.get_gltf_material(pbr(box))
+    mat = get_gltf_material(pbr(box))
     bsdf = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
     res["mask_material"] = {"linked": sorted(i.name for i in bsdf.inputs if i.is_linked),
                             "images": sorted(n.image.colorspace_settings.name for n in mat.node_tree.nodes

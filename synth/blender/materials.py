@@ -33,69 +33,32 @@ sets strength and colour.
 Glass: a Principled BSDF with Transmission Weight 1 (cheap, no volume); depth and instance passes
 still see glass surfaces, as with any other mesh.
 
-glTF materials (mesh assets: ReplicaCAD)
-
-:func:`get_gltf_material` builds a Principled BSDF from a part's glTF PBR material
-(``synth.replicacad.gltf.pbr``), once per (glTF file, material index) and emission key:
-
-* base colour = ``baseColorTexture`` (sRGB image, UV map "UVMap", linear filtering, repeat)
-  x ``baseColorFactor``; alpha = texture alpha x factor alpha for ``alphaMode`` BLEND, the same
-  thresholded at ``alphaCutoff`` for MASK, 1 for OPAQUE (depth and ids ignore alpha: a transparent
-  primitive is a surface in the geometry pass and in the fast renderer);
-* metallic / roughness = factors x ``metallicRoughnessTexture`` B / G (non-colour data);
-* ``normalTexture``: a tangent-space Normal Map node on "UVMap" (strength 1: trimesh does not keep
-  the glTF ``scale``);
-* emission (``emissiveFactor`` > 0): an Emission node named ``"emission"`` (strength 0 = off, set by
-  the lighting like the lamp shades') whose colour is ``emissiveTexture`` (sRGB) x
-  ``emissiveFactor`` x the colour of an RGB node named ``"emission_light"`` (the light's colour,
-  white by default; :func:`set_emission` and the scene builder set it);
-* ``KHR_texture_transform`` of a slot (``params["texture_transforms"]``): a UV Map node ("UVMap")
-  and a Mapping node (POINT, values from ``synth.replicacad.gltf.blender_mapping``, as Blender's own glTF
-  importer sets them) feed that slot's Image Texture node;
-* occlusion maps, vertex colours and samplers are ignored; IOR 1.5 (glTF's).
-
-PIL images become Blender images once per process (saved as PNG to a temporary file, loaded,
-packed, the file removed). An image that PIL cannot decode is logged once and left out (the
-factor alone then gives the colour).
+The emission API (:func:`emission_node`, :func:`set_emission`) and the node-tree helpers are in
+``synth.blender.shading``; glTF PBR materials are ``synth.blender.gltf_materials``.
 """
 from __future__ import annotations
 
 import colorsys
-import logging
 import math
-import os
-import tempfile
-from pathlib import Path
 
 import bpy
-import numpy as np
 
 from ..assets.procedural import MATERIALS
+from .shading import CACHES, Color, Tree, find_socket, finish, is_alive, norm_color, seeded_rng
 
 __all__ = [
     "STAGE_MATERIALS",
     "ALL_MATERIALS",
     "EMISSIVE_MATERIALS",
-    "EMISSION_NODE",
     "get_material",
-    "emission_node",
-    "set_emission",
-    "clear_cache",
-    "get_gltf_material",
-    "EMISSION_LIGHT_NODE",
 ]
-
-log = logging.getLogger(__name__)
 
 STAGE_MATERIALS: tuple[str, ...] = ("floor_wood", "floor_tile", "wall_paint", "ceiling_paint", "door_frame")
 ALL_MATERIALS: tuple[str, ...] = tuple(MATERIALS) + STAGE_MATERIALS
 EMISSIVE_MATERIALS: tuple[str, ...] = ("lamp_shade", "diffuser")  # always get an "emission" node
-EMISSION_NODE = "emission"
-EMISSION_LIGHT_NODE = "emission_light"  # glTF emitters: RGB node carrying the light's colour
 
 _CACHE: dict[tuple, bpy.types.Material] = {}
-
-Color = tuple[float, float, float]
+CACHES.append(_CACHE)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -112,234 +75,20 @@ def get_material(name: str, color: Color | None = None, emissive: bool = False, 
     ``seed``: varies the pattern (the art of a canvas).  Raises ValueError for an unknown name."""
     if name not in _BUILDERS:
         raise ValueError(f"unknown material {name!r}; known: {', '.join(ALL_MATERIALS)}")
-    col = _norm_color(color)
+    col = norm_color(color)
     emissive = bool(emissive) or name in EMISSIVE_MATERIALS
     seed = int(seed)
     ck = (name, col, emissive, None if key is None else str(key), seed)
     mat = _CACHE.get(ck)
-    if mat is not None and _alive(mat):
+    if mat is not None and is_alive(mat):
         return mat
     mat = _build(name, col, emissive, ck[3], seed)
     _CACHE[ck] = mat
     return mat
 
 
-def emission_node(mat: bpy.types.Material):
-    """The Emission node of ``mat`` (inputs "Color" and "Strength"), or None."""
-    if mat is None or mat.node_tree is None:
-        return None
-    return mat.node_tree.nodes.get(EMISSION_NODE)
-
-
-def set_emission(mat: bpy.types.Material, strength: float, color: Color | None = None) -> None:
-    """Set the strength (and optionally the linear RGB colour) of ``mat``'s "emission" node.
-
-    Raises ValueError when ``mat`` has none (build it with ``emissive=True``)."""
-    node = emission_node(mat)
-    if node is None:
-        raise ValueError(f"material {mat.name!r} has no {EMISSION_NODE!r} node")
-    node.inputs["Strength"].default_value = float(strength)
-    if color is not None:
-        light = mat.node_tree.nodes.get(EMISSION_LIGHT_NODE)
-        if light is not None:  # glTF emitter: the texture x factor colour stays, the light tints it
-            light.outputs[0].default_value = (*_norm_color(color), 1.0)
-        else:
-            node.inputs["Color"].default_value = (*_norm_color(color), 1.0)
-
-
-def clear_cache() -> None:
-    """Forget cached materials (they stay in bpy.data); the next get_material builds new ones."""
-    _CACHE.clear()
-    _GLTF_CACHE.clear()
-    _IMAGES.clear()
-
-
-# ----------------------------------------------------------------------------------------------
-# glTF materials
-
-_GLTF_CACHE: dict[tuple, bpy.types.Material] = {}
-_IMAGES: dict[tuple, tuple] = {}  # (id(PIL image), colour space) -> (PIL image, bpy image or None)
-_BAD_IMAGES: set[int] = set()
-
-
-def _load_packed(suffix: str, write) -> bpy.types.Image:
-    """A Blender image packed into the .blend from a temporary file that ``write(path)`` fills
-    (Blender loads images from files only); the file is removed again."""
-    fd, path = tempfile.mkstemp(prefix="synth_gltf_", suffix=suffix)
-    os.close(fd)
-    try:
-        write(path)
-        img = bpy.data.images.load(path)
-        img.pack()
-    finally:
-        os.remove(path)
-    return img
-
-
-def _bpy_image(pil, colorspace: str, label: str, source: dict | None = None):
-    """A packed Blender image (once per image and colour space), or None.
-
-    With ``source`` (``synth.replicacad.gltf.pbr(...)["sources"][slot]``) the file's own encoded bytes are
-    loaded as they are (no re-encoding); otherwise the PIL image is saved as PNG first."""
-    if pil is None:
-        return None
-    if source is not None:
-        ck = ("src", source["file"], source["offset"], colorspace)
-        hit = _IMAGES.get(ck)
-        if hit is not None:
-            try:
-                if bpy.data.images.get(hit[1].name) == hit[1]:
-                    return hit[1]
-            except ReferenceError:
-                pass
-        try:
-            from ..replicacad.gltf import read_image_source
-
-            blob = read_image_source(source)
-            img = _load_packed(source["suffix"], lambda path: Path(path).write_bytes(blob))
-            img.name = label
-            img.colorspace_settings.name = colorspace
-            _IMAGES[ck] = (None, img)
-            return img
-        except (OSError, RuntimeError) as e:  # fall back to the decoded PIL image
-            log.warning("texture %s: cannot load the file's image bytes (%s); re-encoding it", label, e)
-    ck = (id(pil), colorspace)
-    hit = _IMAGES.get(ck)
-    if hit is not None and hit[0] is pil:
-        img = hit[1]
-        try:
-            if img is None or bpy.data.images.get(img.name) == img:
-                return img
-        except ReferenceError:
-            pass
-    img = None
-    try:
-        mode = "RGBA" if (pil.mode in ("RGBA", "LA", "PA") or "transparency" in pil.info) else "RGB"
-        im = pil.convert(mode)
-        img = _load_packed(".png", lambda path: im.save(path, format="PNG", compress_level=1))
-        img.name = label
-        img.colorspace_settings.name = colorspace
-    except Exception as e:  # noqa: BLE001 - PIL raises many types for undecodable data
-        if id(pil) not in _BAD_IMAGES:
-            _BAD_IMAGES.add(id(pil))
-            log.warning("texture %s cannot be decoded (%s); using the material's factor instead", label, e)
-        img = None
-    _IMAGES[ck] = (pil, img)
-    return img
-
-
-def get_gltf_material(params: dict, emissive: bool = False, key: str | None = None) -> bpy.types.Material:
-    """The Cycles material of a glTF PBR material (``params`` = ``synth.replicacad.gltf.pbr(mesh)``).
-
-    Built once per (``params["key"]``, emissive, ``key``); ``key`` (the light fixture) gives an
-    emitter a material of its own. The "emission" node exists when ``emissive`` is true (and the
-    material has an emissive factor); its strength starts at 0."""
-    emissive = bool(emissive) and max(params["emissive"]) > 0.0
-    ck = (params["key"], emissive, None if key is None else str(key))
-    mat = _GLTF_CACHE.get(ck)
-    if mat is not None and _alive(mat):
-        return mat
-    mat = _build_gltf(params, emissive, ck[2])
-    _GLTF_CACHE[ck] = mat
-    return mat
-
-
-def _build_gltf(params: dict, emissive: bool, key: str | None) -> bpy.types.Material:
-    name = "gltf:" + os.path.basename(params["key"])
-    mat = bpy.data.materials.new(name if key is None else f"{name}@{key}")
-    t = _Tree(mat)
-    uv = params.get("has_uv", False)
-    label = os.path.basename(params["key"])
-
-    sources = params.get("sources", {})
-    transforms = params.get("texture_transforms", {})
-
-    def tex(pil, colorspace, what):
-        img = _bpy_image(pil, colorspace, f"{label}:{what}", sources.get(what + "Texture")) if uv else None
-        if img is None:
-            return None
-        node = t.add("ShaderNodeTexImage", image=img, interpolation="Linear", extension="REPEAT")
-        tt = transforms.get(what + "Texture")
-        if tt is not None:  # KHR_texture_transform: UV map -> Mapping -> this image
-            from ..replicacad.gltf import blender_mapping
-
-            m = blender_mapping(tt)
-            uvmap = t.add("ShaderNodeUVMap", uv_map="UVMap")
-            mapping = t.add("ShaderNodeMapping", name=f"uv_transform:{what}", vector_type="POINT",
-                            inputs={"Vector": uvmap.outputs["UV"], "Location": m["location"],
-                                    "Rotation": m["rotation"], "Scale": m["scale"]})
-            t.nt.links.new(mapping.outputs["Vector"], node.inputs["Vector"])
-        return node
-
-    bc = params["base_color"]
-    base_tex = tex(params["base_color_texture"], "sRGB", "baseColor")
-    color = bc[:3]
-    if base_tex is not None:
-        color = base_tex.outputs["Color"]
-        if any(abs(c - 1.0) > 1e-6 for c in bc[:3]):
-            color = t.mix(1.0, color, tuple(bc[:3]), blend="MULTIPLY")
-    mode = params["alpha_mode"]
-    alpha = 1.0
-    if mode in ("BLEND", "MASK"):
-        alpha = bc[3]
-        if base_tex is not None:
-            alpha = t.add("ShaderNodeMath", operation="MULTIPLY",
-                          inputs={"Value": base_tex.outputs["Alpha"], "Value_001": bc[3]}).outputs[0] if bc[3] != 1.0 else base_tex.outputs["Alpha"]
-        if mode == "MASK":
-            if isinstance(alpha, float):
-                alpha = 1.0 if alpha >= params["alpha_cutoff"] else 0.0
-            else:
-                alpha = t.add("ShaderNodeMath", operation="GREATER_THAN",
-                              inputs={"Value": alpha, "Value_001": params["alpha_cutoff"] - 1e-6}).outputs[0]
-    metallic, roughness = params["metallic"], params["roughness"]
-    mr_tex = tex(params["metallic_roughness_texture"], "Non-Color", "metallicRoughness")
-    if mr_tex is not None:
-        sep = t.add("ShaderNodeSeparateColor", inputs={"Color": mr_tex.outputs["Color"]})
-        roughness = t.add("ShaderNodeMath", operation="MULTIPLY", inputs={"Value": sep.outputs["Green"], "Value_001": roughness}).outputs[0]
-        metallic = t.add("ShaderNodeMath", operation="MULTIPLY", inputs={"Value": sep.outputs["Blue"], "Value_001": metallic}).outputs[0]
-    normal = None
-    n_tex = tex(params["normal_texture"], "Non-Color", "normal")
-    if n_tex is not None:
-        normal = t.add("ShaderNodeNormalMap", space="TANGENT", uv_map="UVMap",
-                       inputs={"Color": n_tex.outputs["Color"], "Strength": 1.0}).outputs["Normal"]
-    inputs = {"Base_Color": color, "Metallic": metallic, "Roughness": roughness, "Alpha": alpha, "IOR": 1.5}
-    if normal is not None:
-        inputs["Normal"] = normal
-    surface = t.bsdf(**inputs)
-    if emissive:
-        ef = params["emissive"]
-        em_tex = tex(params["emissive_texture"], "sRGB", "emissive")
-        ecol = tuple(ef)
-        if em_tex is not None:
-            ecol = t.mix(1.0, em_tex.outputs["Color"], tuple(ef), blend="MULTIPLY")
-        light = t.add("ShaderNodeRGB", name=EMISSION_LIGHT_NODE)
-        light.outputs[0].default_value = (1.0, 1.0, 1.0, 1.0)
-        ecol = t.mix(1.0, ecol, light.outputs[0], blend="MULTIPLY")
-    _finish(t, surface, emissive, ecol if emissive else None)
-    mat.diffuse_color = (*[min(max(c, 0.0), 1.0) for c in bc[:3]], 1.0)
-    mat["synth_material"] = "gltf"
-    mat["gltf_key"] = params["key"]
-    return mat
-
-
 # ----------------------------------------------------------------------------------------------
 # helpers
-
-
-def _norm_color(color) -> Color | None:
-    if color is None:
-        return None
-    vals = [float(v) for v in tuple(color)[:3]]
-    if len(vals) != 3 or not all(math.isfinite(v) for v in vals):
-        raise ValueError(f"color must be three finite numbers, got {color!r}")
-    return tuple(round(min(max(v, 0.0), 1.0), 4) for v in vals)
-
-
-def _alive(mat) -> bool:
-    try:
-        return bpy.data.materials.get(mat.name) == mat
-    except ReferenceError:
-        return False
 
 
 def _scale(c: Color, k: float) -> Color:
@@ -354,128 +103,6 @@ def _lum(c: Color) -> float:
     return 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
 
 
-def _rng(seed: int, salt: int) -> np.random.Generator:
-    return np.random.default_rng([abs(int(seed)), salt])
-
-
-def _seed_offset(seed: int) -> tuple[float, float, float]:
-    if seed == 0:
-        return (0.0, 0.0, 0.0)
-    return tuple(float(v) for v in _rng(seed, 1).uniform(-50.0, 50.0, size=3))
-
-
-def _sock(coll, key):
-    for s in coll:
-        if s.identifier == key and s.enabled:
-            return s
-    for s in coll:
-        if s.name == key and s.enabled:
-            return s
-    for s in coll:
-        if s.identifier == key or s.name == key:
-            return s
-    raise KeyError(key)
-
-
-
-MAX_DETAIL = 2.0  # noise octaves (see _Tree.noise)
-
-class _Tree:
-    """Tiny node-graph builder: nodes laid out left to right, inputs given as values or sockets."""
-
-    def __init__(self, mat: bpy.types.Material):
-        mat.use_nodes = True
-        self.nt = mat.node_tree
-        self.nt.nodes.clear()
-        self.n = 0
-
-    def add(self, type_: str, name: str | None = None, inputs: dict | None = None, **props):
-        node = self.nt.nodes.new(type_)
-        if name:
-            node.name = name
-            node.label = name
-        for k, v in props.items():
-            setattr(node, k, v)
-        for k, v in (inputs or {}).items():
-            self.set(node, k, v)
-        node.location = (200.0 * self.n - 1800.0, 300.0 * (self.n % 2))
-        self.n += 1
-        return node
-
-    def set(self, node, key, value):
-        sock = _sock(node.inputs, key)
-        if isinstance(value, bpy.types.NodeSocket):
-            self.nt.links.new(value, sock)
-        elif isinstance(value, (tuple, list)):
-            n = len(sock.default_value)
-            v = list(value)[:n]
-            if len(v) < n:
-                v += [1.0] * (n - len(v))
-            sock.default_value = v
-        else:
-            sock.default_value = value
-
-    # common nodes -------------------------------------------------------------------------------
-    def coords(self, seed=0, scale=(1.0, 1.0, 1.0), rotation=(0.0, 0.0, 0.0), mapping=True):
-        """Object-space coordinates (metres), offset by the seed, optionally scaled / rotated."""
-        tc = self.add("ShaderNodeTexCoord")
-        if not mapping:
-            return tc.outputs["Object"]
-        m = self.add("ShaderNodeMapping", inputs={"Vector": tc.outputs["Object"], "Location": _seed_offset(seed),
-                                                  "Scale": scale, "Rotation": rotation})
-        return m.outputs["Vector"]
-
-    def noise(self, vec, scale, detail=2.0, roughness=0.5, distortion=0.0, **kw):
-        # octaves beyond MAX_DETAIL are sub-pixel at 640x480 from a few metres but cost CPU time
-        return self.add("ShaderNodeTexNoise", inputs={"Vector": vec, "Scale": scale, "Detail": min(detail, MAX_DETAIL),
-                                                      "Roughness": roughness, "Distortion": distortion}, **kw)
-
-    def ramp(self, fac, stops, interpolation="LINEAR"):
-        node = self.add("ShaderNodeValToRGB", inputs={"Fac": fac})
-        cr = node.color_ramp
-        cr.interpolation = interpolation
-        stops = sorted(stops, key=lambda s: s[0])
-        els = cr.elements
-        while len(els) > 1:
-            els.remove(els[-1])
-        els[0].position = stops[0][0]
-        els[0].color = (*stops[0][1][:3], 1.0)
-        for pos, col in stops[1:]:
-            e = els.new(pos)
-            e.color = (*col[:3], 1.0)
-        return node.outputs["Color"]
-
-    def mix(self, fac, a, b, blend="MIX"):
-        node = self.add("ShaderNodeMix", data_type="RGBA", blend_type=blend,
-                        inputs={"Factor_Float": fac, "A_Color": a, "B_Color": b})
-        return _sock(node.outputs, "Result_Color")
-
-    def mixf(self, fac, a, b):
-        node = self.add("ShaderNodeMix", data_type="FLOAT", inputs={"Factor_Float": fac, "A_Float": a, "B_Float": b})
-        return _sock(node.outputs, "Result_Float")
-
-    def bump(self, height, strength, distance=0.01):
-        node = self.add("ShaderNodeBump", inputs={"Height": height, "Strength": strength, "Distance": distance})
-        return node.outputs["Normal"]
-
-    def bsdf(self, **inputs):
-        node = self.add("ShaderNodeBsdfPrincipled",
-                        inputs={k.replace("_", " "): v for k, v in inputs.items()})
-        return node.outputs["BSDF"]
-
-
-def _finish(t: _Tree, surface, emissive: bool, emit_color: Color):
-    if emissive:
-        em = t.add("ShaderNodeEmission", name=EMISSION_NODE, inputs={"Color": emit_color, "Strength": 0.0})
-        add = t.add("ShaderNodeAddShader")
-        t.nt.links.new(surface, add.inputs[0])
-        t.nt.links.new(em.outputs["Emission"], add.inputs[1])
-        surface = add.outputs["Shader"]
-    out = t.add("ShaderNodeOutputMaterial", name="output", target="ALL")
-    t.nt.links.new(surface, out.inputs["Surface"])
-    out.is_active_output = True
-
-
 # ----------------------------------------------------------------------------------------------
 # builders: each takes (tree, color or None, seed) and returns the surface shader socket
 
@@ -485,7 +112,7 @@ def _wood_colors(base: Color) -> tuple[Color, Color, Color]:
     return _scale(base, 0.62), base, _scale(base, 1.22)
 
 
-def _wood(t: _Tree, color, seed, default):
+def _wood(t: Tree, color, seed, default):
     base = color or default
     dark, mid, light = _wood_colors(base)
     # growth rings around the object's x axis; coordinates squeezed along x so the distortion is
@@ -511,7 +138,7 @@ def _wood_dark(t, c, s):
     return _wood(t, c, s, (0.13, 0.065, 0.03))
 
 
-def _floor_wood(t: _Tree, color, seed):
+def _floor_wood(t: Tree, color, seed):
     base = color or (0.40, 0.24, 0.12)
     dark, mid, light = _scale(base, 0.72), base, _scale(base, 1.15)
     tc = t.add("ShaderNodeTexCoord")
@@ -527,7 +154,7 @@ def _floor_wood(t: _Tree, color, seed):
     wave = t.add("ShaderNodeTexWave", wave_type="RINGS", rings_direction="X", wave_profile="SIN",
                  inputs={"Vector": shift.outputs["Vector"], "Scale": 7.0, "Distortion": 12.0, "Detail": 2.0,
                          "Detail Scale": 0.25, "Detail Roughness": 0.6,
-                         "Phase Offset": float(_rng(seed, 2).uniform(0, 6.28)) if seed else 0.0})
+                         "Phase Offset": float(seeded_rng(seed, 2).uniform(0, 6.28)) if seed else 0.0})
     col = t.ramp(wave.outputs["Fac"], [(0.0, light), (0.5, mid), (1.0, dark)])
     tint = t.ramp(brick.outputs["Color"], [(0.0, (0.25, 0.25, 0.25)), (0.1, (0.78, 0.78, 0.78)),
                                            (1.0, (1.12, 1.12, 1.12))])
@@ -536,7 +163,7 @@ def _floor_wood(t: _Tree, color, seed):
     return t.bsdf(Base_Color=col, Roughness=0.35, Normal=nrm, Specular_IOR_Level=0.5)
 
 
-def _floor_tile(t: _Tree, color, seed):
+def _floor_tile(t: Tree, color, seed):
     base = color or (0.62, 0.60, 0.56)
     vec = t.coords(seed)
     mottle = t.noise(vec, 6.0, detail=6.0, roughness=0.6, distortion=0.4)
@@ -551,7 +178,7 @@ def _floor_tile(t: _Tree, color, seed):
     return t.bsdf(Base_Color=brick.outputs["Color"], Roughness=rough.outputs["Result"], Normal=nrm)
 
 
-def _paint(t: _Tree, base: Color, seed, low=0.06, rough=0.75, low_scale=0.9):
+def _paint(t: Tree, base: Color, seed, low=0.06, rough=0.75, low_scale=0.9):
     vec = t.coords(seed)
     lo = t.noise(vec, low_scale, detail=3.0, roughness=0.55)
     col = t.ramp(lo.outputs["Fac"], [(0.3, _scale(base, 1.0 - low)), (0.7, _scale(base, 1.0 + low))])
@@ -573,12 +200,12 @@ def _painted(t, c, s):
     return _paint(t, c or (0.70, 0.70, 0.68), s, low=0.05, rough=0.38, low_scale=2.5)
 
 
-def _door_frame(t: _Tree, color, seed):
+def _door_frame(t: Tree, color, seed):
     """Door and window frames: smooth semi-gloss paint (faint mottling and orange peel)."""
     return _paint(t, color or (0.80, 0.79, 0.76), seed, low=0.04, rough=0.3, low_scale=3.0)
 
 
-def _fabric(t: _Tree, color, seed, default=(0.42, 0.42, 0.44), sheen=0.6, rough=0.9):
+def _fabric(t: Tree, color, seed, default=(0.42, 0.42, 0.44), sheen=0.6, rough=0.9):
     base = color or default
     vec = t.coords(seed)
     mottle = t.noise(vec, 9.0, detail=4.0, roughness=0.6, distortion=0.3)
@@ -593,7 +220,7 @@ def _fabric(t: _Tree, color, seed, default=(0.42, 0.42, 0.44), sheen=0.6, rough=
                   Specular_IOR_Level=0.3)
 
 
-def _leather(t: _Tree, color, seed):
+def _leather(t: Tree, color, seed):
     base = color or (0.25, 0.12, 0.06)
     vec = t.coords(seed)
     lo = t.noise(vec, 3.0, detail=3.0, roughness=0.6, distortion=0.5)
@@ -606,7 +233,7 @@ def _leather(t: _Tree, color, seed):
                   Coat_Weight=0.25, Coat_Roughness=0.25)
 
 
-def _metal(t: _Tree, color, seed):
+def _metal(t: Tree, color, seed):
     base = color or (0.72, 0.72, 0.74)
     bright = max(base) > 0.25
     vec = t.coords(seed)
@@ -622,7 +249,7 @@ def _metal(t: _Tree, color, seed):
                   Anisotropic=0.5)
 
 
-def _plastic(t: _Tree, color, seed):
+def _plastic(t: Tree, color, seed):
     base = color or (0.8, 0.8, 0.8)
     vec = t.coords(seed)
     lo = t.noise(vec, 3.0, detail=3.0, roughness=0.5)
@@ -631,7 +258,7 @@ def _plastic(t: _Tree, color, seed):
     return t.bsdf(Base_Color=col, Roughness=r.outputs["Result"], Specular_IOR_Level=0.5)
 
 
-def _ceramic(t: _Tree, color, seed):
+def _ceramic(t: Tree, color, seed):
     base = color or (0.9, 0.9, 0.88)
     vec = t.coords(seed)
     lo = t.noise(vec, 7.0, detail=4.0, roughness=0.55, distortion=0.4)
@@ -642,23 +269,23 @@ def _ceramic(t: _Tree, color, seed):
     return t.bsdf(Base_Color=col, Roughness=0.08, Specular_IOR_Level=0.6, Coat_Weight=0.6, Coat_Roughness=0.03)
 
 
-def _glass(t: _Tree, color, seed):
+def _glass(t: Tree, color, seed):
     base = color or (0.92, 0.96, 0.95)
     return t.bsdf(Base_Color=base, Roughness=0.02, IOR=1.45, Transmission_Weight=1.0)
 
 
-def _mirror(t: _Tree, color, seed):
+def _mirror(t: Tree, color, seed):
     base = color or (0.92, 0.92, 0.92)
     return t.bsdf(Base_Color=base, Metallic=1.0, Roughness=0.01)
 
 
-def _screen(t: _Tree, color, seed):
+def _screen(t: Tree, color, seed):
     base = color or (0.02, 0.02, 0.025)
     base = _scale(base, 1.0) if max(base) < 0.1 else _scale(base, 0.1 / max(base))
     return t.bsdf(Base_Color=base, Roughness=0.06, Specular_IOR_Level=0.6, Coat_Weight=0.5, Coat_Roughness=0.02)
 
 
-def _leaf(t: _Tree, color, seed):
+def _leaf(t: Tree, color, seed):
     base = color or (0.10, 0.30, 0.08)
     vec = t.coords(seed)
     lo = t.noise(vec, 12.0, detail=3.0, roughness=0.6, distortion=0.6)
@@ -669,7 +296,7 @@ def _leaf(t: _Tree, color, seed):
     return t.bsdf(Base_Color=col, Roughness=0.45, Normal=nrm, Subsurface_Weight=0.0, Sheen_Weight=0.2)
 
 
-def _soil(t: _Tree, color, seed):
+def _soil(t: Tree, color, seed):
     base = color or (0.07, 0.045, 0.028)
     vec = t.coords(seed)
     lo = t.noise(vec, 30.0, detail=8.0, roughness=0.7, distortion=0.3)
@@ -679,7 +306,7 @@ def _soil(t: _Tree, color, seed):
     return t.bsdf(Base_Color=col, Roughness=0.95, Normal=nrm, Specular_IOR_Level=0.2)
 
 
-def _paper(t: _Tree, color, seed):
+def _paper(t: Tree, color, seed):
     base = color or (0.86, 0.85, 0.81)
     vec = t.coords(seed)
     fib = t.noise(vec, 120.0, detail=4.0, roughness=0.6)
@@ -693,9 +320,9 @@ def _paper(t: _Tree, color, seed):
     return t.bsdf(Base_Color=col, Roughness=0.75, Specular_IOR_Level=0.3)
 
 
-def _book_cover(t: _Tree, color, seed):
+def _book_cover(t: Tree, color, seed):
     base = color or (0.45, 0.09, 0.09)
-    rng = _rng(seed, 3)
+    rng = seeded_rng(seed, 3)
     accent = (0.8, 0.62, 0.22) if _lum(base) < 0.35 else (0.05, 0.05, 0.06)
     if rng.random() < 0.35:
         accent = (0.85, 0.84, 0.80) if _lum(base) < 0.35 else _scale(base, 0.35)
@@ -711,7 +338,7 @@ def _book_cover(t: _Tree, color, seed):
     return t.bsdf(Base_Color=col, Roughness=0.45, Specular_IOR_Level=0.4)
 
 
-def _lamp_shade(t: _Tree, color, seed):
+def _lamp_shade(t: Tree, color, seed):
     base = color or (0.9, 0.87, 0.80)
     vec = t.coords(seed)
     weave = t.add("ShaderNodeTexWave", wave_type="BANDS", bands_direction="Z", wave_profile="SIN",
@@ -725,7 +352,7 @@ def _lamp_shade(t: _Tree, color, seed):
     return mix.outputs["Shader"]
 
 
-def _diffuser(t: _Tree, color, seed):
+def _diffuser(t: Tree, color, seed):
     base = color or (0.92, 0.92, 0.92)
     surf = t.bsdf(Base_Color=base, Roughness=0.4, Specular_IOR_Level=0.4)
     trans = t.add("ShaderNodeBsdfTranslucent", inputs={"Color": base})
@@ -735,7 +362,7 @@ def _diffuser(t: _Tree, color, seed):
     return mix.outputs["Shader"]
 
 
-def _mattress(t: _Tree, color, seed):
+def _mattress(t: Tree, color, seed):
     base = color or (0.86, 0.86, 0.83)
     # quilting: diamonds of soft stitch lines (brick texture without offset, turned 45 degrees)
     vec = t.coords(seed, rotation=(0.0, 0.0, math.pi / 4))
@@ -749,7 +376,7 @@ def _mattress(t: _Tree, color, seed):
     return t.bsdf(Base_Color=col, Roughness=0.85, Normal=nrm, Sheen_Weight=0.5)
 
 
-def _marble(t: _Tree, color, seed):
+def _marble(t: Tree, color, seed):
     base = color or (0.86, 0.85, 0.83)
     vein = (0.12, 0.12, 0.13) if _lum(base) > 0.3 else (0.75, 0.74, 0.72)
     vec = t.coords(seed)
@@ -764,7 +391,7 @@ def _marble(t: _Tree, color, seed):
 
 
 def _art_palette(color, seed, n=5) -> list[Color]:
-    rng = _rng(seed, 4)
+    rng = seeded_rng(seed, 4)
     h0 = rng.random()
     cols = []
     for i in range(n):
@@ -783,10 +410,10 @@ def _art_palette(color, seed, n=5) -> list[Color]:
 _ART_STYLES = ("fields", "mosaic", "stripes", "rings")
 
 
-def _canvas(t: _Tree, color, seed):
+def _canvas(t: Tree, color, seed):
     """Colourful abstract art: a seeded palette (``color`` is one of its colours) painted as flat
     colour fields, a mosaic, bands or rings; the seed picks style, palette and composition."""
-    rng = _rng(seed, 5)
+    rng = seeded_rng(seed, 5)
     pal = _art_palette(color, seed)
     style = _ART_STYLES[int(rng.integers(len(_ART_STYLES)))]
     vec = t.coords(seed, rotation=(float(rng.uniform(-0.4, 0.4)), float(rng.uniform(-0.4, 0.4)),
@@ -801,7 +428,7 @@ def _canvas(t: _Tree, color, seed):
                    inputs={"Factor_Float": float(rng.uniform(0.05, 0.2)), "A_Vector": vec,
                            "B_Vector": warp.outputs["Color"]})
         f = t.add("ShaderNodeTexVoronoi", feature="F1",
-                  inputs={"Vector": _sock(vm.outputs, "Result_Vector"), "Scale": float(rng.uniform(4.0, 9.0))}
+                  inputs={"Vector": find_socket(vm.outputs, "Result_Vector"), "Scale": float(rng.uniform(4.0, 9.0))}
                   ).outputs["Color"]
         interp, lo, hi = "CONSTANT", 0.1, 0.9
     elif style == "stripes":
@@ -824,7 +451,7 @@ def _canvas(t: _Tree, color, seed):
     return t.bsdf(Base_Color=col, Roughness=0.6, Specular_IOR_Level=0.4)
 
 
-def _wicker(t: _Tree, color, seed):
+def _wicker(t: Tree, color, seed):
     base = color or (0.55, 0.40, 0.22)
     # rotate 45 deg about z so both x- and y-facing sides show the weave
     vec = t.coords(seed, rotation=(0.0, 0.0, math.pi / 4))
@@ -877,9 +504,9 @@ def _default_emit_color(name: str, col: Color | None) -> Color:
 def _build(name: str, col: Color | None, emissive: bool, key: str | None, seed: int) -> bpy.types.Material:
     label = name if key is None else f"{name}@{key}"
     mat = bpy.data.materials.new(label)
-    t = _Tree(mat)
+    t = Tree(mat)
     surface = _BUILDERS[name](t, col, seed)
-    _finish(t, surface, emissive, _default_emit_color(name, col))
+    finish(t, surface, emissive, _default_emit_color(name, col))
     base = col or (0.7, 0.7, 0.7)
     mat.diffuse_color = (*base, 1.0)  # viewport / solid mode only
     mat["synth_material"] = name

@@ -30,7 +30,7 @@ def add_parts(scene, parts, with_materials: bool) -> dict[str, bpy.types.Materia
     With materials, a part whose material is ``"gltf"`` (``synth.render.meshes.GLTF_MATERIAL``) gets its
     UVs (a UV map "UVMap", per loop), its glTF normals when the file has them (custom normals on
     smooth faces) and a material built from its glTF PBR material
-    (``synth.blender.materials.get_gltf_material``); the geometry pass (no materials) builds the
+    (``synth.blender.gltf_materials.get_gltf_material``); the geometry pass (no materials) builds the
     same plain meshes as for procedural parts.
 
     Returns the materials of emitting parts by fixture id (for the lighting to switch)."""
@@ -40,7 +40,8 @@ def add_parts(scene, parts, with_materials: bool) -> dict[str, bpy.types.Materia
     coll = scene.collection
     if with_materials:
         from ..replicacad.gltf import pbr
-        from .materials import get_gltf_material, get_material
+        from .gltf_materials import get_gltf_material
+        from .materials import get_material
     for p in parts:
         gltf = with_materials and p.material == GLTF_MATERIAL
         mesh = bpy.data.meshes.new(p.name)
