@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from formats import frames as fr
+from formats.atomic import replacing
 
 from ..render.chunks import emit, worker_main
 
@@ -112,10 +113,11 @@ def run(job: dict) -> int:
                 import cv2
 
                 previews.mkdir(parents=True, exist_ok=True)
-                png = previews / f"{i:06d}.png"
-                tmp_png = previews / f".{i:06d}.tmp.png"
-                cv2.imwrite(str(tmp_png), fr.srgb8(rgb)[..., ::-1])
-                os.replace(tmp_png, png)
+                ok, png = cv2.imencode(".png", fr.srgb8(rgb)[..., ::-1])
+                if not ok:
+                    raise RuntimeError(f"frame {i}: the preview could not be encoded as PNG")
+                with replacing(previews / f"{i:06d}.png") as tmp:
+                    tmp.write_bytes(png.tobytes())
             fr.write_frame(target, rgb=rgb, depth=g.depth, instance=g.instance, semantic=g.semantic)
         emit(event="frame", frame=i, seconds=round(time.time() - t0, 4), cpu=round(time.process_time() - c0, 4))
     return 0

@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 from formats import frames as fr
-from formats.atomic import temp_name
+from formats.atomic import replacing
 
 from .chunks import emit, worker_main
 
@@ -29,12 +29,11 @@ def run(job: dict) -> int:
         for i in todo:
             t0, c0 = time.time(), time.process_time()
             dst = out / fr.frame_name(i)
-            tmp = temp_name(dst)
-            try:  # a hard link: the same bytes, no second copy on disk
-                os.link(src / fr.frame_name(i), tmp)
-            except OSError:  # another file system, or links not supported
-                shutil.copyfile(src / fr.frame_name(i), tmp)
-            os.replace(tmp, dst)
+            with replacing(dst) as tmp:
+                try:  # a hard link: the same bytes, no second copy on disk
+                    os.link(src / fr.frame_name(i), tmp)
+                except OSError:  # another file system, or links not supported
+                    shutil.copyfile(src / fr.frame_name(i), tmp)
             emit(event="frame", frame=i, seconds=round(time.time() - t0, 4), cpu=round(time.process_time() - c0, 4))
         return 0
     if job["pass"] != "fast":

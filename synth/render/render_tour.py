@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from formats import frames as fr
-from formats.atomic import temp_name, write_json_atomic
+from formats.atomic import replacing, write_json_atomic
 from formats.camera import CAMERA_DOC, Intrinsics, write_tum
 from formats.errors import UserError, check_output_folder
 
@@ -288,9 +288,8 @@ def render_tour(spec: TourSpec, progress: bool = True) -> dict:
             if p.lighting_name is None:  # geometry-only tour: the cached frames are the tour's frames
                 for i in missing_frames(frames_dir, p.frame_ids):
                     src, dst = gdir / fr.frame_name(i), frames_dir / fr.frame_name(i)
-                    tmp = temp_name(dst)
-                    shutil.copyfile(src, tmp)
-                    os.replace(tmp, dst)
+                    with replacing(dst) as tmp:
+                        shutil.copyfile(src, tmp)
             else:
                 inf, _ = _render_pass(p, "rgb", frames_dir, work, f"{p.layout_name} {p.lighting_name} rgb", progress)
                 info.update(inf)

@@ -3,7 +3,7 @@
 ``load_glb_parts(path)`` reads a GLB with trimesh (``force="scene"``, so every primitive keeps its
 own PBR material) and returns one ``trimesh.Trimesh`` per drawn primitive: the node transforms of
 the file's default scene applied, then converted from glTF's Y-up frame to ours with
-``synth.replicacad.importer.Y_UP_TO_Z_UP`` (C below): a vertex ``v`` becomes ``C M v`` for the node's world
+``synth.scene.geometry.Y_UP_TO_Z_UP`` (C below): a vertex ``v`` becomes ``C M v`` for the node's world
 matrix ``M``, a normal ``n`` becomes ``C (M^-1)^T n`` (unit length); a node with a mirroring matrix
 (det < 0) gets its triangles' winding reversed, as glTF prescribes. A mesh instanced by several
 nodes gives one part per node.
@@ -80,9 +80,11 @@ from trimesh.visual.material import PBRMaterial
 from formats.errors import SceneFormatError
 from formats.lfs import LFS_HINT, LFS_POINTER_PREFIX, is_lfs_pointer  # noqa: F401 - re-exported for readers
 
+from ..scene.geometry import Y_UP_TO_Z_UP
+
 log = logging.getLogger(__name__)
 
-C = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # = synth.replicacad.importer.Y_UP_TO_Z_UP
+C = Y_UP_TO_Z_UP
 
 _GLB_MAGIC = b"glTF"
 _CHUNK_JSON = 0x4E4F534A

@@ -20,10 +20,9 @@ import numpy as np
 
 from formats.errors import SceneFormatError
 
+from ..scene.geometry import Y_UP_TO_Z_UP  # noqa: F401  (the readers import it from here too)
 from ..scene.model import GLB_ASSET_PREFIX, URDF_ASSET_PREFIX
 
-Y_UP_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
-"""Maps ReplicaCAD/habitat world coordinates (Y up, -Z forward) to ours (Z up): (x, y, z) -> (x, -z, y)."""
 
 ASSET_PREFIX = GLB_ASSET_PREFIX  # a GLB, relative to the dataset root (names: synth.scene.model)
 URDF_PREFIX = URDF_ASSET_PREFIX  # an articulated object's URDF, relative to the dataset root (synth.replicacad.urdf)

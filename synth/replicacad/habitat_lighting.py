@@ -75,9 +75,10 @@ import numpy as np
 
 from formats.errors import SceneFormatError
 
+from ..scene.geometry import Y_UP_TO_Z_UP
 from ..scene.model import Layout, LightFixture, object_box
 
-C = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # habitat (Y up) -> ours (Z up)
+C = Y_UP_TO_Z_UP  # habitat (Y up) -> ours (Z up)
 
 LIGHT_TYPES = ("point", "directional", "spot")
 POSITION_MODELS = ("global", "camera", "object")

@@ -161,10 +161,14 @@ def prepare(spec, out: Path, cli_root: str | None = None, progress=print):
         path.meta["layouts"] = [str(files[n].resolve()) for n in w["layouts"]]
         tmp = prep / "paths" / ".tmp" / f"{name}.txt"  # same names, then moved: the sidecar names its poses file
         tmp.parent.mkdir(exist_ok=True)
-        save_path(path, tmp)
-        txt.unlink(missing_ok=True)  # the poses file appears last: it marks a complete path
-        os.replace(tmp.with_suffix(".yaml"), txt.with_suffix(".yaml"))
-        os.replace(tmp, txt)
+        try:
+            save_path(path, tmp)
+            txt.unlink(missing_ok=True)  # the poses file appears last: it marks a complete path
+            os.replace(tmp.with_suffix(".yaml"), txt.with_suffix(".yaml"))
+            os.replace(tmp, txt)
+        finally:  # a failed write leaves no temporary behind
+            tmp.unlink(missing_ok=True)
+            tmp.with_suffix(".yaml").unlink(missing_ok=True)
         load_path(txt)  # readable as written
         state["paths"][name] = key
         write_json_atomic(state_file, state, indent=1)

@@ -126,7 +126,7 @@ DOOR_CLASS = "door"
 AO_CONFIG_SUFFIX = ".ao_config.json"
 LINK_ORDERS = ("unspecified", "tree_traversal", "urdf_order")
 _PRIMITIVES = ("box", "cylinder", "sphere", "capsule", "plane")
-_C = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # = synth.replicacad.importer.Y_UP_TO_Z_UP
+_C = hf.Y_UP_TO_Z_UP
 
 
 def _fail(file, field: str | None, msg: str):

@@ -19,6 +19,11 @@ from formats.camera import matrix_to_quat, quat_to_matrix  # noqa: F401
 
 Quat = tuple[float, float, float, float]
 
+Y_UP_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+"""Y-up files (glTF, habitat-sim / ReplicaCAD: +Y up, -Z forward) to our Z-up world: (x, y, z) -> (x, -z, y),
+a proper rotation (+90 deg about X). The one copy of this matrix: every reader converts with it, once."""
+Y_UP_TO_Z_UP.setflags(write=False)
+
 
 def yaw_to_quat(yaw: float) -> Quat:
     """Quaternion (w, x, y, z) of a rotation by ``yaw`` radians about +Z."""
