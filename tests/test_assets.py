@@ -1,4 +1,4 @@
-"""Tests for synth/assets/procedural.py: procedural object meshes in the object's local frame."""
+"""Tests for synth/assets (registry and family modules): procedural object meshes in the object's local frame."""
 from __future__ import annotations
 
 import math
@@ -8,17 +8,18 @@ import numpy as np
 import pytest
 import trimesh
 
-from synth.assets import procedural as assets
-from synth.assets.procedural import (
-    MATERIALS,
-    Part,
-    Surface,
+from synth.assets.materials import MATERIALS
+from synth.assets.primitives import Builder, Part
+from synth.assets.registry import (
+    REGISTRY,
+    UnknownClassError,
     known_classes,
     make_mesh,
     make_parts,
     sample_params,
     support_surfaces,
 )
+from synth.assets.surfaces import Surface
 
 REPO = Path(__file__).resolve().parents[1]
 CLASSES = known_classes()
@@ -147,8 +148,8 @@ def test_generators_fill_their_box_without_heavy_rescaling(cls):
     """The final exact fit must be a small correction, not what shapes the object."""
     for seed in SEEDS:
         size, params = sample_params(cls, np.random.default_rng(seed))
-        b = assets._Builder()
-        assets._GENERATORS[cls](b, *size, dict(params))
+        b = Builder()
+        REGISTRY[cls].generate(b, *size, dict(params))
         v = np.vstack([p[2].vertices for p in b.parts])
         lo, hi = _target(size)
         ext = hi - lo
@@ -305,7 +306,7 @@ def test_other_is_a_box():
 def test_unknown_class_raises(fn, cls):
     with pytest.raises(ValueError, match=repr(cls)) as info:
         fn(cls)
-    assert isinstance(info.value, assets.UnknownClassError)
+    assert isinstance(info.value, UnknownClassError)
 
 
 @pytest.mark.parametrize("size", [(0, 1, 1), (1, -1, 1), (1, 1, float("nan")), (1, 1)])

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from synth.assets.procedural import MATERIALS
+from synth.assets.materials import MATERIALS
 
 REPO = Path(__file__).resolve().parents[1]
 

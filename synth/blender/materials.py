@@ -1,7 +1,7 @@
 """Procedural Cycles materials: shader nodes only, no image textures.
 
 One entry point, :func:`get_material`, builds (and caches) a material for every name of
-``synth.assets.procedural.MATERIALS`` and of :data:`STAGE_MATERIALS` (the apartment shell).
+``synth.assets.materials.MATERIALS`` and of :data:`STAGE_MATERIALS` (the apartment shell).
 
 Design rules
 
@@ -43,7 +43,7 @@ import math
 
 import bpy
 
-from ..assets.procedural import MATERIALS
+from ..assets.materials import MATERIALS
 from .shading import CACHES, Color, Tree, find_socket, finish, is_alive, norm_color, seeded_rng
 
 __all__ = [

@@ -36,6 +36,7 @@ import yaml
 
 from formats.atomic import write_text_atomic
 from formats.errors import SceneFormatError, UserError
+from formats.fields import integer
 from formats.yamlfile import read_yaml
 
 from ..layout.apartment import DEFAULT_SEED, generate_apartment
@@ -73,13 +74,6 @@ class TrainsetSpec:
         return len(self.seeds) * (1 + self.variants) * len(self.lightings) * self.jitter * self.views
 
 
-def _int(doc, key, source, lo, default=None):
-    v = doc.get(key, default)
-    if isinstance(v, bool) or not isinstance(v, int) or v < lo:
-        raise SceneFormatError(source, key, f"expected an integer >= {lo}, got {v!r}")
-    return v
-
-
 def parse_trainset(doc, source: str) -> TrainsetSpec:
     """Validate a trainset spec; every error names the file and the key."""
     if not isinstance(doc, dict):
@@ -112,9 +106,9 @@ def parse_trainset(doc, source: str) -> TrainsetSpec:
         raise SceneFormatError(source, "size", f"expected [width, height], got {size!r}")
     return TrainsetSpec(
         name=str(doc["name"]), out=str(doc["out"]), seeds=tuple(seeds),
-        variants=_int(doc, "variants", source, 0, 1), lightings=tuple(lightings), jitter=_int(doc, "jitter", source, 1, 2),
-        views=_int(doc, "views", source, 1, 40), size=(size[0], size[1]), quality=str(doc.get("quality", "preview")),
-        seed=_int(doc, "seed", source, 0, 0), chunk_size=_int(doc, "chunk_size", source, 1, 40),
+        variants=integer(source, doc.get("variants", 1), "variants", lo=0), lightings=tuple(lightings), jitter=integer(source, doc.get("jitter", 2), "jitter", lo=1),
+        views=integer(source, doc.get("views", 40), "views", lo=1), size=(size[0], size[1]), quality=str(doc.get("quality", "preview")),
+        seed=integer(source, doc.get("seed", 0), "seed", lo=0), chunk_size=integer(source, doc.get("chunk_size", 40), "chunk_size", lo=1),
         description=str(doc.get("description", "")), source=source)
 
 

@@ -37,6 +37,7 @@ from formats import frames as fr
 from formats.atomic import write_json_atomic, write_text_atomic
 from formats.design import tour_name, write_design
 from formats.errors import SceneFormatError, UserError, check_output_file, check_output_folder
+from formats.fields import fail, names, positive_int
 from formats.yamlfile import read_yaml
 
 from ..render.chunks import chunk_job, run_chunk_process
@@ -81,100 +82,82 @@ class JobSpec:
     replicacad: dict | None = None  # layouts are scenes of a ReplicaCAD folder (synth.replicacad.job)
 
 
-def _fail(src, field, msg):
-    raise SceneFormatError(src, field, msg)
-
-
-def _pos_int(v, src, field):
-    if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
-        _fail(src, field, f"expected a positive integer, got {v!r}")
-    return v
-
-
-def _names(v, src, field):
-    if isinstance(v, str):
-        v = [v]
-    if not isinstance(v, list) or not v or not all(isinstance(x, str) and x for x in v):
-        _fail(src, field, f"expected a non-empty list of names, got {v!r}")
-    return list(v)
-
-
 def parse_spec(doc, source: str) -> JobSpec:
     """Validate a spec document; every error names the file and the key."""
     if not isinstance(doc, dict):
-        _fail(source, None, "expected a mapping at the top level")
+        fail(source, None, "expected a mapping at the top level")
     unknown = sorted(map(str, set(doc) - SPEC_KEYS))
     if unknown:
-        _fail(source, unknown[0], f"unknown key; allowed: {', '.join(sorted(SPEC_KEYS))}")
+        fail(source, unknown[0], f"unknown key; allowed: {', '.join(sorted(SPEC_KEYS))}")
     for k in ("name", "out", "designs"):
         if k not in doc:
-            _fail(source, k, "missing")
+            fail(source, k, "missing")
     renderer = doc.get("renderer", "blender")
     if renderer not in ("blender", "fast"):
-        _fail(source, "renderer", f"expected blender or fast, got {renderer!r}")
+        fail(source, "renderer", f"expected blender or fast, got {renderer!r}")
     geometry = doc.get("geometry", "blender" if renderer == "blender" else "fast")
     if geometry not in ("blender", "fast"):
-        _fail(source, "geometry", f"expected blender or fast, got {geometry!r}")
+        fail(source, "geometry", f"expected blender or fast, got {geometry!r}")
     if renderer == "fast" and geometry != "fast":
-        _fail(source, "geometry", "the fast renderer makes its own geometry: leave geometry out")
+        fail(source, "geometry", "the fast renderer makes its own geometry: leave geometry out")
     q = doc.get("quality", "preview")
     try:
         quality(q)
     except UserError as e:
-        _fail(source, "quality", str(e))
+        fail(source, "quality", str(e))
     size = doc.get("size", [640, 480])
     if not isinstance(size, list) or len(size) != 2:
-        _fail(source, "size", f"expected [width, height], got {size!r}")
-    w, h = (_pos_int(v, source, "size") for v in size)
+        fail(source, "size", f"expected [width, height], got {size!r}")
+    w, h = (positive_int(source, v, "size") for v in size)
     device = doc.get("device", "cpu")
     if device not in DEVICES:
-        _fail(source, "device", f"expected one of {', '.join(DEVICES)}, got {device!r}")
+        fail(source, "device", f"expected one of {', '.join(DEVICES)}, got {device!r}")
     seed = doc.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        _fail(source, "seed", f"expected a non-negative integer, got {seed!r}")
+        fail(source, "seed", f"expected a non-negative integer, got {seed!r}")
     retries = doc.get("retries", 2)
     if isinstance(retries, bool) or not isinstance(retries, int) or retries < 0:
-        _fail(source, "retries", f"expected a non-negative integer, got {retries!r}")
+        fail(source, "retries", f"expected a non-negative integer, got {retries!r}")
     hfov = doc.get("hfov_deg", 75.0)
     if isinstance(hfov, bool) or not isinstance(hfov, (int, float)) or not 1.0 <= hfov <= 170.0:
-        _fail(source, "hfov_deg", f"expected degrees in [1, 170], got {hfov!r}")
+        fail(source, "hfov_deg", f"expected degrees in [1, 170], got {hfov!r}")
     designs_doc = doc["designs"]
     if not isinstance(designs_doc, list) or not designs_doc:
-        _fail(source, "designs", "expected a non-empty list")
+        fail(source, "designs", "expected a non-empty list")
     designs = []
     for i, d in enumerate(designs_doc):
         f = f"designs[{i}]"
         if not isinstance(d, dict):
-            _fail(source, f, "expected a mapping with layouts, lightings, path")
+            fail(source, f, "expected a mapping with layouts, lightings, path")
         unknown = sorted(map(str, set(d) - DESIGN_KEYS))
         if unknown:
-            _fail(source, f"{f}.{unknown[0]}", f"unknown key; allowed: {', '.join(sorted(DESIGN_KEYS))}")
+            fail(source, f"{f}.{unknown[0]}", f"unknown key; allowed: {', '.join(sorted(DESIGN_KEYS))}")
         if "layouts" not in d or "path" not in d:
-            _fail(source, f, "needs layouts and path")
-        layouts = _names(d["layouts"], source, f + ".layouts")
-        lightings = None if d.get("lightings") is None else _names(d["lightings"], source, f + ".lightings")
+            fail(source, f, "needs layouts and path")
+        layouts = names(source, d["layouts"], f + ".layouts")
+        lightings = None if d.get("lightings") is None else names(source, d["lightings"], f + ".lightings")
         if renderer == "blender" and lightings is None:
             pass  # geometry-only tours rendered with Blender
         if renderer == "fast" and lightings is not None:
-            _fail(source, f + ".lightings", "the fast renderer makes geometry only: leave lightings out")
+            fail(source, f + ".lightings", "the fast renderer makes geometry only: leave lightings out")
         p = d["path"]
         if isinstance(p, str):
             p = {"name": p}
         if not isinstance(p, dict) or "name" not in p:
-            _fail(source, f + ".path", f"expected a path name or {{name, frames}}, got {p!r}")
+            fail(source, f + ".path", f"expected a path name or {{name, frames}}, got {p!r}")
         unknown = sorted(map(str, set(p) - PATH_KEYS))
         if unknown:
-            _fail(source, f"{f}.path.{unknown[0]}", "unknown key; allowed: name, frames")
-        frames = None if p.get("frames") is None else _pos_int(p["frames"], source, f + ".path.frames")
-        rgb_every = _pos_int(d.get("rgb_every", 1), source, f + ".rgb_every")
+            fail(source, f"{f}.path.{unknown[0]}", "unknown key; allowed: name, frames")
+        frames = None if p.get("frames") is None else positive_int(source, p["frames"], f + ".path.frames")
+        rgb_every = positive_int(source, d.get("rgb_every", 1), f + ".rgb_every")
         if rgb_every > 1 and lightings is None:
-            _fail(source, f + ".rgb_every", "a geometry-only design renders no RGB: leave rgb_every out")
+            fail(source, f + ".rgb_every", "a geometry-only design renders no RGB: leave rgb_every out")
         designs.append(Design(layouts, lightings, str(p["name"]), frames, rgb_every))
     return JobSpec(
         name=str(doc["name"]), out=str(doc["out"]), designs=designs, renderer=renderer, geometry=geometry, quality=q,
         width=w, height=h,
         hfov_deg=float(hfov), seed=seed, device=device,
-        chunk_size=_pos_int(doc.get("chunk_size", 50), source, "chunk_size"), retries=retries,
+        chunk_size=positive_int(source, doc.get("chunk_size", 50), "chunk_size"), retries=retries,
         previews=bool(doc.get("previews", False)), description=str(doc.get("description", "")), source=source,
         replicacad=_replicacad_section(doc, source),
     )
@@ -278,9 +261,9 @@ def validate_names(spec: JobSpec, check_clearance: bool = False) -> None:
         cpath = paths[d.path]
         n = len(cpath.poses)
         if n == 0:
-            _fail(src, f"{f}.path", f"camera path '{d.path}' has no poses")
+            fail(src, f"{f}.path", f"camera path '{d.path}' has no poses")
         if d.frames is not None and d.frames > n:
-            _fail(src, f"{f}.path.frames", f"{d.frames} exceeds the {n} frames of camera path '{cpath.name}'")
+            fail(src, f"{f}.path.frames", f"{d.frames} exceeds the {n} frames of camera path '{cpath.name}'")
         for k, name in enumerate(d.layouts):
             field = f"{f}.layouts[{k}]"
             if name not in layouts:
@@ -291,7 +274,7 @@ def validate_names(spec: JobSpec, check_clearance: bool = False) -> None:
                 checked.add(key)
                 why = render_clearance_problem(cpath, lay, lfile, name, d.frames)
                 if why:
-                    _fail(src, field, why)
+                    fail(src, field, why)
 
 
 def expand(spec: JobSpec, out: Path | None = None, check_clearance: bool = False) -> Plan:

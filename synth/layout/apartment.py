@@ -1,7 +1,7 @@
 """The built-in procedural apartment ``apt_0``: a Manhattan flat of five rooms, furnished.
 
 Deterministic from a seed: the seed jitters the floor plan (about 85-110 m2), picks every
-object's size and style (``synth.assets.procedural.sample_params``) and places it with ``synth.layout.placement``.
+object's size and style (``synth.assets.registry.sample_params``) and places it with ``synth.layout.placement``.
 
 Floor plan (north up; x east, y north; one wall centre line per edge)::
 

@@ -19,7 +19,7 @@ Procedural and mesh objects
     the template turned about the vertical.
 
 Supporting surfaces
-    Procedural objects: ``synth.assets.procedural.support_surfaces``; mesh objects:
+    Procedural objects: ``synth.assets.registry.support_surfaces``; mesh objects:
     ``synth.replicacad.surfaces.mesh_surfaces`` (their box top and the levels below it).
 """
 
@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..assets import procedural as assets
+from ..assets import registry as assets
 from ..replicacad.surfaces import mesh_surfaces
 from ..scene import geometry as geo
 from ..scene.classes import class_table

@@ -1,7 +1,7 @@
 """Physical plausibility of a layout: interpenetrations, support, passable doors.
 
 ``check_layout`` is what ``synth scene check`` prints. It works from boxes (an object's mesh lies
-inside its box: a property of every generator in ``synth.assets.procedural``), the supporting surfaces of
+inside its box: a property of every generator in ``synth.assets``), the supporting surfaces of
 procedural objects, and a free-space grid for door reachability.
 """
 
@@ -14,7 +14,7 @@ import numpy as np
 from matplotlib.path import Path as MplPath
 from scipy import ndimage
 
-from ..assets import procedural as assets
+from ..assets import registry as assets
 from ..scene import geometry as geo
 from ..replicacad.collision import DEFAULT_MARGIN, PENETRATION_TOL, contact_gap, margin, penetration, stage_distance, stage_drop, touching, world_pieces
 from ..replicacad.surfaces import mesh_surfaces

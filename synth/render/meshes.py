@@ -52,7 +52,7 @@ import trimesh
 from formats.boxes import CEILING_ID_BASE, FLOOR_ID_BASE, STRUCT_SLAB, WALL_ID_BASE
 from formats.errors import SceneFormatError, UnknownNameError
 
-from ..assets import procedural as assets
+from ..assets import registry as assets
 from ..scene import geometry as geo
 from ..scene.classes import class_table
 from ..scene.model import GLB_ASSET_PREFIX, URDF_ASSET_PREFIX, Layout, ObjectInstance, Stage

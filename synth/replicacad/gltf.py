@@ -78,6 +78,7 @@ from trimesh.visual import TextureVisuals
 from trimesh.visual.material import PBRMaterial
 
 from formats.errors import SceneFormatError
+from formats.fields import listing
 from formats.lfs import LFS_HINT, LFS_POINTER_PREFIX, is_lfs_pointer  # noqa: F401 - re-exported for readers
 
 from ..scene.geometry import Y_UP_TO_Z_UP
@@ -155,13 +156,6 @@ def _external(path: Path, uri: str) -> Path | None:
     return path.parent / urllib.parse.unquote(uri)
 
 
-def _list(doc: dict, key: str, path: Path) -> list:
-    v = doc.get(key, [])
-    if not isinstance(v, list):
-        raise SceneFormatError(path, key, f"expected a list, got {type(v).__name__}")
-    return v
-
-
 def check_glb(path) -> dict:
     """Check a GLB before it is loaded; return its JSON document.
 
@@ -176,24 +170,24 @@ def check_glb(path) -> dict:
 
 def _check(path: Path) -> tuple[dict, bytes | None, int]:
     doc, binary, bin_at = _read_container(path)
-    for i, img in enumerate(_list(doc, "images", path)):
+    for i, img in enumerate(listing(path, doc.get("images", []), "images")):
         if isinstance(img, dict) and isinstance(img.get("uri"), str):
             f = _external(path, img["uri"])
             if f is not None and not f.is_file():
                 raise SceneFormatError(path, f"images[{i}].uri", f"texture not found: {f}")
             if f is not None and is_lfs_pointer(f):
                 raise SceneFormatError(path, f"images[{i}].uri", f"texture {f} {LFS_HINT}")
-    for i, buf in enumerate(_list(doc, "buffers", path)):
+    for i, buf in enumerate(listing(path, doc.get("buffers", []), "buffers")):
         if isinstance(buf, dict) and isinstance(buf.get("uri"), str):
             f = _external(path, buf["uri"])
             if f is not None and not f.is_file():
                 raise SceneFormatError(path, f"buffers[{i}].uri", f"buffer not found: {f}")
             if f is not None and is_lfs_pointer(f):
                 raise SceneFormatError(path, f"buffers[{i}].uri", f"buffer {f} {LFS_HINT}")
-    for i in range(len(_list(doc, "materials", path))):
+    for i in range(len(listing(path, doc.get("materials", []), "materials"))):
         _texture_transforms(path, doc, i)  # a malformed transform is named now, not at render time
     if not any(isinstance(p, dict) and p.get("mode", 4) in _TRIANGLE_MODES
-               for m in _list(doc, "meshes", path) if isinstance(m, dict) for p in m.get("primitives", [])):
+               for m in listing(path, doc.get("meshes", []), "meshes") if isinstance(m, dict) for p in m.get("primitives", [])):
         raise SceneFormatError(path, None, "GLB has no triangles")
     return doc, binary, bin_at
 

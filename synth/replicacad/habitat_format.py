@@ -12,13 +12,13 @@ rotation (+90 deg about X). A habitat pose ``T_h`` becomes ``C T_h C^T``, a vert
 from __future__ import annotations
 
 import json
-import math
 import os
 from pathlib import Path
 
 import numpy as np
 
-from formats.errors import SceneFormatError
+from formats.fields import fail, mapping, number, numbers, string  # noqa: F401  (re-exported)
+from formats.fields import unit_quat as quat  # noqa: F401
 
 from ..scene.geometry import Y_UP_TO_Z_UP  # noqa: F401  (the readers import it from here too)
 from ..scene.model import GLB_ASSET_PREFIX, URDF_ASSET_PREFIX
@@ -34,51 +34,7 @@ _DEFAULT_UP = (0.0, 1.0, 0.0)
 _DEFAULT_FRONT = (0.0, 0.0, -1.0)
 _C = Y_UP_TO_Z_UP
 
-# --------------------------------------------------------------------------------------------
-# field checks: every error names the file and the field
-
-
-def fail(file, field: str | None, msg: str):
-    raise SceneFormatError(file, field, msg)
-
-
-def number(file, v, field: str, positive: bool = False) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
-        fail(file, field, f"expected a finite number, got {v!r}")
-    if positive and v <= 0:
-        fail(file, field, f"must be > 0, got {v!r}")
-    return float(v)
-
-
-def numbers(file, v, field: str, n: int, what: str = "", positive: bool = False) -> np.ndarray:
-    ok = isinstance(v, list) and len(v) == n and all(
-        not isinstance(x, bool) and isinstance(x, (int, float)) and math.isfinite(float(x)) for x in v
-    )
-    if not ok:
-        fail(file, field, f"expected {n} numbers{what}, got {v!r}")
-    if positive and any(x <= 0 for x in v):
-        fail(file, field, f"expected {n} numbers > 0{what}, got {v!r}")
-    return np.array([float(x) for x in v])
-
-
-def quat(file, v, field: str) -> np.ndarray:
-    q = numbers(file, v, field, 4, " (w, x, y, z)")
-    n = float(np.linalg.norm(q))
-    if abs(n - 1.0) > 1e-3:
-        fail(file, field, f"expected a unit quaternion (w, x, y, z), got {v!r} (norm {n:.4f})")
-    return q / n
-
-
-def string(file, v, field: str) -> str:
-    if not isinstance(v, str) or not v:
-        fail(file, field, f"expected a non-empty string, got {v!r}")
-    return v
-
-
-def mapping(file, v, field: str | None) -> dict:
-    if not isinstance(v, dict):
-        fail(file, field, f"expected a JSON object, got {type(v).__name__}")
-    return v
+# field checks (every error names the file and the field): formats.fields, re-exported for the readers
 
 
 def read_json(path: Path):

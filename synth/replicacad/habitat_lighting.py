@@ -74,6 +74,7 @@ from pathlib import Path
 import numpy as np
 
 from formats.errors import SceneFormatError
+from formats.fields import number
 
 from ..scene.geometry import Y_UP_TO_Z_UP
 from ..scene.model import Layout, LightFixture, object_box
@@ -109,16 +110,8 @@ def _vec3(path, v, field: str, nonneg: bool = False) -> tuple[float, float, floa
         raise SceneFormatError(path, field, f"expected a list of 3 numbers, got {v!r}")
     out = []
     for i, x in enumerate(v):
-        out.append(_num(path, x, f"{field}[{i}]", nonneg=nonneg))
+        out.append(number(path, x, f"{field}[{i}]", lo=0 if nonneg else None))
     return tuple(out)  # type: ignore[return-value]
-
-
-def _num(path, v, field: str, nonneg: bool = False) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
-        raise SceneFormatError(path, field, f"expected a finite number, got {v!r}")
-    if nonneg and v < 0:
-        raise SceneFormatError(path, field, f"must be >= 0, got {v}")
-    return float(v)
 
 
 def _ours(v) -> tuple[float, float, float]:
@@ -139,7 +132,7 @@ def dataset_light_defaults(dataset_config) -> dict[str, float]:
     doc = mapping(p, read_json(p), None)
     setups = mapping(p, doc.get("light_setups", {}), "light_setups")
     attrs = mapping(p, setups.get("default_attributes", {}), "light_setups.default_attributes")
-    return {k: _num(p, attrs[k], f"light_setups.default_attributes.{k}", nonneg=True) for k in SCALE_KEYS if k in attrs}
+    return {k: number(p, attrs[k], f"light_setups.default_attributes.{k}", lo=0) for k in SCALE_KEYS if k in attrs}
 
 
 def parse_lighting_config(doc, path="<memory>", defaults: dict | None = None) -> list[HabitatLight]:
@@ -150,7 +143,7 @@ def parse_lighting_config(doc, path="<memory>", defaults: dict | None = None) ->
         raise SceneFormatError(path, "(top level)", f"expected a JSON object, got {type(doc).__name__}")
     scale = {}
     for key in SCALE_KEYS:
-        scale[key] = _num(path, doc[key], key, nonneg=True) if key in doc else float((defaults or {}).get(key, 1.0))
+        scale[key] = number(path, doc[key], key, lo=0) if key in doc else float((defaults or {}).get(key, 1.0))
     lights = doc.get("lights", {})
     if not isinstance(lights, dict):
         raise SceneFormatError(path, "lights", f"expected an object mapping light ids to lights, got {type(lights).__name__}")
@@ -181,7 +174,7 @@ def parse_lighting_config(doc, path="<memory>", defaults: dict | None = None) ->
                 raise SceneFormatError(path, f + ".direction", "missing (a directional light needs one)")
             direction = position
         color = _vec3(path, d["color"], f + ".color", nonneg=True) if "color" in d else (1.0, 1.0, 1.0)
-        intensity = _num(path, d["intensity"], f + ".intensity") if "intensity" in d else 1.0
+        intensity = number(path, d["intensity"], f + ".intensity") if "intensity" in d else 1.0
         intensity *= scale["positive_intensity_scale"] if intensity > 0 else scale["negative_intensity_scale"]
         model = d.get("position_model", "global")
         if not isinstance(model, str) or model.lower() not in POSITION_MODELS:

@@ -22,7 +22,7 @@ frame of ``ObjectInstance.position``/``rotation``, scaled by ``ObjectInstance.sc
 for an articulated object the link's pose at the object's joint state comes first. Receptacles are
 stored on the object (``params["receptacles"]``) so that a layout file keeps them and the checks,
 the importer's support inference and the placement engine read one list; ``surfaces`` turns them
-into ``synth.assets.procedural.Surface`` (bottom face, with ``band`` = the box height).
+into ``synth.assets.surfaces.Surface`` (bottom face, with ``band`` = the box height).
 """
 
 from __future__ import annotations
@@ -84,14 +84,14 @@ def to_object_frame(recs, scale, link_pose=None) -> list[dict]:
 
 
 def surfaces(obj) -> list:
-    """``synth.assets.procedural.Surface`` per receptacle of ``obj`` (``params["receptacles"]``), in the frame
+    """``synth.assets.surfaces.Surface`` per receptacle of ``obj`` (``params["receptacles"]``), in the frame
     the checks use for supporting surfaces: origin at ``obj.position``, turned by ``obj.yaw`` only.
     A tilted object's receptacle (an articulated object whose root frame is rolled, a mesh authored
     on its side) becomes the level box around it in that frame. Each surface is the box's bottom
     face, ``band`` = its height (a resting object's bottom lies anywhere in it), and the clearance
     up to the next receptacle above that overlaps it in plan (else unlimited)."""
     from ..scene import geometry as geo
-    from ..assets.procedural import Surface
+    from ..assets.surfaces import Surface
 
     recs = obj.params.get("receptacles") or []
     M = geo.rot_z(obj.yaw).T @ geo.quat_to_matrix(obj.rotation)

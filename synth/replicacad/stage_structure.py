@@ -68,7 +68,7 @@ import trimesh
 from scipy import ndimage
 
 from formats.boxes import CEILING_ID_BASE, FLOOR_ID_BASE, WALL_ID_BASE
-from formats.errors import SceneFormatError
+from formats.fields import fail
 
 from ..scene.model import Opening, Room, Stage, Wall, quantize
 
@@ -313,10 +313,6 @@ class _WallRec:
     holes: list  # (kind, hu0, hu1, bottom, height)
 
 
-def _fail(source: str, msg: str):
-    raise SceneFormatError(source, "stage", msg)
-
-
 # --------------------------------------------------------------------------------------------
 # floor and ceiling
 
@@ -332,7 +328,7 @@ def _floor_ceiling(source, cen, n, area, zmin, zmax, report) -> tuple[float, flo
         best = max(low, key=lambda p: p[1], default=None)
         found = f"largest there: {best[1]:.2f} m2 at z {best[0]:.2f}" if best else "none there"
         ang = math.degrees(math.acos(HORIZONTAL_NZ))
-        _fail(source, f"no floor found: looked for an up-facing horizontal plane (normal within {ang:.0f} deg of +Z) "
+        fail(source, "stage", f"no floor found: looked for an up-facing horizontal plane (normal within {ang:.0f} deg of +Z) "
                       f"of at least {MIN_FLOOR_AREA:g} m2 in the lower half of the mesh (z {zmin:.2f} .. {mid:.2f}); {found}")
     fz, fa = max(cand, key=lambda p: (p[1], -p[0]))
     floor_z = quantize(fz)
@@ -348,7 +344,7 @@ def _floor_ceiling(source, cen, n, area, zmin, zmax, report) -> tuple[float, flo
         report["ceiling"] = {"z": quantize(cz), "area_m2": 0.0, "source": "top of the mesh (no down-facing plane)",
                              "down_planes": len(planes)}
     else:
-        _fail(source, f"no ceiling found: the mesh ends {zmax - floor_z:.2f} m above the floor (z {floor_z:.2f}); "
+        fail(source, "stage", f"no ceiling found: the mesh ends {zmax - floor_z:.2f} m above the floor (z {floor_z:.2f}); "
                       f"looked for a down-facing plane at least {MIN_CEILING_CLEARANCE:g} m above it")
     return floor_z, quantize(cz)
 
@@ -1057,7 +1053,7 @@ def derive_structure(mesh: trimesh.Trimesh, source: str) -> StageStructure:
     area = 0.5 * dbl
     cen = tri.mean(axis=1) if len(tri) else np.zeros((0, 3))
     if len(tri) == 0:
-        _fail(source, "no floor found: the mesh has no (non-degenerate) triangles")
+        fail(source, "stage", "no floor found: the mesh has no (non-degenerate) triangles")
     zmin, zmax = float(tri[:, :, 2].min()), float(tri[:, :, 2].max())
 
     floor_z, ceil_z = _floor_ceiling(source, cen, n, area, zmin, zmax, report)
@@ -1086,7 +1082,7 @@ def derive_structure(mesh: trimesh.Trimesh, source: str) -> StageStructure:
     groups = _pair_groups(good, report)
     recs = _walls(dirs, good, groups, tri, floor_z, ceil_z, nrows, report)
     if not recs:
-        _fail(source, f"no walls found: looked for vertical faces (|n_z| < {VERTICAL_NZ:g}) at least {MIN_WALL_HEIGHT:g} m "
+        fail(source, "stage", f"no walls found: looked for vertical faces (|n_z| < {VERTICAL_NZ:g}) at least {MIN_WALL_HEIGHT:g} m "
                       f"high and {MIN_WALL_LENGTH:g} m long between the floor (z {floor_z:.2f}) and the ceiling "
                       f"(z {ceil_z:.2f}); found {report['planes']['found']} vertical planes, none of that size")
 

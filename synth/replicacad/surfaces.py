@@ -1,6 +1,6 @@
 """Supporting surfaces of mesh objects: where a ReplicaCAD object can hold another one.
 
-Procedural objects have theirs in ``synth.assets.procedural.support_surfaces``. A mesh object's are
+Procedural objects have theirs in ``synth.assets.registry.support_surfaces``. A mesh object's are
 the receptacles its dataset declares when it has any (``synth.replicacad.receptacles``), else the
 top face of its local box, when the mesh has up-facing triangles at its top covering at least
 ``MESH_TOP_COVERAGE`` of that face (``mesh_top_coverage``, cached per asset), ``SURFACE_MARGIN``
@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from ..assets import procedural as assets
+from ..assets import registry as assets
 from ..scene import geometry as geo
 from ..scene.model import MESH_ASSET_PREFIXES, ObjectInstance
 
@@ -34,7 +34,7 @@ UPRIGHT_TILT_DEG = 0.5
 LEVEL_MIN_SIDE = 0.15  # a level below the top (seat, shelf board) at least this wide and deep (m)
 LEVEL_MIN_RISE = 0.05  # ... and at least this high above the mesh's bottom (m)
 # classes that hold nothing, as in the procedural apartment (a bowl on a lamp's shade, on a vase...)
-MESH_NO_SURFACE_CLASSES = assets._NO_SURFACES
+MESH_NO_SURFACE_CLASSES = assets.NO_SURFACE_CLASSES
 
 
 def mesh_top_coverage(vertices, faces) -> float:

@@ -105,7 +105,8 @@ import numpy as np
 import trimesh
 
 from formats.boxes import MAX_OBJECT_ID
-from formats.errors import SceneFormatError, UnknownNameError
+from formats.errors import UnknownNameError
+from formats.fields import fail
 
 from . import habitat_format as hf
 from ..scene.classes import ClassTable
@@ -127,10 +128,6 @@ AO_CONFIG_SUFFIX = ".ao_config.json"
 LINK_ORDERS = ("unspecified", "tree_traversal", "urdf_order")
 _PRIMITIVES = ("box", "cylinder", "sphere", "capsule", "plane")
 _C = hf.Y_UP_TO_Z_UP
-
-
-def _fail(file, field: str | None, msg: str):
-    raise SceneFormatError(file, field, msg)
 
 
 # --------------------------------------------------------------------------------------------
@@ -208,9 +205,9 @@ def _floats(file, text, field: str, n: int, positive: bool = False, allow_one: b
         vals = None
     ok_len = vals is not None and (len(vals) == n or (allow_one and len(vals) == 1))
     if not ok_len or not all(math.isfinite(v) for v in vals):
-        _fail(file, field, f"expected {n} finite numbers{' (or one)' if allow_one else ''}, got {text!r}")
+        fail(file, field, f"expected {n} finite numbers{' (or one)' if allow_one else ''}, got {text!r}")
     if positive and any(v <= 0 for v in vals):
-        _fail(file, field, f"expected numbers > 0, got {text!r}")
+        fail(file, field, f"expected numbers > 0, got {text!r}")
     if len(vals) == 1 and n > 1:
         vals = vals * n
     return np.array(vals, dtype=float)
@@ -251,22 +248,22 @@ def _parse_visual(file: Path, link: str, index: int, vis) -> _Visual:
     geom = vis.find("geometry")
     shapes = list(geom) if geom is not None else []
     if len(shapes) != 1:
-        _fail(file, f"{field}.geometry", f"expected exactly one shape element, got {len(shapes)}")
+        fail(file, f"{field}.geometry", f"expected exactly one shape element, got {len(shapes)}")
     shape = shapes[0]
     if shape.tag in _PRIMITIVES:
-        _fail(file, f"{field}.geometry", f"primitive visual '{shape.tag}' is not supported (only <mesh> visuals with a .glb file)")
+        fail(file, f"{field}.geometry", f"primitive visual '{shape.tag}' is not supported (only <mesh> visuals with a .glb file)")
     if shape.tag != "mesh":
-        _fail(file, f"{field}.geometry", f"unknown shape <{shape.tag}> (expected <mesh>)")
+        fail(file, f"{field}.geometry", f"unknown shape <{shape.tag}> (expected <mesh>)")
     fn = shape.get("filename")
     if not fn:
-        _fail(file, f"{field}.mesh", "missing filename")
+        fail(file, f"{field}.mesh", "missing filename")
     if "://" in fn:
-        _fail(file, f"{field}.mesh", f"URIs such as {fn!r} are not resolved (habitat-sim neither); use a path relative to the URDF")
+        fail(file, f"{field}.mesh", f"URIs such as {fn!r} are not resolved (habitat-sim neither); use a path relative to the URDF")
     glb = Path(os.path.normpath(file.parent / fn))
     if glb.suffix.lower() != ".glb":
-        _fail(file, f"{field}.mesh", f"only .glb meshes are supported, got {fn!r}")
+        fail(file, f"{field}.mesh", f"only .glb meshes are supported, got {fn!r}")
     if not glb.is_file():
-        _fail(file, f"{field}.mesh", f"mesh file not found: {glb}")
+        fail(file, f"{field}.mesh", f"mesh file not found: {glb}")
     scale = np.ones(3)
     if shape.get("scale") is not None:
         scale = _floats(file, shape.get("scale"), f"{field}.mesh.scale", 3, positive=True, allow_one=True)
@@ -277,12 +274,12 @@ def _parse(path: Path) -> UrdfModel:
     try:
         tree = ET.parse(str(path))
     except ET.ParseError as e:
-        _fail(path, None, f"malformed XML: {e}")
+        fail(path, None, f"malformed XML: {e}")
     except OSError as e:
-        _fail(path, None, f"cannot read: {e}")
+        fail(path, None, f"cannot read: {e}")
     robot = tree.getroot()
     if robot.tag != "robot":
-        _fail(path, None, f"expected a <robot> root element, got <{robot.tag}>")
+        fail(path, None, f"expected a <robot> root element, got <{robot.tag}>")
     name = robot.get("name", path.stem)
 
     links: list[str] = []
@@ -290,39 +287,39 @@ def _parse(path: Path) -> UrdfModel:
     for k, el in enumerate(robot.findall("link")):
         ln = el.get("name")
         if not ln:
-            _fail(path, f"link #{k}", "missing name")
+            fail(path, f"link #{k}", "missing name")
         if ln in visuals:
-            _fail(path, f"link[{ln}]", "duplicate link name")
+            fail(path, f"link[{ln}]", "duplicate link name")
         links.append(ln)
         visuals[ln] = [_parse_visual(path, ln, i, v) for i, v in enumerate(el.findall("visual"))]
     if not links:
-        _fail(path, "robot", "no <link> elements")
+        fail(path, "robot", "no <link> elements")
 
     joints: dict[str, _Joint] = {}
     parent_of: dict[str, str] = {}
     for k, el in enumerate(robot.findall("joint")):
         jn = el.get("name")
         if not jn:
-            _fail(path, f"joint #{k}", "missing name")
+            fail(path, f"joint #{k}", "missing name")
         f = f"joint[{jn}]"
         if jn in joints:
-            _fail(path, f, "duplicate joint name")
+            fail(path, f, "duplicate joint name")
         jt = el.get("type")
         if jt not in JOINT_TYPES:
-            _fail(path, f + ".type", f"unsupported joint type {jt!r} (expected one of {', '.join(JOINT_TYPES)})")
+            fail(path, f + ".type", f"unsupported joint type {jt!r} (expected one of {', '.join(JOINT_TYPES)})")
         ends = {}
         for end in ("parent", "child"):
             e = el.find(end)
             ref = e.get("link") if e is not None else None
             if not ref:
-                _fail(path, f"{f}.{end}", "missing <" + end + " link=...>")
+                fail(path, f"{f}.{end}", "missing <" + end + " link=...>")
             if ref not in visuals:
-                _fail(path, f"{f}.{end}", f"unknown link {ref!r}")
+                fail(path, f"{f}.{end}", f"unknown link {ref!r}")
             ends[end] = ref
         if ends["child"] == ends["parent"]:
-            _fail(path, f + ".child", f"link {ends['child']!r} is its own parent")
+            fail(path, f + ".child", f"link {ends['child']!r} is its own parent")
         if ends["child"] in parent_of:
-            _fail(path, f + ".child", f"link {ends['child']!r} already has parent joint {parent_of[ends['child']]!r}")
+            fail(path, f + ".child", f"link {ends['child']!r} already has parent joint {parent_of[ends['child']]!r}")
         parent_of[ends["child"]] = jn
         axis = np.array([1.0, 0.0, 0.0])
         ax = el.find("axis")
@@ -330,22 +327,22 @@ def _parse(path: Path) -> UrdfModel:
             axis = _floats(path, ax.get("xyz"), f + ".axis.xyz", 3)
             n = float(np.linalg.norm(axis))
             if n < 1e-9:
-                _fail(path, f + ".axis.xyz", f"zero axis {ax.get('xyz')!r}")
+                fail(path, f + ".axis.xyz", f"zero axis {ax.get('xyz')!r}")
             axis = axis / n
         limits = None
         lim = el.find("limit")
         if lim is not None and lim.get("lower") is not None and lim.get("upper") is not None:
             lo_hi = (_floats(path, lim.get("lower"), f + ".limit.lower", 1)[0], _floats(path, lim.get("upper"), f + ".limit.upper", 1)[0])
             if lo_hi[0] > lo_hi[1]:
-                _fail(path, f + ".limit", f"lower {lo_hi[0]} > upper {lo_hi[1]}")
+                fail(path, f + ".limit", f"lower {lo_hi[0]} > upper {lo_hi[1]}")
             limits = (float(lo_hi[0]), float(lo_hi[1]))
         joints[jn] = _Joint(jn, jt, ends["parent"], ends["child"], _origin(path, el, f), axis, limits)
 
     roots = [ln for ln in links if ln not in parent_of]
     if not roots:
-        _fail(path, "robot", "the joints form a cycle (no root link)")
+        fail(path, "robot", "the joints form a cycle (no root link)")
     if len(roots) > 1:
-        _fail(path, "robot", f"several root links ({', '.join(roots)}): every link but one needs a parent joint")
+        fail(path, "robot", f"several root links ({', '.join(roots)}): every link but one needs a parent joint")
     children: dict[str, list[_Joint]] = {}
     for j in sorted(joints.values(), key=lambda j: j.name):
         children.setdefault(j.parent, []).append(j)
@@ -358,7 +355,7 @@ def _parse(path: Path) -> UrdfModel:
                 stack.append(j.child)
     unreached = [ln for ln in links if ln not in seen]
     if unreached:
-        _fail(path, "robot", f"the joints form a cycle: links {', '.join(unreached)} are not reached from root link {roots[0]!r}")
+        fail(path, "robot", f"the joints form a cycle: links {', '.join(unreached)} are not reached from root link {roots[0]!r}")
     return UrdfModel(path, name, links, visuals, joints, roots[0], children)
 
 
@@ -373,7 +370,7 @@ def parse_urdf(path) -> UrdfModel:
     """
     p = Path(path)
     if not p.is_file():
-        _fail(p, None, "URDF file not found")
+        fail(p, None, "URDF file not found")
     st = p.stat()
     key = (str(p.resolve()), st.st_mtime_ns, st.st_size)
     model = _CACHE.get(key)
@@ -393,16 +390,16 @@ def _check_state(model: UrdfModel, joint_state) -> dict[str, float]:
     if joint_state is None:
         return {}
     if not isinstance(joint_state, dict):
-        _fail(model.path, "joint_state", f"expected a mapping joint name -> position, got {type(joint_state).__name__}")
+        fail(model.path, "joint_state", f"expected a mapping joint name -> position, got {type(joint_state).__name__}")
     unknown = sorted(str(k) for k in joint_state if k not in model.joints)
     if unknown:
         raise UnknownNameError(f"{model.path}: no joint(s) {', '.join(unknown)}; joints: {', '.join(model.joints) or 'none'}")
     out = {}
     for k, v in joint_state.items():
         if model.joints[k].type not in MOVABLE_JOINT_TYPES:
-            _fail(model.path, f"joint_state.{k}", f"joint {k!r} is {model.joints[k].type}: it has no position")
+            fail(model.path, f"joint_state.{k}", f"joint {k!r} is {model.joints[k].type}: it has no position")
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
-            _fail(model.path, f"joint_state.{k}", f"expected a finite number, got {v!r}")
+            fail(model.path, f"joint_state.{k}", f"expected a finite number, got {v!r}")
         out[k] = float(v)
     return out
 
@@ -466,7 +463,7 @@ def urdf_mesh(urdf_path, joint_state: dict[str, float] | None = None) -> trimesh
         # rotations and positive scales only: the winding is kept
         pieces.append(trimesh.Trimesh(vertices=v, faces=np.asarray(m.faces), process=False))
     if not pieces:
-        _fail(Path(urdf_path), None, "URDF has no visual meshes")
+        fail(Path(urdf_path), None, "URDF has no visual meshes")
     return trimesh.util.concatenate(pieces) if len(pieces) > 1 else pieces[0]
 
 
@@ -477,7 +474,7 @@ def urdf_path(root, asset: str) -> Path:
         raise UnknownNameError(f"not a ReplicaCAD URDF asset name: {asset!r} (expected '{URDF_ASSET_PREFIX}<relative urdf path>')")
     p = r / asset[len(URDF_ASSET_PREFIX):]
     if not p.is_file():
-        _fail(p, None, f"URDF not found (asset {asset!r})")
+        fail(p, None, f"URDF not found (asset {asset!r})")
     return p
 
 
@@ -574,7 +571,7 @@ def _ao_config(cfg_path: Path | None) -> dict:
         rel = hf.string(cfg_path, cfg["urdf_filepath"], "urdf_filepath")
         p = Path(os.path.normpath(cfg_path.parent / rel))
         if not p.is_file():
-            _fail(cfg_path, "urdf_filepath", f"URDF not found: {p}")
+            fail(cfg_path, "urdf_filepath", f"URDF not found: {p}")
         out["urdf"] = p
     if "uniform_scale" in cfg:
         out["scale"] = hf.number(cfg_path, cfg["uniform_scale"], "uniform_scale", positive=True)
@@ -599,11 +596,11 @@ def _joint_pose(scene_path: Path, v, field: str) -> list[float]:
     elif isinstance(v, list):
         items = v
     else:
-        _fail(scene_path, field, f"expected a list of numbers or an object of numbers, got {type(v).__name__}")
+        fail(scene_path, field, f"expected a list of numbers or an object of numbers, got {type(v).__name__}")
     out = []
     for x in items:
         if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(float(x)):
-            _fail(scene_path, field, f"expected finite numbers, got {v!r}")
+            fail(scene_path, field, f"expected finite numbers, got {v!r}")
         out.append(float(x))
     return out
 
@@ -626,9 +623,9 @@ def load_articulated_instances(root, scene_path, doc: dict, first_id: int, class
     scene_path = Path(scene_path)
     raw = doc.get("articulated_object_instances", []) if isinstance(doc, dict) else []
     if not isinstance(raw, list):
-        _fail(scene_path, "articulated_object_instances", f"expected a list, got {type(raw).__name__}")
+        fail(scene_path, "articulated_object_instances", f"expected a list, got {type(raw).__name__}")
     if raw and first_id + len(raw) - 1 > MAX_OBJECT_ID:
-        _fail(scene_path, "articulated_object_instances",
+        fail(scene_path, "articulated_object_instances",
               f"ids {first_id}..{first_id + len(raw) - 1} exceed the maximum object id {MAX_OBJECT_ID}")
     parsed = []
     for i, inst in enumerate(raw):
@@ -647,30 +644,30 @@ def load_articulated_instances(root, scene_path, doc: dict, first_id: int, class
         if "motion_type" in inst:
             mt = hf.string(scene_path, inst["motion_type"], f + ".motion_type").upper()
             if mt not in hf.MOTION_TYPES:
-                _fail(scene_path, f + ".motion_type", f"expected one of {', '.join(hf.MOTION_TYPES)}, got {inst['motion_type']!r}")
+                fail(scene_path, f + ".motion_type", f"expected one of {', '.join(hf.MOTION_TYPES)}, got {inst['motion_type']!r}")
         fixed = inst.get("fixed_base", False)
         if not isinstance(fixed, bool):
-            _fail(scene_path, f + ".fixed_base", f"expected true or false, got {fixed!r}")
+            fail(scene_path, f + ".fixed_base", f"expected true or false, got {fixed!r}")
         hf.translation_origin(scene_path, inst.get("translation_origin"), f + ".translation_origin")  # checked, unused
         pose = _joint_pose(scene_path, inst["initial_joint_pose"], f + ".initial_joint_pose") if "initial_joint_pose" in inst else []
         order = None
         if "link_order" in inst:
             order = hf.string(scene_path, inst["link_order"], f + ".link_order").lower()
             if order not in LINK_ORDERS:
-                _fail(scene_path, f + ".link_order", f"expected one of {', '.join(LINK_ORDERS)}, got {inst['link_order']!r}")
+                fail(scene_path, f + ".link_order", f"expected one of {', '.join(LINK_ORDERS)}, got {inst['link_order']!r}")
         cfg_path = find_ao_config(r, name)
         cfg = _ao_config(cfg_path)
         urdf = cfg.get("urdf") or _search(r, _template_name(name), ".urdf")
         if urdf is None:
             base = _template_name(name).rsplit("/", 1)[-1]
-            _fail(scene_path, f + ".template_name",
+            fail(scene_path, f + ".template_name",
                   f"no URDF for articulated template '{name}' (looked for {base}.urdf and {base}{AO_CONFIG_SUFFIX} "
                   f"under {r / 'urdf'})")
         s = s * cfg.get("scale", 1.0)  # habitat-sim: template scale times instance scale
         if order in (None, "unspecified"):
             order = cfg.get("link_order", "tree_traversal")
         if order == "urdf_order" and pose:
-            _fail(scene_path, f + ".initial_joint_pose",
+            fail(scene_path, f + ".initial_joint_pose",
                   "joint positions in link_order 'urdf_order' are not supported (only the default 'tree_traversal')")
         parsed.append((i, f, name, t, q, s, mt, fixed, pose, urdf, cfg.get("receptacles", ()), cfg_path))
 
@@ -711,7 +708,7 @@ def load_articulated_instances(root, scene_path, doc: dict, first_id: int, class
             poses = link_poses(model, state)
             for rec in recs:
                 if rec["link"] is not None and rec["link"] not in poses:
-                    _fail(cfg_path, f"user_defined.{rec['name']}.parent_link", f"no link {rec['link']!r} in {urdf}")
+                    fail(cfg_path, f"user_defined.{rec['name']}.parent_link", f"no link {rec['link']!r} in {urdf}")
             extra["receptacles"] = to_object_frame(recs, (s, s, s), lambda ln: poses[ln])
         out.append(ObjectInstance(
             id=first_id + i,
@@ -740,7 +737,7 @@ def _local_bounds(model: UrdfModel, state: dict[str, float]) -> tuple[np.ndarray
         lo = np.minimum(lo, v.min(axis=0))
         hi = np.maximum(hi, v.max(axis=0))
     if not np.all(np.isfinite(lo)):
-        _fail(model.path, None, "URDF has no visual meshes (nothing to render or box)")
+        fail(model.path, None, "URDF has no visual meshes (nothing to render or box)")
     return lo, hi
 
 

@@ -23,7 +23,7 @@ class ClassInfo:
     support: str
     movable: bool
     structure: bool = False
-    imported: bool = False  # only imported datasets have it: synth.assets.procedural has no generator for it
+    imported: bool = False  # only imported datasets have it: synth.assets.registry has no generator for it
 
 
 @dataclass(frozen=True)

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from formats.errors import SceneFormatError, UnknownNameError
+from formats.fields import number
 from formats.yamlfile import read_yaml
 
 from ..resources import scenes_dir
@@ -75,14 +76,6 @@ class LightingPreset:
     source: str = ""
 
 
-def _num(v, src, field, lo=None):
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise SceneFormatError(src, field, f"expected a number, got {v!r}")
-    if lo is not None and v < lo:
-        raise SceneFormatError(src, field, f"must be >= {lo}, got {v}")
-    return float(v)
-
-
 def parse_preset(doc, source: str) -> LightingPreset:
     if not isinstance(doc, dict):
         raise SceneFormatError(source, None, "expected a mapping")
@@ -96,13 +89,13 @@ def parse_preset(doc, source: str) -> LightingPreset:
     color = sky.get("color", [0.0, 0.0, 0.0])
     if not isinstance(color, list) or len(color) != 3:
         raise SceneFormatError(source, "sky.color", f"expected 3 numbers, got {color!r}")
-    sky_color = tuple(_num(c, source, "sky.color", 0.0) for c in color)
+    sky_color = tuple(number(source, c, "sky.color", lo=0.0) for c in color)
     sun = doc.get("sun")
     if sun is not None:
         keys = {"strength", "elevation_deg", "azimuth_deg", "color_temperature", "angle_deg"}
         if not isinstance(sun, dict) or set(sun) - keys:
             raise SceneFormatError(source, "sun", f"expected a mapping with keys {sorted(keys)} or null")
-        sun = {k: _num(sun.get(k, d), source, f"sun.{k}") for k, d in
+        sun = {k: number(source, sun.get(k, d), f"sun.{k}") for k, d in
                (("strength", 3.0), ("elevation_deg", 35.0), ("azimuth_deg", 200.0), ("color_temperature", 5600.0), ("angle_deg", 1.0))}
     fx = doc.get("fixtures") or {}
     if not isinstance(fx, dict) or set(fx) - {"ceiling", "lamp"}:
@@ -119,13 +112,13 @@ def parse_preset(doc, source: str) -> LightingPreset:
         count = d.get("count")
         if count is not None and (isinstance(count, bool) or not isinstance(count, int) or count < 0):
             raise SceneFormatError(source, f"fixtures.{kind}.count", f"expected a non-negative integer, got {count!r}")
-        return FixtureSetting(on, _num(d.get("color_temperature", 3000.0), source, f"fixtures.{kind}.color_temperature", 1000.0),
-                              _num(d.get("power", 60.0), source, f"fixtures.{kind}.power", 0.0), count)
+        return FixtureSetting(on, number(source, d.get("color_temperature", 3000.0), f"fixtures.{kind}.color_temperature", lo=1000.0),
+                              number(source, d.get("power", 60.0), f"fixtures.{kind}.power", lo=0.0), count)
 
     name = doc.get("name") or Path(source).stem
     return LightingPreset(
         name=str(name), description=str(doc.get("description", "")), sky_color=sky_color,
-        sky_strength=_num(sky.get("strength", 1.0), source, "sky.strength", 0.0), sun=sun,
+        sky_strength=number(source, sky.get("strength", 1.0), "sky.strength", lo=0.0), sun=sun,
         window_portals=bool(doc.get("window_portals", False)), ceiling=setting("ceiling"), lamp=setting("lamp"), source=source,
     )
 

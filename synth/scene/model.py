@@ -14,7 +14,7 @@ Object instances
     loading meshes. For procedural assets the local origin is the centre of the box's bottom face
     (``box_offset = (0, 0, h/2)``) and the front faces local +Y.
     ``support`` names what holds the object: ``floor``, ``ceiling``, ``wall:<wall id>`` or
-    ``object:<id>:<surface index>`` (a surface of another object, see ``synth.assets.procedural``), or
+    ``object:<id>:<surface index>`` (a surface of another object, see ``synth.assets.registry``), or
     ``free`` (placed by an outside source such as ReplicaCAD: checked only to rest on something).
 
 Ids
@@ -225,7 +225,7 @@ class Stage:
 class ObjectInstance:
     id: int
     cls: str
-    asset: str  # "proc:<class>" (synth.assets.procedural generator), "replicacad:<glb path relative to meta.root>" or
+    asset: str  # "proc:<class>" (synth.assets.registry generator), "replicacad:<glb path relative to meta.root>" or
     #             "replicacad-urdf:<urdf path relative to meta.root>" (an articulated object in its default joint state)
     position: tuple[float, float, float]
     rotation: geo.Quat
