@@ -110,11 +110,12 @@ def test_no_import_cycles():
 # what each stage of reloc may import (besides reloc.config, reloc.geometry, reloc.io and synth)
 MAY_IMPORT = {
     "reloc.map.boxmap": set(),
-    "reloc.frontend": {"reloc.map.boxmap", "reloc.frontend"},
-    "reloc.map": {"reloc.map", "reloc.frontend.detection", "reloc.frontend.detector_base"},  # all but boxmap
-    "reloc.backend": {"reloc.map.boxmap", "reloc.frontend", "reloc.backend"},
-    "reloc.baselines": {"reloc.map.boxmap", "reloc.frontend", "reloc.backend", "reloc.baselines"},
-    "reloc.detector": {"reloc.frontend", "reloc.detector"},  # training tools of the front-end's detector
+    "reloc.detection": {"reloc.detection"},  # frames -> detections, for map building and the front-end alike
+    "reloc.frontend": {"reloc.map.boxmap", "reloc.detection", "reloc.frontend"},
+    "reloc.map": {"reloc.map", "reloc.detection"},  # map building: all of reloc.map but boxmap; not the front-end
+    "reloc.backend": {"reloc.map.boxmap", "reloc.detection", "reloc.frontend", "reloc.backend"},
+    "reloc.baselines": {"reloc.map.boxmap", "reloc.detection", "reloc.frontend", "reloc.backend", "reloc.baselines"},
+    "reloc.detector": {"reloc.detection", "reloc.detector"},  # training tools of the learned detector
 }
 
 
@@ -126,7 +127,12 @@ def _stage(module: str) -> str | None:
 
 
 def test_stages_import_one_way():
-    """map format <- front-end <- back-end <- baselines <- experiments; nothing imports the experiments."""
+    """map format <- detection <- {map building, front-end} <- back-end <- baselines <- experiments.
+
+    Map building and the front-end are siblings: each may import the map format (``reloc.map.boxmap``)
+    and detection (``reloc.detection``, which imports neither of them), never the other. The
+    detector's training tools (``reloc.detector``) import detection only. Nothing imports the experiments.
+    """
     mods = _modules()
     shared = {"reloc", "reloc.config", "reloc.geometry", "reloc.io"}
     bad = []
@@ -143,7 +149,7 @@ def test_stages_import_one_way():
                 bad.append((m, t))
     assert bad == []
     assert _stage("reloc.frontend.odometry") == "reloc.frontend" and _stage("reloc.map.build") == "reloc.map"
-    assert _stage("reloc.map.boxmap") == "reloc.map.boxmap"
+    assert _stage("reloc.map.boxmap") == "reloc.map.boxmap" and _stage("reloc.detection.oracle") == "reloc.detection"
 
 
 def test_the_format_layer_is_the_only_bridge():
@@ -155,3 +161,70 @@ def test_the_format_layer_is_the_only_bridge():
     assert {(m, t) for m, ts in graph.items() if m.startswith("formats") for t in ts
             if not t.startswith("formats")} == set()
     assert {(m, t) for m, ts in graph.items() if m.startswith("reloc") for t in ts if t.startswith("synth")} == set()
+
+
+# synth's layers, lowest first: a module may import its own layer and the layers below it, never
+# one above. ``synth.resources`` (where the shipped data lives) and the package root (its version)
+# are below everything; every command-line module (``synth.cli``, ``synth.<layer>.cli``) is the top.
+SYNTH_LAYERS = ("scene", "assets", "paths", "replicacad", "layout", "render", "blender", "jobs", "datasets", "cli")
+SYNTH_BASE = {"synth", "synth.resources"}
+
+
+def synth_layer(module: str) -> int | None:
+    """Index of ``module``'s layer in SYNTH_LAYERS (None: the base modules)."""
+    if module in SYNTH_BASE:
+        return None
+    parts = module.split(".")
+    if parts[-1] == "cli":
+        return SYNTH_LAYERS.index("cli")
+    if parts[1] not in SYNTH_LAYERS:
+        raise AssertionError(f"{module}: not in any of synth's layers; add its package to SYNTH_LAYERS")
+    return SYNTH_LAYERS.index(parts[1])
+
+
+def synth_upward_imports(mods) -> list[tuple[str, str]]:
+    bad = []
+    for m, p in mods.items():
+        if not m.startswith("synth."):
+            continue
+        lm = synth_layer(m)
+        for t in _imports(m, p, mods):
+            if not t.startswith("synth"):
+                continue
+            lt = synth_layer(t)
+            if lt is not None and (lm is None or lt > lm):
+                bad.append((m, t))
+    return sorted(bad)
+
+
+def test_synth_layers_import_downwards():
+    """scene < assets < paths < replicacad < layout < render < blender < jobs < datasets < cli."""
+    mods = _modules()
+    assert synth_upward_imports(mods) == []
+    # every synth module is in a layer, and the layers are the subpackages on disk
+    on_disk = {p.name for p in (REPO / "synth").iterdir() if (p / "__init__.py").exists()}
+    assert on_disk == set(SYNTH_LAYERS) - {"cli"}
+    flat = sorted(m for m in mods if m.count(".") == 1 and m not in SYNTH_BASE and m.startswith("synth.")
+                  and mods[m].name != "__init__.py")
+    assert flat == ["synth.cli"], f"modules at synth's top level besides cli and resources: {flat}"
+
+
+def test_an_upward_synth_import_is_found(tmp_path, monkeypatch):
+    for pkg in ("synth", "synth/scene", "synth/layout", "formats", "reloc"):
+        (tmp_path / pkg).mkdir()
+        (tmp_path / pkg / "__init__.py").write_text("")
+    (tmp_path / "synth" / "layout" / "apartment.py").write_text("from ..scene import model\n")
+    (tmp_path / "synth" / "scene" / "model.py").write_text("def f():\n    from ..layout.apartment import g\n")
+    monkeypatch.setattr(sys.modules[__name__], "REPO", tmp_path)
+    assert synth_upward_imports(_modules()) == [("synth.scene.model", "synth.layout.apartment")]
+
+
+def test_bpy_is_imported_only_by_the_blender_package():
+    bad = []
+    for m, p in _modules().items():
+        for node in ast.walk(ast.parse(p.read_text(), str(p))):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+                [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level else []
+            if any(n == "bpy" or n.startswith("bpy.") for n in names) and not m.startswith("synth.blender"):
+                bad.append(m)
+    assert bad == []
