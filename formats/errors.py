@@ -64,6 +64,15 @@ def _check_output(path, kind: str) -> None:
         raise UserError(f"{what}: cannot create anything in {anc} ({e.strerror or e})") from None
 
 
+def one_line(e: BaseException, limit: int = 240, with_type: bool = False) -> str:
+    """An exception as one line of at most ``limit`` characters (whitespace and newlines collapsed),
+    optionally prefixed with its type (``OSError: ...``), for the one-line errors and failure logs."""
+    s = " ".join(str(e).split())
+    if with_type:
+        s = f"{type(e).__name__}: {s}".rstrip(": ")
+    return s if len(s) <= limit else s[: limit - 3] + "..."
+
+
 def run_command(prog: str, fn, args) -> int:
     """Run a CLI command function: a UserError prints one line and exits 2, Ctrl-C exits 130."""
     import sys

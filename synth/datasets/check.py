@@ -207,11 +207,7 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
     ``UserError``; everything else is reported: ``ok`` is True when ``problems`` is empty, and
     ``problems`` has one readable line per problem. Frames are read one at a time.
     """
-    from tqdm import tqdm
-
     tour = Tour(root, strict=False)
-    intr = tour.intrinsics
-    H, W = intr.height, intr.width
     N = len(tour)
     rep: dict = {
         "tour": str(tour.root),
@@ -239,9 +235,22 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
         "errors": [],
         "warnings": [],
     }
-    problems: list[str] = rep["problems"]
+    present = _check_files(tour, rep)
+    known = _check_objects(tour, rep)
+    _check_poses(tour, rep)
+    frame_channels, depth_ok, rgb_p99 = _check_frames(tour, rep, present, known, progress)
+    _check_channels(tour, rep, frame_channels)
+    rep["consistency"] = _consistency(tour, depth_ok, consistency_pairs)
+    rep["brightness"] = _brightness(rgb_p99)  # a lit tour must not be black
+    meta_count_bad = _summary_lines(tour, rep)
+    rep["problem_counts"] = _problem_counts(rep, meta_count_bad)
+    rep["problem_total"] = sum(rep["problem_counts"].values())
+    rep["ok"] = not rep["problems"]
+    return rep
 
-    # -- files on disk -------------------------------------------------------------------------
+
+def _check_files(tour: Tour, rep: dict) -> set[int]:
+    """Files on disk: frames present, missing and extra; stray temporaries; failed-render leftovers."""
     expected = {int(i) for i in tour.frame_indices}
     present: set[int] = set()
     for d in (tour.root, tour.frames_dir, tour.root / PREVIEWS_DIR):
@@ -264,9 +273,11 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
     fi = tour.frame_indices
     if isinstance(meta_frames, list) and len(meta_frames) == 2 and list(meta_frames) != [int(fi.min()), int(fi.max())]:
         rep["warnings"].append(f"{META_FILE}: frames is {meta_frames}, poses.txt spans [{int(fi.min())}, {int(fi.max())}]")
+    return present
 
-    # -- objects.json --------------------------------------------------------------------------
-    known_inst = known_sem = None
+
+def _check_objects(tour: Tour, rep: dict):
+    """objects.json: the known instance and semantic ids, instance -> class id; None when unreadable."""
     inst_to_sem: dict[int, int] = {}
     try:
         objs = tour.objects()
@@ -279,19 +290,25 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
         inst_to_sem[0] = 0
     except UserError as e:
         rep["errors"].append(str(e))
-        classes = {}
+        return None
+    return known_inst, known_sem, inst_to_sem, classes
 
-    # -- poses ---------------------------------------------------------------------------------
+
+def _check_poses(tour: Tour, rep: dict) -> None:
     for i, T in zip(tour.frame_indices, tour.poses):
         why = _pose_problem(T)
         if why:
             rep["bad_poses"].append({"frame": int(i), "why": why})
 
-    # -- frames, one at a time -----------------------------------------------------------------
-    expect_rgb = (tour.meta.get("lighting") is not None) if "lighting" in tour.meta else None
-    channels: set[str] = set()
+
+def _check_frames(tour: Tour, rep: dict, present: set[int], known, progress):
+    """Every frame, one at a time: readable, the camera's size, valid depth and RGB, known ids.
+    Returns the channels of each frame, which frames have valid depth, and each RGB frame's brightness."""
+    from tqdm import tqdm
+
+    H, W = tour.intrinsics.height, tour.intrinsics.width
     frame_channels: dict[int, frozenset] = {}
-    depth_ok = np.zeros(N, dtype=bool)
+    depth_ok = np.zeros(len(tour), dtype=bool)
     rgb_p99: dict[int, float] = {}  # frame -> 99th-percentile linear luminance
     if progress is None:
         progress = sys.stderr.isatty()
@@ -306,7 +323,6 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
             rep["unreadable"].append({"frame": idx, "file": str(path), "error": str(e)})
             continue
         names = frozenset(ch)
-        channels |= names
         frame_channels[idx] = names
         shapes = {tuple(a.shape[:2]) for a in ch.values()}
         if shapes != {(H, W)}:
@@ -314,51 +330,65 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
             continue
         img = images_from_channels(ch)
         del ch
-        # depth
-        if img.depth is not None:
-            d = img.depth
-            why = []
-            nonfinite = int((~np.isfinite(d)).sum())
-            if nonfinite:
-                why.append(f"{nonfinite} NaN/inf pixels")
-            neg = int((d < 0).sum())
-            if neg:
-                why.append(f"{neg} negative pixels")
-            kinds = (["nonfinite"] if nonfinite else []) + (["negative"] if neg else [])
-            if not (d > 0).any():
-                why.append("all zero (no surface hit)")
-                kinds.append("all_zero")
-            if why:
-                rep["bad_depth"].append({"frame": idx, "why": "; ".join(why), "kinds": kinds})
-            else:
-                depth_ok[k] = True
+        why = _depth_problem(img.depth)
+        if why is True:
+            depth_ok[k] = True
+        elif why is not None:
+            rep["bad_depth"].append({"frame": idx, **why})
         if img.rgb is not None:
             nonfinite = int((~np.isfinite(img.rgb)).sum())
             if nonfinite:
                 rep["bad_rgb"].append({"frame": idx, "why": f"{nonfinite} NaN/inf values"})
             rgb_p99[idx] = frame_brightness(img.rgb)
-        # ids against objects.json
-        if known_inst is not None:
-            entry: dict = {}
-            if img.instance is not None:
-                ids = np.unique(img.instance)
-                bad = [int(x) for x in ids if x != 0 and int(x) not in known_inst and not STRUCTURE_ID_MIN <= x <= STRUCTURE_ID_MAX]
-                if bad:
-                    entry["instance"] = bad
-            if img.semantic is not None:
-                bad = [int(x) for x in np.unique(img.semantic) if int(x) not in known_sem]
-                if bad:
-                    entry["semantic"] = bad
-            if entry:
-                rep["unknown_ids"].append({"frame": idx, **entry})
-            if img.instance is not None and img.semantic is not None:
-                mm = _class_mismatch(img.instance, img.semantic, inst_to_sem, classes)
-                if mm is not None:
-                    rep["class_mismatch"].append({"frame": idx, **mm})
+        if known is not None:
+            _check_ids(rep, idx, img, known)
         del img
+    return frame_channels, depth_ok, rgb_p99
 
-    rep["channels"] = sorted(channels)
-    # channels every frame should have: depth, ids and (for lit tours) RGB
+
+def _depth_problem(d):
+    """None without depth, True for valid depth, else {"why": text, "kinds": [...]}."""
+    if d is None:
+        return None
+    why = []
+    nonfinite = int((~np.isfinite(d)).sum())
+    if nonfinite:
+        why.append(f"{nonfinite} NaN/inf pixels")
+    neg = int((d < 0).sum())
+    if neg:
+        why.append(f"{neg} negative pixels")
+    kinds = (["nonfinite"] if nonfinite else []) + (["negative"] if neg else [])
+    if not (d > 0).any():
+        why.append("all zero (no surface hit)")
+        kinds.append("all_zero")
+    return {"why": "; ".join(why), "kinds": kinds} if why else True
+
+
+def _check_ids(rep: dict, idx: int, img, known) -> None:
+    """A frame's instance and semantic ids against objects.json."""
+    known_inst, known_sem, inst_to_sem, classes = known
+    entry: dict = {}
+    if img.instance is not None:
+        ids = np.unique(img.instance)
+        bad = [int(x) for x in ids if x != 0 and int(x) not in known_inst and not STRUCTURE_ID_MIN <= x <= STRUCTURE_ID_MAX]
+        if bad:
+            entry["instance"] = bad
+    if img.semantic is not None:
+        bad = [int(x) for x in np.unique(img.semantic) if int(x) not in known_sem]
+        if bad:
+            entry["semantic"] = bad
+    if entry:
+        rep["unknown_ids"].append({"frame": idx, **entry})
+    if img.instance is not None and img.semantic is not None:
+        mm = _class_mismatch(img.instance, img.semantic, inst_to_sem, classes)
+        if mm is not None:
+            rep["class_mismatch"].append({"frame": idx, **mm})
+
+
+def _check_channels(tour: Tour, rep: dict, frame_channels: dict) -> None:
+    """Channels every frame should have: depth, ids and (for lit tours) RGB."""
+    expect_rgb = (tour.meta.get("lighting") is not None) if "lighting" in tour.meta else None
+    rep["channels"] = sorted(set().union(*frame_channels.values()))
     want = {fr.DEPTH_CHANNEL, fr.INSTANCE_CHANNEL, fr.SEMANTIC_CHANNEL}
     if expect_rgb is None:
         expect_rgb = any(set(fr.RGB_CHANNELS) <= c for c in frame_channels.values())
@@ -372,13 +402,13 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
     if expect_rgb is False and any(set(fr.RGB_CHANNELS) <= c for c in frame_channels.values()):
         rep["warnings"].append(f"{META_FILE}: lighting is null (geometry-only) but frames have R, G, B")
 
-    # -- multi-view depth consistency ------------------------------------------------------------
-    rep["consistency"] = _consistency(tour, depth_ok, consistency_pairs)
 
-    # -- brightness: a lit tour must not be black -------------------------------------------------
-    rep["brightness"] = _brightness(rgb_p99)
-
-    # -- summary lines -------------------------------------------------------------------------
+def _summary_lines(tour: Tour, rep: dict) -> bool:
+    """One readable line per problem (capped per kind) into rep["problems"]; returns whether
+    meta.json's frame count disagrees with poses.txt."""
+    problems: list[str] = rep["problems"]
+    N = len(tour)
+    H, W = tour.intrinsics.height, tour.intrinsics.width
     def capped(kind_lines: list[str]) -> None:
         problems.extend(kind_lines[:PROBLEM_LINES_PER_KIND])
         if len(kind_lines) > PROBLEM_LINES_PER_KIND:
@@ -422,8 +452,12 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
     capped([f"frames {p['frames'][0]} -> {p['frames'][1]}: depth inconsistent with poses: "
             f"{p['agreement']:.1%} of {p['compared_pixels']} pixels agree (need {MIN_AGREEMENT:.0%}), "
             f"median |diff| {p['median_abs_diff_m'] * 100:.1f} cm" for p in rep["consistency"]["pairs"] if p["flagged"]])
+    return meta_count_bad
 
-    # -- how many problems of each kind (the text lines above are capped per kind) -------------
+
+def _problem_counts(rep: dict, meta_count_bad: bool) -> dict:
+    """How many problems of each kind (the text lines are capped per kind); kinds with none left out."""
+    br = rep["brightness"]
     depth_kinds = {"all_zero": "frames with all-zero depth", "nonfinite": "frames with NaN/inf depth",
                    "negative": "frames with negative depth"}
     counts = {
@@ -443,10 +477,7 @@ def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -
         "nearly black tours": int(bool(br.get("dark"))),
         "frame pairs with depth inconsistent with the poses": len(rep["consistency"]["flagged"]),
     }
-    rep["problem_counts"] = {k: v for k, v in counts.items() if v}
-    rep["problem_total"] = sum(rep["problem_counts"].values())
-    rep["ok"] = not problems
-    return rep
+    return {k: v for k, v in counts.items() if v}
 
 
 def frame_brightness(rgb) -> float:

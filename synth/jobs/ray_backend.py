@@ -41,7 +41,7 @@ from pathlib import Path
 
 from formats import frames as fr
 from formats.atomic import replacing, write_text_atomic
-from formats.errors import UserError
+from formats.errors import UserError, one_line
 
 from ..render.chunks import run_chunk_process
 
@@ -458,11 +458,6 @@ class _Attempt:
         self.end: list | None = None
 
 
-def _one_line(e: BaseException) -> str:
-    text = str(e).strip().splitlines()
-    return f"{type(e).__name__}: {text[0][:300] if text else ''}".rstrip(": ")
-
-
 def copy_stored(c, store, bar) -> tuple[int, str | None]:
     """A ``copy`` chunk when the job folder is on a storage URI: its missing frames copied from the
     geometry cache there (read, then an atomic write: no hard links across a file system API)."""
@@ -471,7 +466,7 @@ def copy_stored(c, store, bar) -> tuple[int, str | None]:
             store.copy(Path(c.job["geometry_dir"]) / fr.frame_name(i), Path(c.out_dir) / fr.frame_name(i))
             bar.update()
     except (OSError, UserError) as e:
-        return 1, _one_line(e)
+        return 1, one_line(e, limit=300, with_type=True)
     return 0, None
 
 
@@ -588,7 +583,7 @@ def run(plan, state, todo: list, bar, work: Path, queue_cls, files_of) -> dict:
                     packed = pack_chunk(c)
                 except OSError as e:  # e.g. a geometry frame that went missing
                     write_text_atomic(log, f"cannot pack the chunk: {e}\n")
-                    q.finished(c, 1, f"cannot pack the chunk: {_one_line(e)}", log)
+                    q.finished(c, 1, f"cannot pack the chunk: {one_line(e, limit=300, with_type=True)}", log)
                     continue
                 gen = task.remote(packed, box, token, BATCH_BYTES, BATCH_SECONDS)
                 running[gen] = a
