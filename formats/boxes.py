@@ -20,7 +20,7 @@ FRAME_TEXT = "world: right-handed, Z up, metres; yaw about +Z in radians"
 MAX_OBJECT_ID = 999
 WALL_ID_BASE, FLOOR_ID_BASE, CEILING_ID_BASE = 1000, 2000, 3000
 ID_BASE = {"object": 1, "wall": WALL_ID_BASE, "floor": FLOOR_ID_BASE, "ceiling": CEILING_ID_BASE}
-STRUCTURE_KINDS = ("wall", "floor", "ceiling")
+STRUCTURE_KINDS = ("wall", "floor", "ceiling")  # also the class names of structure boxes and detections
 STRUCTURE_ID_MIN, STRUCTURE_ID_MAX = WALL_ID_BASE, CEILING_ID_BASE + 999
 STRUCTURE_CLASSES = ((WALL_ID_BASE, "wall"), (FLOOR_ID_BASE, "floor"), (CEILING_ID_BASE, "ceiling"))
 

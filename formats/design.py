@@ -14,11 +14,11 @@ missing; each tour's ``meta.json`` is written when its frames are done. Readers 
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 from .atomic import write_json_atomic
 from .errors import SceneFormatError
+from .yamlfile import read_json
 
 DESIGN_FORMAT = "videoreloc-design/1"
 DESIGN_FILE = "design.json"
@@ -46,25 +46,13 @@ def write_design(out, job: str, spec, tours: dict[str, dict]) -> Path:
     return write_json_atomic(Path(out) / DESIGN_FILE, doc, indent=1)
 
 
-def _read_json(path: Path) -> dict:
-    try:
-        doc = json.loads(path.read_text())
-    except OSError as e:
-        raise SceneFormatError(path, None, f"cannot read: {e.strerror}") from None
-    except json.JSONDecodeError as e:
-        raise SceneFormatError(path, None, f"malformed JSON: {e}") from None
-    if not isinstance(doc, dict):
-        raise SceneFormatError(path, None, "expected a JSON object")
-    return doc
-
-
 def read_design(root) -> dict | None:
     """The planned tours of the design in ``root`` ({name: {layout, lighting, path, n_frames}}), or
     None when ``root`` has no design.json (tours rendered one by one with ``synth tour render``)."""
     path = Path(root) / DESIGN_FILE
     if not path.is_file():
         return None
-    doc = _read_json(path)
+    doc = read_json(path)
     if doc.get("format") != DESIGN_FORMAT:
         raise SceneFormatError(path, "format", f"expected {DESIGN_FORMAT!r}, got {doc.get('format')!r}")
     tours = doc.get("tours")
@@ -87,7 +75,7 @@ def list_tours(root) -> dict[str, dict]:
         f = d / "meta.json"
         if not f.is_file():
             continue
-        meta = _read_json(f)
+        meta = read_json(f)
         for k in ("layout", "path"):
             if not isinstance(meta.get(k), str):
                 raise SceneFormatError(f, k, "expected a name")

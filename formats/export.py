@@ -95,6 +95,7 @@ import json
 import math
 import os
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -106,20 +107,11 @@ from formats.errors import SceneFormatError, UserError, check_output_folder
 from formats.tour import CAMERA_FILE, META_FILE, POSES_FILE, Tour, ranges_text, tonemap
 from formats.yamlfile import read_json
 
-FORMATS = ("7scenes", "ace", "tum-rgbd", "colmap")
 ROLES = ("mapping", "query")
 MANIFEST_FORMAT = "synth-export/1"
 MANIFEST_FILE = "export.json"
 REQUEST_FILE = ".synth-export.json"  # the request, written before the first frame; kept
-IMAGE_FORMATS = ("7scenes", "ace", "colmap")  # every exported frame needs RGB
-
-# depth encodings: uint16 value = round(metres * scale), 0 = no surface (or out of range)
-DEPTH_ENCODING = {
-    "7scenes": {"unit": "mm", "scale": 1000.0},
-    "ace": {"unit": "mm", "scale": 1000.0},
-    "tum-rgbd": {"unit": "1/5000 m", "scale": 5000.0},
-}
-UINT16_MAX = 65535
+UINT16_MAX = 65535  # depth: uint16 value = round(metres * scale), 0 = no surface (or out of range)
 TIMESTAMP_DECIMALS = 6  # as formats.camera.write_tum
 
 
@@ -143,7 +135,7 @@ def parse_exposure(value) -> str | float:
 
 
 def _check_choice(value, known, option: str, what: str) -> str:
-    if value not in known:
+    if not isinstance(value, str) or value not in known:
         raise UserError(f"{option} {value!r}: unknown {what}; known: {', '.join(known)}")
     return value
 
@@ -177,52 +169,6 @@ def _has_rgb_channels(path: Path) -> bool:
     except Exception as e:
         raise FrameFileError(f"{path}: corrupt or unreadable EXR ({e or type(e).__name__})") from None
     return all(c in names for c in RGB_CHANNELS) or "RGB" in names
-
-
-def _seq(role: str) -> tuple[str, int]:
-    n = 1 if role == "mapping" else 2
-    return f"seq-{n:02d}", n
-
-
-def _frame_files(fmt: str, role: str, i: int, has_rgb: bool) -> dict[str, str]:
-    """The files of tour frame ``i`` in an export (empty: the frame is left out)."""
-    if fmt in IMAGE_FORMATS and not has_rgb:
-        return {}
-    if fmt == "7scenes":
-        seq, _ = _seq(role)
-        stem = f"{seq}/frame-{i:06d}"
-        return {"rgb": f"{stem}.color.png", "depth": f"{stem}.depth.png", "pose": f"{stem}.pose.txt"}
-    if fmt == "ace":
-        split = "train" if role == "mapping" else "test"
-        stem = f"frame-{i:06d}"
-        return {"rgb": f"{split}/rgb/{stem}.color.png", "depth": f"{split}/depth/{stem}.depth.png",
-                "pose": f"{split}/poses/{stem}.pose.txt", "calibration": f"{split}/calibration/{stem}.calibration.txt"}
-    if fmt == "tum-rgbd":
-        out = {"depth": f"depth/{i:06d}.png"}
-        if has_rgb:
-            out = {"rgb": f"rgb/{i:06d}.png", **out}
-        return out
-    if fmt == "colmap":
-        return {"rgb": f"images/frame-{i:06d}.png"}
-    raise AssertionError(fmt)
-
-
-def _name_root(fmt: str, role: str) -> str:
-    """The prefix to strip from a ``frames`` key to get the name the tool uses in its pose files."""
-    return {"7scenes": "", "ace": f"{'train' if role == 'mapping' else 'test'}/rgb/", "tum-rgbd": "",
-            "colmap": "images/"}[fmt]
-
-
-def _frame_dirs(fmt: str, role: str) -> list[str]:
-    """The export's folders that hold frame files (stray temporary files are cleaned there)."""
-    if fmt == "7scenes":
-        return [_seq(role)[0]]
-    if fmt == "ace":
-        split = "train" if role == "mapping" else "test"
-        return [f"{split}/{d}" for d in ("rgb", "depth", "poses", "calibration")]
-    if fmt == "tum-rgbd":
-        return ["rgb", "depth"]
-    return ["images"]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -277,11 +223,250 @@ def _write_text_if_changed(path: Path, text: str) -> bool:
     return True
 
 
+def _ts(i: int, fps: float) -> str:
+    return f"{i / fps:.{TIMESTAMP_DECIMALS}f}"
+
+
+# ---------------------------------------------------------------------------------------------
+# the formats: one record each
+
+
+@dataclass(frozen=True)
+class ExportFormat:
+    """One export layout: where its frame files go, the files written once per export, and what
+    export.json says of it. The functions take the export's role ("mapping" or "query")."""
+
+    name: str
+    needs_rgb: bool  # an image format: frames without RGB are left out (else written without colour)
+    depth: dict | None  # depth PNGs: {"unit", "scale"} (uint16 = round(metres * scale)); None: no depth
+    poses: dict  # export.json "poses": where the poses are, in which convention
+    frame_files: Callable[[str, int, bool], dict[str, str]]  # (role, frame, has RGB) -> {kind: path}
+    frame_dirs: Callable[[str], list[str]]  # the folders holding frame files
+    name_root: Callable[[str], str]  # prefix of a ``frames`` key that the tool's own frame name lacks
+    whole_files: Callable[[str], list[str]]  # the files written once, after the frames
+    write_whole_files: Callable[[Path, Tour, str, list[_Frame]], None]  # (out, tour, role, exported frames)
+    intrinsics: Callable[[object], dict]  # (tour intrinsics) -> this format's entries of export.json "intrinsics"
+    named_kinds: tuple[str, ...] = ("rgb",)  # the frame files export.json "frames" names
+    manifest_extra: Callable[[Tour, list[_Frame]], dict] | None = None  # more export.json entries
+
+
+MM_DEPTH = {"unit": "mm", "scale": 1000.0}
+
+
+def _dsacstar_doc(intr, files: str) -> dict:
+    """What DSAC* (the same layout as 7-Scenes / ACE, one focal length per frame) needs instead."""
+    w, h = intr.width, intr.height
+    return {
+        "focal_length": intr.fx,
+        "principal_point": [w / 2.0, h / 2.0],
+        "offset_px": [w / 2.0 - intr.cx, h / 2.0 - intr.cy],
+        "note": f"DSAC* reads ONE focal length per frame (float(np.loadtxt(calibration file))); {files}. DSAC* "
+                "assumes the principal point at W/2, H/2, offset_px from the toolkit's (half a pixel right and "
+                "down for a centred camera, cx = (W - 1) / 2)" + ("" if math.isclose(intr.fx, intr.fy) else
+                                                                   "; fx != fy here, which DSAC* cannot represent"),
+    }
+
+
+# 7-Scenes: seq-01/ (mapping) or seq-02/ (query), split files, intrinsics.txt
+
+
+def _seq(role: str) -> tuple[str, int]:
+    n = 1 if role == "mapping" else 2
+    return f"seq-{n:02d}", n
+
+
+def _7scenes_frame_files(role: str, i: int, has_rgb: bool) -> dict[str, str]:
+    seq, _ = _seq(role)
+    stem = f"{seq}/frame-{i:06d}"
+    return {"rgb": f"{stem}.color.png", "depth": f"{stem}.depth.png", "pose": f"{stem}.pose.txt"}
+
+
+def _7scenes_write_whole_files(out: Path, tour: Tour, role: str, exported: list[_Frame]) -> None:
+    _, n = _seq(role)
+    own, other = ("TrainSplit.txt", "TestSplit.txt") if role == "mapping" else ("TestSplit.txt", "TrainSplit.txt")
+    _write_text_if_changed(out / own, f"sequence{n}\n")
+    _write_text_if_changed(out / other, "")
+    _write_text_if_changed(out / "intrinsics.txt", _matrix_text(tour.K))
+
+
+def _7scenes_intrinsics(intr) -> dict:
+    return {
+        "dsacstar": _dsacstar_doc(intr, "its setup_7scenes.py writes 525 for every frame: write fx instead"),
+        "file": "intrinsics.txt (3x3 K, toolkit convention)",
+        "7scenes": ("7-Scenes ships no intrinsics; its readers' setup scripts hard-code fx = fy = 525 and "
+                    "the image centre: use this K"),
+    }
+
+
+SEVEN_SCENES = ExportFormat(
+    name="7scenes", needs_rgb=True, depth=MM_DEPTH,
+    poses={"files": "seq-XX/frame-NNNNNN.pose.txt", "content": "4x4 camera-to-world, OpenCV camera axes"},
+    frame_files=_7scenes_frame_files,
+    frame_dirs=lambda role: [_seq(role)[0]],
+    name_root=lambda role: "",
+    whole_files=lambda role: ["TrainSplit.txt", "TestSplit.txt", "intrinsics.txt"],
+    write_whole_files=_7scenes_write_whole_files,
+    intrinsics=_7scenes_intrinsics,
+)
+
+
+# ACE: train/ (mapping) or test/ (query), rgb/, depth/, poses/, calibration/ (per-frame 3x3 K)
+
+
+def _ace_split(role: str) -> str:
+    return "train" if role == "mapping" else "test"
+
+
+def _ace_frame_files(role: str, i: int, has_rgb: bool) -> dict[str, str]:
+    split = _ace_split(role)
+    stem = f"frame-{i:06d}"
+    return {"rgb": f"{split}/rgb/{stem}.color.png", "depth": f"{split}/depth/{stem}.depth.png",
+            "pose": f"{split}/poses/{stem}.pose.txt", "calibration": f"{split}/calibration/{stem}.calibration.txt"}
+
+
+def _ace_intrinsics(intr) -> dict:
+    return {
+        "ace": {
+            "file": "{train,test}/calibration/frame-NNNNNN.calibration.txt",
+            "content": "3x3 K, toolkit convention (ACE uses fx, fy, cx, cy of a 3x3 K as given; pixel u at u)",
+        },
+        "dsacstar": _dsacstar_doc(intr, "the 3x3 calibration files of this export do not load in DSAC*: replace "
+                                        "each with fx"),
+    }
+
+
+ACE = ExportFormat(
+    name="ace", needs_rgb=True, depth=MM_DEPTH,
+    poses={"files": "{train,test}/poses/frame-NNNNNN.pose.txt",
+           "content": "4x4 camera-to-world, OpenCV camera axes",
+           "tool_output": "test_ace.py: 'NAME qw qx qy qz tx ty tz ...' world-to-camera, NAME = rgb base name"},
+    frame_files=_ace_frame_files,
+    frame_dirs=lambda role: [f"{_ace_split(role)}/{d}" for d in ("rgb", "depth", "poses", "calibration")],
+    name_root=lambda role: f"{_ace_split(role)}/rgb/",
+    whole_files=lambda role: [],
+    write_whole_files=lambda out, tour, role, exported: None,
+    intrinsics=_ace_intrinsics,
+)
+
+
+# TUM RGB-D: rgb/, depth/, rgb.txt, depth.txt, groundtruth.txt, associations.txt, intrinsics.txt
+
+
+def _tum_frame_files(role: str, i: int, has_rgb: bool) -> dict[str, str]:
+    out = {"depth": f"depth/{i:06d}.png"}
+    if has_rgb:
+        out = {"rgb": f"rgb/{i:06d}.png", **out}
+    return out
+
+
+def _tum_write_whole_files(out: Path, tour: Tour, role: str, exported: list[_Frame]) -> None:
+    fps = tour.fps
+    rgb = [f for f in exported if "rgb" in f.files]
+    head = "# {what}\n# file: '{name}' (synth export)\n# timestamp filename\n"
+    _write_text_if_changed(out / "rgb.txt", head.format(what="color images", name=tour.name)
+                           + "".join(f"{_ts(f.index, fps)} {f.files['rgb']}\n" for f in rgb))
+    _write_text_if_changed(out / "depth.txt", head.format(what="depth maps", name=tour.name)
+                           + "".join(f"{_ts(f.index, fps)} {f.files['depth']}\n" for f in exported))
+    lines = ["# ground truth trajectory", f"# file: '{tour.name}' (synth export)", "# timestamp tx ty tz qx qy qz qw"]
+    for f in exported:
+        T = tour.pose(f.index)
+        w, x, y, z = matrix_to_quat(T[:3, :3])
+        t = T[:3, 3]
+        lines.append(f"{_ts(f.index, fps)} {t[0]:.9f} {t[1]:.9f} {t[2]:.9f} {x:.9f} {y:.9f} {z:.9f} {w:.9f}")
+    _write_text_if_changed(out / "groundtruth.txt", "\n".join(lines) + "\n")
+    _write_text_if_changed(out / "associations.txt", "".join(
+        f"{_ts(f.index, fps)} {f.files['rgb']} {_ts(f.index, fps)} {f.files['depth']}\n" for f in rgb))
+    _write_text_if_changed(out / "intrinsics.txt", _matrix_text(tour.K))
+
+
+def _tum_manifest_extra(tour: Tour, exported: list[_Frame]) -> dict:
+    return {"timestamps": {_ts(f.index, tour.fps): f.index for f in exported},
+            "timestamp_rule": f"t = frame / fps (fps {tour.fps:g}), {TIMESTAMP_DECIMALS} decimals"}
+
+
+TUM_RGBD = ExportFormat(
+    name="tum-rgbd", needs_rgb=False, depth={"unit": "1/5000 m", "scale": 5000.0},
+    poses={"files": "groundtruth.txt", "content": "timestamp tx ty tz qx qy qz qw, camera-to-world, "
+                                                  "t = frame / fps"},
+    frame_files=_tum_frame_files,
+    frame_dirs=lambda role: ["rgb", "depth"],
+    name_root=lambda role: "",
+    whole_files=lambda role: ["rgb.txt", "depth.txt", "groundtruth.txt", "associations.txt", "intrinsics.txt"],
+    write_whole_files=_tum_write_whole_files,
+    intrinsics=lambda intr: {"file": "intrinsics.txt (3x3 K, toolkit convention)"},
+    named_kinds=("rgb", "depth"),
+    manifest_extra=_tum_manifest_extra,
+)
+
+
+# COLMAP (as hloc reads it): images/, sparse/{cameras,images,points3D}.txt, queries_with_intrinsics.txt
+
+COLMAP_NAME_ROOT = "images/"
+
+
+def _colmap_params(intr) -> str:
+    """PINHOLE fx fy cx cy in COLMAP's convention (image origin at the upper-left pixel's corner)."""
+    return " ".join(f"{v:.15g}" for v in (intr.fx, intr.fy, intr.cx + 0.5, intr.cy + 0.5))
+
+
+def _colmap_write_whole_files(out: Path, tour: Tour, role: str, exported: list[_Frame]) -> None:
+    intr = tour.intrinsics
+    cam = f"1 PINHOLE {intr.width} {intr.height} {_colmap_params(intr)}"
+    _write_text_if_changed(out / "sparse/cameras.txt", "# Camera list with one line of data per camera:\n"
+                           "#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n# Number of cameras: 1\n" + cam + "\n")
+    lines = ["# Image list with two lines of data per image:", "#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME",
+             "#   POINTS2D[] as (X, Y, POINT3D_ID)", f"# Number of images: {len(exported)}, mean observations per image: 0"]
+    root = COLMAP_NAME_ROOT
+    for f in exported:
+        T = tour.pose(f.index)
+        R = T[:3, :3].T
+        t = -R @ T[:3, 3]
+        w, x, y, z = matrix_to_quat(R)
+        name = f.files["rgb"][len(root):]
+        lines.append(f"{f.index + 1} {w:.12f} {x:.12f} {y:.12f} {z:.12f} {t[0]:.12f} {t[1]:.12f} {t[2]:.12f} 1 {name}")
+        lines.append("")
+    _write_text_if_changed(out / "sparse/images.txt", "\n".join(lines) + "\n")
+    _write_text_if_changed(out / "sparse/points3D.txt", "# 3D point list with one line of data per point:\n"
+                           "#   POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)\n"
+                           "# Number of points: 0, mean track length: 0\n")
+    if role == "query":
+        params = _colmap_params(intr)
+        _write_text_if_changed(out / "queries_with_intrinsics.txt", "".join(
+            f"{f.files['rgb'][len(root):]} PINHOLE {intr.width} {intr.height} {params}\n" for f in exported))
+
+
+def _colmap_intrinsics(intr) -> dict:
+    return {
+        "colmap": {
+            "model": "PINHOLE", "fx": intr.fx, "fy": intr.fy, "cx": intr.cx + 0.5, "cy": intr.cy + 0.5,
+            "file": "sparse/cameras.txt",
+            "note": "COLMAP's image origin is the upper-left pixel's corner (its centre is at 0.5, 0.5; hloc adds "
+                    "0.5 to keypoints for COLMAP): COLMAP cx, cy = toolkit cx, cy + 0.5",
+        },
+    }
+
+
+COLMAP = ExportFormat(
+    name="colmap", needs_rgb=True, depth=None,
+    poses={"files": "sparse/images.txt", "content": "IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME, "
+                                                    "world-to-camera; IMAGE_ID = frame + 1"},
+    frame_files=lambda role, i, has_rgb: {"rgb": f"images/frame-{i:06d}.png"},
+    frame_dirs=lambda role: ["images"],
+    name_root=lambda role: COLMAP_NAME_ROOT,
+    whole_files=lambda role: ["sparse/cameras.txt", "sparse/images.txt", "sparse/points3D.txt"]
+                             + (["queries_with_intrinsics.txt"] if role == "query" else []),
+    write_whole_files=_colmap_write_whole_files,
+    intrinsics=_colmap_intrinsics,
+)
+
+FORMATS: dict[str, ExportFormat] = {f.name: f for f in (SEVEN_SCENES, ACE, TUM_RGBD, COLMAP)}
+
+
 # ---------------------------------------------------------------------------------------------
 # manifest
 
 
-def _intrinsics_doc(tour: Tour, fmt: str) -> dict:
+def _intrinsics_doc(tour: Tour, layout: ExportFormat) -> dict:
     intr = tour.intrinsics
     w, h = intr.width, intr.height
     doc = {
@@ -290,59 +475,17 @@ def _intrinsics_doc(tour: Tour, fmt: str) -> dict:
         "pixel_centers": "toolkit (= OpenCV, ACE): pixel (u, v) is centred at integer (u, v); a centred camera "
                          "has cx = (width - 1) / 2",
     }
-    if fmt == "colmap":
-        doc["colmap"] = {
-            "model": "PINHOLE", "fx": intr.fx, "fy": intr.fy, "cx": intr.cx + 0.5, "cy": intr.cy + 0.5,
-            "file": "sparse/cameras.txt",
-            "note": "COLMAP's image origin is the upper-left pixel's corner (its centre is at 0.5, 0.5; hloc adds "
-                    "0.5 to keypoints for COLMAP): COLMAP cx, cy = toolkit cx, cy + 0.5",
-        }
-    if fmt == "ace":
-        doc["ace"] = {
-            "file": "{train,test}/calibration/frame-NNNNNN.calibration.txt",
-            "content": "3x3 K, toolkit convention (ACE uses fx, fy, cx, cy of a 3x3 K as given; pixel u at u)",
-        }
-    if fmt in ("ace", "7scenes"):
-        files = ("the 3x3 calibration files of this export do not load in DSAC*: replace each with fx" if fmt == "ace"
-                 else "its setup_7scenes.py writes 525 for every frame: write fx instead")
-        doc["dsacstar"] = {
-            "focal_length": intr.fx,
-            "principal_point": [w / 2.0, h / 2.0],
-            "offset_px": [w / 2.0 - intr.cx, h / 2.0 - intr.cy],
-            "note": f"DSAC* reads ONE focal length per frame (float(np.loadtxt(calibration file))); {files}. DSAC* "
-                    "assumes the principal point at W/2, H/2, offset_px from the toolkit's (half a pixel right and "
-                    "down for a centred camera, cx = (W - 1) / 2)" + ("" if math.isclose(intr.fx, intr.fy) else
-                                                                       "; fx != fy here, which DSAC* cannot represent"),
-        }
-    if fmt in ("7scenes", "tum-rgbd"):
-        doc["file"] = "intrinsics.txt (3x3 K, toolkit convention)"
-        if fmt == "7scenes":
-            doc["7scenes"] = ("7-Scenes ships no intrinsics; its readers' setup scripts hard-code fx = fy = 525 and "
-                              "the image centre: use this K")
+    doc.update(layout.intrinsics(intr))
     return doc
 
 
-def _depth_doc(fmt: str) -> dict | None:
-    enc = DEPTH_ENCODING.get(fmt)
+def _depth_doc(enc: dict | None) -> dict | None:
     if enc is None:
         return None
     return {"dtype": "uint16 PNG", "unit": enc["unit"], "scale": enc["scale"],
             "meaning": "planar z along the camera's +z axis (not ray length): metres = value / scale",
             "invalid": 0, "max_m": UINT16_MAX / enc["scale"],
             "out_of_range": f"surfaces farther than {UINT16_MAX / enc['scale']:g} m are written as 0 (invalid)"}
-
-
-def _pose_doc(fmt: str) -> dict:
-    return {
-        "7scenes": {"files": "seq-XX/frame-NNNNNN.pose.txt", "content": "4x4 camera-to-world, OpenCV camera axes"},
-        "ace": {"files": "{train,test}/poses/frame-NNNNNN.pose.txt",
-                "content": "4x4 camera-to-world, OpenCV camera axes",
-                "tool_output": "test_ace.py: 'NAME qw qx qy qz tx ty tz ...' world-to-camera, NAME = rgb base name"},
-        "tum-rgbd": {"files": "groundtruth.txt", "content": "timestamp tx ty tz qx qy qz qw, camera-to-world, "
-                                                            "t = frame / fps"},
-        "colmap": {"files": "sparse/images.txt", "content": "IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME, "
-                                                           "world-to-camera; IMAGE_ID = frame + 1"},
-    }[fmt]
 
 
 def _request(fmt: str, role: str, exposure, key: str, sensor: dict | None = None) -> dict:
@@ -400,7 +543,7 @@ def read_manifest(out_dir) -> dict:
     doc = read_json(path, missing="not found (not a finished synth export)")
     if doc.get("format") != MANIFEST_FORMAT:
         raise SceneFormatError(path, "format", f"expected {MANIFEST_FORMAT!r}, got {doc.get('format')!r}")
-    if doc.get("export_format") not in FORMATS:
+    if not isinstance(doc.get("export_format"), str) or doc["export_format"] not in FORMATS:
         raise SceneFormatError(path, "export_format", f"expected one of {', '.join(FORMATS)}, got "
                                f"{doc.get('export_format')!r}")
     if doc.get("role") not in ROLES:
@@ -495,6 +638,7 @@ def export_tour(tour_dir, fmt: str, out_dir, role: str = "query", exposure: str 
     ``sensor_seed``: read the frames through that RGB-D camera model (``formats.sensors``).
     """
     fmt = _check_choice(fmt, FORMATS, "--format", "export format")
+    layout = FORMATS[fmt]
     role = _check_choice(role, ROLES, "--role", "role")
     exp_req = parse_exposure(exposure)
     sensor_doc = sensor_record(sensor, sensor_seed)
@@ -507,7 +651,7 @@ def export_tour(tour_dir, fmt: str, out_dir, role: str = "query", exposure: str 
     manifest = _folder_state(out, want, tour_path)
 
     for f in frames:
-        f.files = _frame_files(fmt, role, f.index, f.has_rgb)
+        f.files = layout.frame_files(role, f.index, f.has_rgb) if f.has_rgb or not layout.needs_rgb else {}
     exported = [f for f in frames if f.files]
     skipped = [f.index for f in frames if not f.has_rgb]
     if not exported:
@@ -515,7 +659,7 @@ def export_tour(tour_dir, fmt: str, out_dir, role: str = "query", exposure: str 
                         f"(tum-rgbd exports depth alone)")
 
     if manifest is not None and all((out / p).is_file() for f in exported for p in f.files.values()) \
-            and all((out / p).is_file() for p in _whole_files(fmt, role)):
+            and all((out / p).is_file() for p in layout.whole_files(role)):
         return {**manifest, "run": {"written": 0, "kept": len(exported)}}
 
     # the request first (a killed export is recognised and resumed by it), then the frames, then the manifest
@@ -524,7 +668,7 @@ def export_tour(tour_dir, fmt: str, out_dir, role: str = "query", exposure: str 
     request = {**want, "tour_path": tour_path, "format": MANIFEST_FORMAT + " request"}
     if not req_path.exists():
         write_json_atomic(req_path, request)
-    _clean_strays(out, _frame_dirs(fmt, role))
+    _clean_strays(out, layout.frame_dirs(role))
 
     from tqdm import tqdm
 
@@ -538,7 +682,6 @@ def export_tour(tour_dir, fmt: str, out_dir, role: str = "query", exposure: str 
     elif exp_req == "fixed":
         fixed_factor = _fixed_factor(tour, rgb_frames, out, manifest, progress)
 
-    enc = DEPTH_ENCODING.get(fmt)
     factors: dict[int, float] = {}
     written = kept = 0
     bar = tqdm(exported, desc=f"export {fmt}", unit="frame", disable=not progress, file=sys.stderr, dynamic_ncols=True)
@@ -562,7 +705,7 @@ def export_tour(tour_dir, fmt: str, out_dir, role: str = "query", exposure: str 
         if "depth" in f.files:
             if fr.depth is None:
                 raise UserError(f"{tour.frame_path(f.index)}: no depth channel (Z)")
-            _write_bytes_atomic(out / f.files["depth"], _encode_png(depth16(fr.depth, enc["scale"])))
+            _write_bytes_atomic(out / f.files["depth"], _encode_png(depth16(fr.depth, layout.depth["scale"])))
         if "calibration" in f.files:
             write_text_atomic(out / f.files["calibration"], _matrix_text(tour.K))
         if "pose" in f.files:  # last: a frame is complete when all its files exist
@@ -570,8 +713,8 @@ def export_tour(tour_dir, fmt: str, out_dir, role: str = "query", exposure: str 
         written += 1
     bar.close()
 
-    _write_whole_files(out, tour, fmt, role, exported)
-    manifest = _manifest(tour, tour_path, key, fmt, role, exp_req, fixed_factor, factors, exported, skipped)
+    layout.write_whole_files(out, tour, role, exported)
+    manifest = _manifest(tour, tour_path, key, layout, role, exp_req, fixed_factor, factors, exported, skipped)
     manifest["sensor"] = sensor_doc
     write_json_atomic(out / MANIFEST_FILE, manifest)
     return {**manifest, "run": {"written": written, "kept": kept}}
@@ -601,78 +744,7 @@ def _fixed_factor(tour: Tour, rgb_frames: list[_Frame], out: Path, manifest: dic
     return factor
 
 
-def _whole_files(fmt: str, role: str) -> list[str]:
-    return {
-        "7scenes": ["TrainSplit.txt", "TestSplit.txt", "intrinsics.txt"],
-        "ace": [],
-        "tum-rgbd": ["rgb.txt", "depth.txt", "groundtruth.txt", "associations.txt", "intrinsics.txt"],
-        "colmap": ["sparse/cameras.txt", "sparse/images.txt", "sparse/points3D.txt"]
-                  + (["queries_with_intrinsics.txt"] if role == "query" else []),
-    }[fmt]
-
-
-def _ts(i: int, fps: float) -> str:
-    return f"{i / fps:.{TIMESTAMP_DECIMALS}f}"
-
-
-def _colmap_params(intr) -> str:
-    """PINHOLE fx fy cx cy in COLMAP's convention (image origin at the upper-left pixel's corner)."""
-    return " ".join(f"{v:.15g}" for v in (intr.fx, intr.fy, intr.cx + 0.5, intr.cy + 0.5))
-
-
-def _write_whole_files(out: Path, tour: Tour, fmt: str, role: str, exported: list[_Frame]) -> None:
-    K_text = _matrix_text(tour.K)
-    intr = tour.intrinsics
-    if fmt == "7scenes":
-        _, n = _seq(role)
-        own, other = ("TrainSplit.txt", "TestSplit.txt") if role == "mapping" else ("TestSplit.txt", "TrainSplit.txt")
-        _write_text_if_changed(out / own, f"sequence{n}\n")
-        _write_text_if_changed(out / other, "")
-        _write_text_if_changed(out / "intrinsics.txt", K_text)
-    elif fmt == "tum-rgbd":
-        fps = tour.fps
-        rgb = [f for f in exported if "rgb" in f.files]
-        head = "# {what}\n# file: '{name}' (synth export)\n# timestamp filename\n"
-        _write_text_if_changed(out / "rgb.txt", head.format(what="color images", name=tour.name)
-                               + "".join(f"{_ts(f.index, fps)} {f.files['rgb']}\n" for f in rgb))
-        _write_text_if_changed(out / "depth.txt", head.format(what="depth maps", name=tour.name)
-                               + "".join(f"{_ts(f.index, fps)} {f.files['depth']}\n" for f in exported))
-        lines = ["# ground truth trajectory", f"# file: '{tour.name}' (synth export)", "# timestamp tx ty tz qx qy qz qw"]
-        for f in exported:
-            T = tour.pose(f.index)
-            w, x, y, z = matrix_to_quat(T[:3, :3])
-            t = T[:3, 3]
-            lines.append(f"{_ts(f.index, fps)} {t[0]:.9f} {t[1]:.9f} {t[2]:.9f} {x:.9f} {y:.9f} {z:.9f} {w:.9f}")
-        _write_text_if_changed(out / "groundtruth.txt", "\n".join(lines) + "\n")
-        _write_text_if_changed(out / "associations.txt", "".join(
-            f"{_ts(f.index, fps)} {f.files['rgb']} {_ts(f.index, fps)} {f.files['depth']}\n" for f in rgb))
-        _write_text_if_changed(out / "intrinsics.txt", K_text)
-    elif fmt == "colmap":
-        cam = f"1 PINHOLE {intr.width} {intr.height} {_colmap_params(intr)}"
-        _write_text_if_changed(out / "sparse/cameras.txt", "# Camera list with one line of data per camera:\n"
-                               "#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n# Number of cameras: 1\n" + cam + "\n")
-        lines = ["# Image list with two lines of data per image:", "#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME",
-                 "#   POINTS2D[] as (X, Y, POINT3D_ID)", f"# Number of images: {len(exported)}, mean observations per image: 0"]
-        root = _name_root(fmt, role)
-        for f in exported:
-            T = tour.pose(f.index)
-            R = T[:3, :3].T
-            t = -R @ T[:3, 3]
-            w, x, y, z = matrix_to_quat(R)
-            name = f.files["rgb"][len(root):]
-            lines.append(f"{f.index + 1} {w:.12f} {x:.12f} {y:.12f} {z:.12f} {t[0]:.12f} {t[1]:.12f} {t[2]:.12f} 1 {name}")
-            lines.append("")
-        _write_text_if_changed(out / "sparse/images.txt", "\n".join(lines) + "\n")
-        _write_text_if_changed(out / "sparse/points3D.txt", "# 3D point list with one line of data per point:\n"
-                               "#   POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)\n"
-                               "# Number of points: 0, mean track length: 0\n")
-        if role == "query":
-            params = _colmap_params(intr)
-            _write_text_if_changed(out / "queries_with_intrinsics.txt", "".join(
-                f"{f.files['rgb'][len(root):]} PINHOLE {intr.width} {intr.height} {params}\n" for f in exported))
-
-
-def _manifest(tour: Tour, tour_path: str, key: str, fmt: str, role: str, exp_req, fixed_factor, factors,
+def _manifest(tour: Tour, tour_path: str, key: str, layout: ExportFormat, role: str, exp_req, fixed_factor, factors,
               exported: list[_Frame], skipped: list[int]) -> dict:
     if fixed_factor is None:
         exposure = {"mode": "auto", "requested": exp_req, "factors": {str(i): factors[i] for i in sorted(factors)}}
@@ -684,32 +756,31 @@ def _manifest(tour: Tour, tour_path: str, key: str, fmt: str, role: str, exp_req
                              "(formats.tour.tonemap); auto factor = 0.9 / 97th percentile of the frame's luminance")
     frames: dict[str, int] = {}
     for f in exported:
-        for kind in ("rgb", "depth"):
-            if kind in f.files and (kind == "rgb" or fmt == "tum-rgbd"):
+        for kind in layout.named_kinds:
+            if kind in f.files:
                 frames[f.files[kind]] = f.index
     doc = {
         "format": MANIFEST_FORMAT,
-        "export_format": fmt,
+        "export_format": layout.name,
         "role": role,
         "tour": {"path": tour_path, "key": key, "key_of": f"sha256 of {CAMERA_FILE}, {POSES_FILE}, {META_FILE}",
                  "name": tour.name, "n_frames": len(tour), "fps": tour.fps,
                  "layout": tour.meta.get("layout"), "lighting": tour.meta.get("lighting")},
-        "intrinsics": _intrinsics_doc(tour, fmt),
-        "poses": _pose_doc(fmt),
-        "depth": _depth_doc(fmt),
+        "intrinsics": _intrinsics_doc(tour, layout),
+        "poses": dict(layout.poses),
+        "depth": _depth_doc(layout.depth),
         "exposure": exposure,
         "frames": frames,
-        "name_root": _name_root(fmt, role),
+        "name_root": layout.name_root(role),
         "names": "frames maps each exported file (path relative to the export root) to its tour frame index; the "
                  "tool's own name for a frame (in its pose files) is the key without name_root",
         "skipped": {"count": len(skipped), "frames": skipped,
-                    "reason": ("geometry-only frames (no RGB): left out" if fmt in IMAGE_FORMATS else
+                    "reason": ("geometry-only frames (no RGB): left out" if layout.needs_rgb else
                                "geometry-only frames (no RGB): depth and pose written, no colour image")},
         "n_exported": len(exported),
     }
-    if fmt == "tum-rgbd":
-        doc["timestamps"] = {_ts(f.index, tour.fps): f.index for f in exported}
-        doc["timestamp_rule"] = f"t = frame / fps (fps {tour.fps:g}), {TIMESTAMP_DECIMALS} decimals"
+    if layout.manifest_extra is not None:
+        doc.update(layout.manifest_extra(tour, exported))
     return doc
 
 
@@ -720,7 +791,8 @@ def summary_line(manifest: dict, out_dir) -> str:
     exp = manifest["exposure"]
     exp_text = "auto (per frame)" if exp["mode"] == "auto" else f"fixed x{exp['factor']:.4g}"
     sk = manifest["skipped"]["count"]
-    sk_text = (f"{sk} geometry-only frames skipped" if manifest["export_format"] in IMAGE_FORMATS
+    layout = FORMATS.get(manifest["export_format"])
+    sk_text = (f"{sk} geometry-only frames skipped" if layout is not None and layout.needs_rgb
                else f"{sk} geometry-only frames without colour")
     done = (f"{run.get('written', n)} written, {run.get('kept', 0)} already there" if run.get("kept")
             else f"{run.get('written', n)} written")

@@ -11,9 +11,10 @@ from .errors import SceneFormatError
 
 
 def read_json(path, missing: str = "file not found", expect_object: bool = True):
-    """The value in a JSON file the toolkit writes (tour metadata, export manifests); a missing,
-    unreadable or malformed file is a SceneFormatError naming the file (and the line), ``missing``
-    saying what was expected there. With ``expect_object`` anything but a JSON object is one too."""
+    """The value in a JSON file the toolkit writes (tour metadata, export manifests, design.json,
+    an experiment's results.json); a missing, unreadable or malformed file is a SceneFormatError
+    naming the file (and the line), ``missing`` saying what was expected there. With
+    ``expect_object`` anything but a JSON object is one too. Every reader of such a file uses this."""
     path = Path(path)
     if not path.is_file():
         raise SceneFormatError(path, None, missing)
@@ -21,8 +22,10 @@ def read_json(path, missing: str = "file not found", expect_object: bool = True)
         data = json.loads(path.read_text())
     except json.JSONDecodeError as e:
         raise SceneFormatError(path, f"line {e.lineno}", f"not valid JSON ({e.msg})") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise SceneFormatError(path, None, f"cannot read ({e})") from None
+    except OSError as e:
+        raise SceneFormatError(path, None, f"cannot read: {e.strerror or e}") from None
+    except UnicodeDecodeError as e:
+        raise SceneFormatError(path, None, f"cannot read: not UTF-8 text ({e.reason})") from None
     if expect_object and not isinstance(data, dict):
         raise SceneFormatError(path, None, f"expected a JSON object, got {type(data).__name__}")
     return data

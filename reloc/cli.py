@@ -18,19 +18,19 @@ def build_parser() -> argparse.ArgumentParser:
     # one module per command group, imported when the parser is built (``reloc --version`` stays fast)
     from .backend import run
     from .detector import cli as detector_cli
-    from .experiments import bench, checks, experiment, units
-    from .experiments import eval as eval_
+    from .experiments import bench, checks, localization_units, runner
+    from .experiments import cli as eval_cli
     from .map import cli as map_cli
 
     p = argparse.ArgumentParser(prog="reloc", description="VideoReloc: relocalization against a map of class-labelled boxes.")
     p.add_argument("--version", action="version", version=f"reloc {__version__}")
     sub = p.add_subparsers(dest="group")
     map_cli.register_cli(sub)
-    units.register_cli(sub)
+    localization_units.register_cli(sub)
     run.register_cli(sub)
-    eval_.register_cli(sub)
+    eval_cli.register_cli(sub)
     bench.register_cli(sub)
-    experiment.register_cli(sub)
+    runner.register_cli(sub)
     checks.register_cli(sub)
     detector_cli.register_cli(sub)
     return p

@@ -149,6 +149,19 @@ def level(R: np.ndarray, u_clip: np.ndarray) -> np.ndarray:
     return rotation_between(up, [0.0, 0.0, 1.0]) @ R
 
 
+def non_degenerate_triangles(P: np.ndarray, min_angle_deg: float) -> np.ndarray:
+    """Triangles (M, 3, 3) whose smallest interior angle is at least min_angle_deg."""
+    a = P[:, 1] - P[:, 0]
+    b = P[:, 2] - P[:, 0]
+    c = P[:, 2] - P[:, 1]
+    la, lb, lc = (np.linalg.norm(v, axis=1) for v in (a, b, c))
+    area2 = np.linalg.norm(np.cross(a, b), axis=1)
+    # sin of each angle = 2 * area / (product of adjacent sides); smallest angle is opposite the
+    # shortest side, so checking the largest product suffices
+    prod = np.maximum.reduce([la * lb, la * lc, lb * lc])
+    return area2 / np.maximum(prod, 1e-12) >= math.sin(math.radians(min_angle_deg))
+
+
 # --------------------------------------------------------------------------------------------
 # gravity-aligned boxes
 

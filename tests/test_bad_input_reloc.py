@@ -144,13 +144,13 @@ def test_reloc_map_ground_truth_unwritable_out(world, tmp_path, blocker, capsys)
 def test_reloc_experiment_unwritable_out_fails_fast(tmp_path, blocker, capsys, monkeypatch):
     import yaml
 
-    import reloc.experiments.experiment
+    import reloc.experiments.runner
     from test_reloc_experiment import _spec
 
     def no_work(*a, **k):
         raise AssertionError("the design was read before --out was checked")
 
-    monkeypatch.setattr(reloc.experiments.experiment, "design_tours", no_work)
+    monkeypatch.setattr(reloc.experiments.runner, "design_tours", no_work)
     spec = _spec(tmp_path)
     out = blocker / "exp"
     assert reloc_main(["experiment", str(spec), "--out", str(out), "--quiet"]) == 2
@@ -324,7 +324,7 @@ def test_run_json_records_the_detector_and_its_corruption(world, tmp_path, capsy
 
 def test_experiment_runs_record_the_spec_detector(world, tmp_path):
     """The experiment's VideoReloc runs go through relocalize with the spec's ``detector`` settings."""
-    from reloc.experiments.experiment import _detector
+    from reloc.experiments.tasks import _detector
     from reloc.map.boxmap import BoxMap
     from reloc.backend.run import relocalize
 

@@ -16,8 +16,8 @@ import yaml
 from formats.errors import UserError
 from formats.tour import Tour, tonemap
 from reloc.cli import main as reloc_main
-from reloc.frontend.detection_learned import LearnedDetector, depth_edges
-from reloc.frontend.detector_base import FrameData
+from reloc.detection.base import FrameData
+from reloc.detection.learned import LearnedDetector, depth_edges
 from synth.cli import main as synth_main
 
 torch = pytest.importorskip("torch")  # the [train] extra; make test installs it

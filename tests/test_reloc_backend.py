@@ -297,7 +297,8 @@ def test_no_clip_ever_placed_gives_complete_empty_outputs(data, tmp_path, capsys
 
 def test_run_broken_at_every_frame(data):
     """Every other frame has no depth: every clip is one frame long and its own run."""
-    from reloc.frontend.detection import FrameData, OracleDetector
+    from reloc.detection.base import FrameData
+    from reloc.detection.oracle import OracleDetector
     from reloc.frontend.stream import OdometryPoses
     from reloc.backend.run import Relocalizer
 

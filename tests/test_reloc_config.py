@@ -15,7 +15,9 @@ from reloc import geometry as G
 from reloc.frontend.clip_rigid import fit_clip_transform
 from reloc.frontend.clips import Node, fuse
 from reloc.config import Config, load_config
-from reloc.frontend.detection import Corruption, Detection, DetectorSpec, FrameData, build_detector
+from reloc.detection.base import Detection, FrameData
+from reloc.detection.factory import DetectorSpec, build_detector
+from reloc.detection.oracle import Corruption
 from reloc.frontend.observations import Observation, observe
 from reloc.frontend.refinement import estimate_gravity, wall_yaws
 
@@ -129,7 +131,7 @@ def test_clip_rigid_tolerances(tmp_path):
 def test_detection_min_mask_pixels_reaches_the_oracle_everywhere():
     """detection.min_mask_pixels was accepted and ignored; now reloc run, units, experiments and the
     bench build their oracle with it (default_detector, build_detector)."""
-    from reloc.frontend.detection import DetectorSpec, build_detector
+    from reloc.detection.factory import DetectorSpec, build_detector
     from reloc.frontend.stream import default_detector
 
     class FakeTour:

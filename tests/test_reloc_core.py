@@ -18,7 +18,7 @@ from reloc.frontend.clips import ClipPolicy, Node, fuse
 from reloc.config import ClipConfig, Config
 from reloc.map.boxmap import BoxMap, circular_median_mod
 from reloc.frontend.observations import Observation, observe
-from reloc.frontend.detection import Detection
+from reloc.detection.base import Detection
 from reloc.frontend.refinement import Gravity, estimate_gravity, manhattan_correction, orientation_aware, tilt_deg
 from reloc.frontend.registration import (anchor_candidate, anchors_for_clip, anchors_veto, fallback_candidates,
                                 graph_candidate)
@@ -687,7 +687,7 @@ def _clip_schedule(clip_cfg: ClipConfig, frames: int) -> tuple[list[int], list[t
     """Stream ``frames`` frames without evidence (no detections, no camera travel) through the
     front-end: the clip lengths at which it asked the policy whether to close, and each clip's
     (length, end reason)."""
-    from reloc.frontend.detection import FrameData
+    from reloc.detection.base import FrameData
     from reloc.frontend.stream import FrontEnd, StaticPoses
 
     cfg = dataclasses.replace(Config(), clips=clip_cfg)

@@ -13,7 +13,7 @@ import yaml
 
 from reloc.experiments import tables
 from reloc.cli import main as reloc_main
-from reloc.experiments.experiment import load_experiment
+from reloc.experiments.spec import load_experiment
 
 from formats.design import write_design
 
@@ -352,7 +352,7 @@ def test_malformed_design_file_is_one_line(tmp_path, capsys):
     (root / "design.json").write_text('{"format": "videoreloc-design/1", "tours": [1]')
     assert reloc_main(["experiment", str(_spec(tmp_path)), "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
-    assert "design.json: malformed JSON" in err and len(err.splitlines()) == 1, err
+    assert "design.json: line 1: not valid JSON" in err and len(err.splitlines()) == 1, err
 
 
 # ---------------------------------------------------------------------------------------------
@@ -589,7 +589,7 @@ def test_factors_table_columns_line_up(lightings):
 
 
 def _copy_sources(root: Path, files) -> None:
-    from reloc.experiments.experiment import SOURCE_ROOT
+    from reloc.experiments.fingerprint import SOURCE_ROOT
 
     for f in files:
         dst = root / f.relative_to(SOURCE_ROOT)
@@ -607,7 +607,7 @@ def _flip_one_byte(path: Path) -> None:
 @pytest.fixture
 def fresh_fingerprint():
     """code_fingerprint is computed once per process: forget it before and after a test that moves it."""
-    from reloc.experiments.experiment import code_fingerprint
+    from reloc.experiments.fingerprint import code_fingerprint
 
     code_fingerprint.cache_clear()
     yield
@@ -615,7 +615,7 @@ def fresh_fingerprint():
 
 
 def test_code_fingerprint_covers_reloc_and_the_format_modules_it_imports(tmp_path, fresh_fingerprint):
-    from reloc.experiments import experiment as E
+    from reloc.experiments import fingerprint as E
 
     files = E.code_files()
     rel = {f.relative_to(E.SOURCE_ROOT).as_posix() for f in files}
@@ -646,7 +646,7 @@ def test_code_fingerprint_covers_reloc_and_the_format_modules_it_imports(tmp_pat
 
 def test_project_packages_are_the_ones_pyproject_ships():
     """The fingerprint follows imports into PROJECT_PACKAGES only: every top-level package is there."""
-    from reloc.experiments.experiment import PROJECT_PACKAGES
+    from reloc.experiments.fingerprint import PROJECT_PACKAGES
 
     import tomllib
 
@@ -682,7 +682,7 @@ def _done_markers(exp: Path) -> dict:
 
 @pytest.mark.slow
 def test_a_code_change_recomputes_every_result(fast_design, capsys, monkeypatch, tmp_path, fresh_fingerprint):
-    from reloc.experiments import experiment as E
+    from reloc.experiments import fingerprint as E
 
     exp = fast_design / "exp"
     argv = ["experiment", str(fast_design / "exp.yaml"), "--quiet", "--no-plots"]

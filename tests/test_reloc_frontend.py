@@ -10,12 +10,13 @@ import numpy as np
 import pytest
 
 from reloc.config import Config
-from reloc.frontend.detection import Corruption, FrameData, OracleDetector
+from reloc.detection.base import FrameData
+from reloc.detection.oracle import Corruption, OracleDetector
 from reloc.experiments.evaluation import summarize
 from reloc.frontend.stream import FrontEnd, GroundTruthPoses
 from reloc.geometry import pose_distance
 from reloc.map.boxmap import BoxMap
-from reloc.experiments.units import format_units, run_units
+from reloc.experiments.localization_units import format_units, run_units
 
 from formats.tour import Tour
 from synth.scene.model import boxes_document, load_layout

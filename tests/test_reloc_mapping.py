@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from reloc.frontend.detection import Corruption, OracleDetector
+from reloc.detection.oracle import Corruption, OracleDetector
 from reloc.map.boxmap import BoxMap
 from reloc.map.build import build_map
 from reloc.map.cli import register_cli

@@ -25,8 +25,8 @@ import onnx
 import pytest
 from onnx import TensorProto, helper, numpy_helper
 
-from reloc.frontend.detection import FrameData
-from reloc.frontend.detection_onnx import OnnxDetector
+from reloc.detection.base import FrameData
+from reloc.detection.onnx_yolo import OnnxDetector
 
 from formats.errors import UserError
 

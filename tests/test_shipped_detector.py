@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from formats.tour import Tour
-from reloc.frontend.detection_learned import LearnedDetector
-from reloc.frontend.detector_base import FrameData
+from reloc.detection.base import FrameData
+from reloc.detection.learned import LearnedDetector
 from synth.paths.files import save_path
 from synth.paths.views import plan_views
 from synth.scene.model import load_layout

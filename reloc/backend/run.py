@@ -33,8 +33,8 @@ from formats.errors import check_output_folder
 from .online import Backend, ClipState
 from ..frontend.clips import fuse
 from ..config import Config
-from ..frontend.detection import Detector, detector_record
-from ..frontend.detector_base import check_rgb_schedule, needs_rgb
+from ..detection.base import Detector, check_rgb_schedule, needs_rgb
+from ..detection.factory import detector_record
 from ..frontend.stream import FrontEnd, PoseEvent, default_detector, make_pose_stream, read_frame
 from ..geometry import inv_T
 from ..frontend.localize import localize_clip
@@ -284,7 +284,7 @@ def cmd_run(args) -> int:
     from formats.tour import Tour
 
     from ..config import load_config
-    from ..frontend.detection import build_detector, detector_spec_from_args
+    from ..detection.factory import build_detector, detector_spec_from_args
 
     check_output_folder(args.out)
     tour = Tour(args.tour, sensor=args.sensor, sensor_seed=args.sensor_seed)
@@ -310,7 +310,7 @@ def cmd_run(args) -> int:
 
 
 def register_cli(subparsers) -> None:
-    from ..frontend.detection import add_detector_arguments
+    from ..detection.factory import add_detector_arguments
 
     p = subparsers.add_parser("run", help="relocalize a tour: causal.txt, closure.txt, frames.json, clips.json")
     p.add_argument("--map", required=True, help="map file (videoreloc-boxes/1 JSON)")

@@ -10,7 +10,7 @@ For every RGB frame (every ``every``-th) of the tours, against the frame's rende
 * milliseconds per frame of ``detect`` (network and instance cutting) on this machine, median.
 
 Needs onnxruntime only (no PyTorch): it runs the exported model through
-``reloc.frontend.detection_learned.LearnedDetector``.
+``reloc.detection.learned.LearnedDetector``.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ import numpy as np
 
 from formats.tour import Tour
 
-from ..frontend.detection_learned import LearnedDetector
+from ..detection.learned import LearnedDetector
 
 IOU_MATCH = 0.5
 

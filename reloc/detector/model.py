@@ -3,7 +3,7 @@
 Input: an 8-bit sRGB image as float in [0, 1], NCHW, height and width divisible by 8. Outputs, at
 full resolution: ``semantic`` logits (background + the class table's classes) and ``boundary``
 logits (one channel: the pixel lies on the border between two instances, or between an instance
-and the background). Instances are cut from these by ``reloc.frontend.detection_learned``, which
+and the background). Instances are cut from these by ``reloc.detection.learned``, which
 also splits them at depth discontinuities.
 
 Three stride-2 stages (24, 48, 96 channels, a 128-channel bottleneck at 1/8) with skip

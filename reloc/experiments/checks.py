@@ -47,7 +47,7 @@ from pathlib import Path
 
 from formats.errors import SceneFormatError, UserError
 
-from .tables import FACTOR_KEYS, METRICS
+from .tables import FACTOR_KEYS, METRICS, read_results
 
 OPS = {">=": operator.ge, "<=": operator.le, ">": operator.gt, "<": operator.lt, "==": operator.eq, "!=": operator.ne}
 _EXPR = re.compile(r"^\s*([A-Za-z0-9_.@\-]+)\s*(>=|<=|==|!=|>|<)\s*([A-Za-z0-9_.@\-+eE]+)\s*$")
@@ -144,13 +144,7 @@ def _value(token: str, vals: dict, path: Path, field: str) -> float | None:
 
 def run_checks(check_file, results_dir) -> list[dict]:
     checks = parse_checks(check_file)
-    rpath = Path(results_dir) / "results.json"
-    if not rpath.is_file():
-        raise UserError(f"{rpath}: not found (is {results_dir} a reloc experiment results folder?)")
-    try:
-        results = json.loads(rpath.read_text())
-    except ValueError as e:
-        raise UserError(f"{rpath}: not valid JSON ({e})") from None
+    results = read_results(results_dir)
     vals = metric_table(results)
     rows = []
     for i, c in enumerate(checks):

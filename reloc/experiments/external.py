@@ -272,7 +272,7 @@ def _fill(template: str, values: dict) -> str:
     return template.format(**{k: shlex.quote(str(v)) for k, v in values.items()})
 
 
-def _fill_path(template: str, values: dict) -> str:
+def fill_path(template: str, values: dict) -> str:
     return template.format(**{k: str(v) for k, v in values.items()})
 
 
@@ -340,10 +340,10 @@ def run_external_task(task: dict) -> dict:
         values = {"mapping": task["mapping_export"], "query": task["query_export"], "scene": task["scene"], "out": work,
                   "map_out": task.get("map_out") or "", "tour": task["tour_name"], "name": m.name}
         _run_command(_fill(m.command, values), work, d / "command.log", m.timeout_s, what)
-        pose_file = Path(_fill_path(m.poses_file, values))
+        pose_file = Path(fill_path(m.poses_file, values))
         names = load_names(task["query_export"])
     else:
-        pose_file = Path(m.trajectories) / _fill_path(m.file, {"tour": task["tour_name"], "name": m.name})
+        pose_file = Path(m.trajectories) / fill_path(m.file, {"tour": task["tour_name"], "name": m.name})
         names = None if m.names is None else load_names(m.names)
     if not pose_file.is_file() or pose_file.stat().st_size == 0:
         raise UserError(f"{what}: wrote no poses ({pose_file} {'is empty' if pose_file.is_file() else 'not found'})")
@@ -358,9 +358,3 @@ def run_external_task(task: dict) -> dict:
                                         "file": str(pose_file), "code": task.get("code")})
     return {"method": m.name, "tour": task["tour_name"], "seconds": seconds}
 
-
-def file_key(path) -> str:
-    p = Path(path)
-    if not p.is_file():
-        return "missing"
-    return hashlib.sha1(p.read_bytes()).hexdigest()[:16]

@@ -20,7 +20,6 @@ Headless: matplotlib's Agg canvas, no pyplot. PNGs are written atomically.
 
 from __future__ import annotations
 
-import json
 import math
 import re
 import sys
@@ -40,6 +39,7 @@ from formats.camera import read_tum
 from formats.errors import SceneFormatError, UserError
 
 from .evaluation import THRESHOLDS, pose_errors
+from .tables import read_results
 
 __all__ = [
     "ERROR_CMAP", "ERROR_MAX_M", "POS_THRESHOLD_M", "ROT_THRESHOLD_DEG", "ROLLING_WINDOW", "DPI",
@@ -383,16 +383,6 @@ def _resolve(results_dir: Path, p) -> Path:
     return results_dir / p
 
 
-def _load_results(results_dir: Path) -> dict:
-    path = results_dir / "results.json"
-    if not path.is_file():
-        raise UserError(f"{path}: results file not found (is {results_dir} an experiment results directory?)")
-    try:
-        return json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise SceneFormatError(path, None, f"not valid JSON ({e})") from None
-
-
 def _trajectory_file(results_dir: Path, results: dict, row: dict, tour: str) -> Path:
     try:
         f = results["methods"][row["method"]]["modes"][row["mode"]]["tours"][tour].get("file")
@@ -411,7 +401,7 @@ def plot_experiment(results_dir) -> list[Path]:
     from ..map.boxmap import BoxMap
 
     results_dir = Path(results_dir)
-    results = _load_results(results_dir)
+    results = read_results(results_dir)
     plots = results_dir / "plots"
     bmap = None
     if results.get("map"):

@@ -17,15 +17,13 @@ Both files are written atomically.
 from __future__ import annotations
 
 import html
-import json
 import math
 import re
 from pathlib import Path
 
 from formats.atomic import write_text_atomic
-from formats.errors import SceneFormatError, UserError
 
-from .tables import EXTRA_TABLES, PAPER_TABLES, table_title
+from .tables import EXTRA_TABLES, PAPER_TABLES, read_results, table_title
 
 __all__ = ["write_report", "build_markdown", "markdown_to_html", "table_to_html", "split_row", "TABLE_ORDER"]
 
@@ -327,13 +325,7 @@ def build_markdown(results_dir, results: dict) -> str:
 def write_report(results_dir) -> tuple[Path, Path]:
     """Write ``report.html`` and ``report.md`` into ``results_dir``; returns (html_path, md_path)."""
     results_dir = Path(results_dir)
-    path = results_dir / "results.json"
-    if not path.is_file():
-        raise UserError(f"{path}: results file not found (is {results_dir} an experiment results directory?)")
-    try:
-        results = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise SceneFormatError(path, None, f"not valid JSON ({e})") from None
+    results = read_results(results_dir)
     md = build_markdown(results_dir, results)
     name = results.get("name") or results_dir.name
     md_path = write_text_atomic(results_dir / "report.md", md)

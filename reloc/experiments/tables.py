@@ -37,6 +37,7 @@ import numpy as np
 
 from formats.atomic import write_json_atomic, write_text_atomic
 from formats.camera import read_tum
+from formats.yamlfile import read_json
 
 from .evaluation import END_REASONS, end_reason_kind, odometry_drift, summarize
 
@@ -554,6 +555,12 @@ def write_tables(res: dict, out: Path) -> None:
             stale.with_suffix(".json").unlink(missing_ok=True)
 
 
+def read_results(results_dir) -> dict:
+    """``results.json`` of an experiment results folder; a missing or malformed one is one line naming it."""
+    return read_json(Path(results_dir) / "results.json",
+                     missing=f"not found (is {results_dir} a reloc experiment results folder?)")
+
+
 def format_all(out: Path) -> str:
-    res = json.loads((Path(out) / "results.json").read_text())
+    res = read_results(out)
     return "\n\n".join(md for md, _ in make_tables(res).values())

@@ -19,8 +19,9 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from formats.boxes import STRUCTURE_KINDS
+
 from ..config import ClipConfig, ObservationConfig
-from .detector_base import STRUCTURE_CLASSES
 from ..geometry import farthest_point_sample
 from .observations import Observation
 
@@ -36,7 +37,7 @@ class Node:
 
     @property
     def structure(self) -> bool:
-        return self.cls in STRUCTURE_CLASSES
+        return self.cls in STRUCTURE_KINDS
 
 
 @dataclass

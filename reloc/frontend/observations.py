@@ -12,8 +12,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from formats.boxes import STRUCTURE_KINDS
+
 from ..config import DetectionConfig, ObservationConfig
-from .detector_base import STRUCTURE_CLASSES, Detection
+from ..detection.base import Detection
 from ..geometry import farthest_point_sample
 
 
@@ -30,7 +32,7 @@ class Observation:
 
     @property
     def structure(self) -> bool:
-        return self.cls in STRUCTURE_CLASSES
+        return self.cls in STRUCTURE_KINDS
 
     def transformed(self, T: np.ndarray) -> "Observation":
         """The observation in another frame (T maps camera coordinates there)."""
@@ -101,7 +103,7 @@ def observe(frame_index: int, depth: np.ndarray, K: np.ndarray, detections: list
             step = int(np.ceil(len(ys) / cfg.max_points_per_mask))
             ys, xs = ys[::step], xs[::step]
         z = depth[ys, xs].astype(np.float64)
-        structure = det.cls in STRUCTURE_CLASSES
+        structure = det.cls in STRUCTURE_KINDS
         if not structure:
             # depth-consistent pixels: drop background seen through or beside the object
             zm = float(np.median(z))

@@ -26,8 +26,8 @@ import numpy as np
 from .clip_rigid import consensus_fit, within_sum
 from .clips import Node
 from ..config import RegistrationConfig
-from ..geometry import make_T, pose_distance, rigid_fit, rigid_fit_batch, rot_z, yaw_of
-from ..map.boxmap import BoxMap, _non_degenerate, circular_median_mod
+from ..geometry import make_T, non_degenerate_triangles, pose_distance, rigid_fit, rigid_fit_batch, rot_z, yaw_of
+from ..map.boxmap import BoxMap, circular_median_mod
 from .observations import Observation
 from .surface import SurfaceScorer, kappa, median_rho
 
@@ -162,7 +162,7 @@ def indexed_assignments(U_cls: list[str], U_c: np.ndarray, U_n: np.ndarray, bmap
     e = np.stack([np.linalg.norm(P[:, 0] - P[:, 1], axis=1), np.linalg.norm(P[:, 0] - P[:, 2], axis=1),
                   np.linalg.norm(P[:, 1] - P[:, 2], axis=1)], axis=1)
     ok = (e >= mc.triangle_edge_min_m).all(axis=1) & (e <= mc.triangle_edge_max_m).all(axis=1)
-    ok &= _non_degenerate(P, mc.triangle_min_angle_deg)
+    ok &= non_degenerate_triangles(P, mc.triangle_min_angle_deg)
     trip, e = trip[ok], e[ok]
     groups: dict[tuple, np.ndarray] = {}
     K = len(names)

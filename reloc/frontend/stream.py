@@ -24,8 +24,8 @@ import numpy as np
 
 from .clips import Clip, ClipPolicy, Node, fuse
 from ..config import Config
-from .detection import Detector, FrameData, OracleDetector
-from .detector_base import needs_labels
+from ..detection.base import Detector, FrameData, needs_labels
+from ..detection.oracle import OracleDetector
 from ..geometry import inv_T
 from .localize import Placement, localize_clip
 from ..map.boxmap import BoxMap

@@ -29,6 +29,7 @@ from formats.boxes import BOXES_FORMAT, STRUCTURE_KINDS
 from formats.errors import SceneFormatError, UserError
 
 from ..config import MapConfig
+from ..geometry import non_degenerate_triangles
 
 KINDS = ("object",) + STRUCTURE_KINDS
 
@@ -131,7 +132,7 @@ class BoxMap:
         out: dict[tuple[str, str, str], TriangleSet] = {}
         if tris:
             T = np.concatenate(tris)
-            T = T[_non_degenerate(C[T], cfg.triangle_min_angle_deg)]
+            T = T[non_degenerate_triangles(C[T], cfg.triangle_min_angle_deg)]
             names = sorted({self.classes[n] for n in obj})
             code = np.array([names.index(self.classes[n]) for n in obj])
             K = len(names)
@@ -188,19 +189,6 @@ class BoxMap:
             "manhattan_yaw_deg": round(math.degrees(self.manhattan_yaw), 3),
             "size_bytes": self.size_bytes,
         }
-
-
-def _non_degenerate(P: np.ndarray, min_angle_deg: float) -> np.ndarray:
-    """Triangles (M, 3, 3) whose smallest interior angle is at least min_angle_deg."""
-    a = P[:, 1] - P[:, 0]
-    b = P[:, 2] - P[:, 0]
-    c = P[:, 2] - P[:, 1]
-    la, lb, lc = (np.linalg.norm(v, axis=1) for v in (a, b, c))
-    area2 = np.linalg.norm(np.cross(a, b), axis=1)
-    # sin of each angle = 2 * area / (product of adjacent sides); smallest angle is opposite the
-    # shortest side, so checking the largest product suffices
-    prod = np.maximum.reduce([la * lb, la * lc, lb * lc])
-    return area2 / np.maximum(prod, 1e-12) >= math.sin(math.radians(min_angle_deg))
 
 
 def manhattan_yaw(m: BoxMap) -> float:

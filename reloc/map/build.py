@@ -6,7 +6,7 @@ walls, floors and ceilings. Here detector masks stand in for that pipeline (:fun
 with the knobs of :class:`~reloc.map.settings.MappingSettings`):
 
 * every ``stride``-th frame of the mapping tour is run through a detector (by default the
-  :class:`~reloc.frontend.detection.OracleDetector` of the tour's classes); a detector that sees
+  :class:`~reloc.detection.oracle.OracleDetector` of the tour's classes); a detector that sees
   images (the learned one) gets the frames among them that have RGB (every
   lcm(``stride``, the tour's ``rgb_every``)-th);
 * the depth-consistent pixels of each mask (valid depth; not on the far side of a depth
@@ -63,8 +63,8 @@ import numpy as np
 from formats.boxes import BOXES_FORMAT, FRAME_TEXT, ID_BASE
 from formats.errors import UserError
 
-from ..frontend.detection import FrameData, OracleDetector
-from ..frontend.detector_base import check_rgb_schedule, needs_labels, needs_rgb
+from ..detection.base import FrameData, check_rgb_schedule, needs_labels, needs_rgb
+from ..detection.oracle import OracleDetector
 from .document import kind_of
 from .fitting import fit_box
 from .pixels import _Backprojector, _depth_edges, _mask_pixels

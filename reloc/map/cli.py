@@ -14,7 +14,7 @@ from formats.errors import UserError, check_output_file
 from .build import build_map
 from .document import dumps_map, map_from_tour
 from .scoring import errors_against_ground_truth
-from .settings import DEFAULT_STRIDE
+from .settings import DEFAULT_STRIDE, MappingSettings
 
 
 def summary_line(doc: dict, size_bytes: int, errors: dict | None, report: dict | None = None) -> str:
@@ -51,7 +51,7 @@ def cmd_build(args) -> int:
     tour = Tour(args.tour)  # UserError when missing or malformed
     detector = None
     if args.detector != "oracle":
-        from ..frontend.detection import build_detector, detector_spec_from_args
+        from ..detection.factory import build_detector, detector_spec_from_args
 
         detector = build_detector(detector_spec_from_args(args), tour.class_names())
     doc, report = build_map(tour.root, detector=detector, stride=args.stride, voxel=args.voxel, progress=not args.quiet)
@@ -93,10 +93,11 @@ def register_cli(subparsers) -> None:
     a.add_argument("tour", metavar="TOUR_DIR", help="tour directory")
     a.add_argument("--out", required=True, help="map file (.json)")
     a.add_argument("--stride", type=int, default=DEFAULT_STRIDE, help=f"use every N-th frame (default {DEFAULT_STRIDE})")
-    a.add_argument("--voxel", type=float, default=0.05, help="voxel size in metres (default 0.05)")
+    a.add_argument("--voxel", type=float, default=MappingSettings.voxel,
+                   help=f"voxel size in metres (default {MappingSettings.voxel:g})")
     a.add_argument("--report", metavar="FILE.json", help="write the build report and per-box errors against the tour's ground truth")
     a.add_argument("--quiet", action="store_true", help="no progress bar")
-    from ..frontend.detection import add_detector_arguments
+    from ..detection.factory import add_detector_arguments
 
     add_detector_arguments(a)
     a.set_defaults(fn=cmd_build)

@@ -8,13 +8,12 @@ from __future__ import annotations
 
 import json
 
+from formats.boxes import STRUCTURE_KINDS
 from formats.tour import Tour
-
-from ..frontend.detection import STRUCTURE_CLASSES
 
 
 def kind_of(cls: str) -> str:
-    return cls if cls in STRUCTURE_CLASSES else "object"
+    return cls if cls in STRUCTURE_KINDS else "object"
 
 
 def dumps_map(doc: dict) -> str:

@@ -13,7 +13,11 @@ DEFAULT_STRIDE = 5  # every 5th frame: a 6000-frame 320x240 tour maps in well un
 
 @dataclass(frozen=True)
 class MappingSettings:
-    """Knobs of :func:`~reloc.map.build.build_map` (all "ours": the paper's pipeline has none of these)."""
+    """Knobs of :func:`~reloc.map.build.build_map` (all "ours": the paper's pipeline has none of these):
+    how a box map is built from a mapping tour (``reloc map build --stride --voxel``).
+
+    Not a section of :class:`reloc.config.Config`: ``Config.map`` (:class:`reloc.config.MapConfig`)
+    is how a map, once built and loaded, indexes its objects for registration."""
 
     stride: int = DEFAULT_STRIDE
     voxel: float = 0.05  # m, one centroid per cell

@@ -1,14 +1,12 @@
-"""Detection (paper Sec. III-C): class-labelled instance masks for a frame.
+"""The oracle detector (paper Sec. III-C): class-labelled instance masks from the rendered labels.
 
-One interface, :class:`Detector` (with :class:`FrameData` and :class:`Detection`, in
-:mod:`reloc.frontend.detector_base`), with two implementations:
-
-* :class:`OracleDetector` reads the rendered instance and semantic images and can degrade them
-  on purpose with a seeded :class:`Corruption` model (misses, label confusion among map classes,
-  mask erosion/dilation, spurious detections), so experiments can ask how much detector quality
-  matters;
-* :class:`reloc.frontend.detection_onnx.OnnxDetector` runs a user's ONNX instance-segmentation model with
-  YOLO-style segmentation outputs.
+:class:`OracleDetector` reads the rendered instance and semantic images and can degrade them on
+purpose with a seeded :class:`Corruption` model (misses, label confusion among map classes, mask
+erosion/dilation, spurious detections), so experiments can ask how much detector quality matters.
+It implements the :class:`~reloc.detection.base.Detector` interface, as do
+:class:`reloc.detection.learned.LearnedDetector` (the toolkit's own model) and
+:class:`reloc.detection.onnx_yolo.OnnxDetector` (a user's ONNX instance-segmentation model with
+YOLO-style segmentation outputs); :mod:`reloc.detection.factory` builds whichever a spec names.
 
 Detectors see only what a camera would give them plus, for the oracle, the rendered label
 images. The relocalizer never reads ground-truth instance ids: ``Detection.track_id`` is filled
@@ -17,21 +15,16 @@ by the oracle only so that map building can stand in for a class-agnostic 3D seg
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
 from scipy.ndimage import find_objects
 
-from formats.errors import UserError
+from formats.boxes import STRUCTURE_KINDS
 
 from ..config import DetectionConfig
-from .detection_learned import SHIPPED_MODEL, LearnedDetector
-from .detection_onnx import OnnxDetector
-from .detector_base import STRUCTURE_CLASSES, Detection, Detector, FrameData
-
-__all__ = ["STRUCTURE_CLASSES", "Corruption", "Detection", "Detector", "DetectorSpec", "FrameData", "OnnxDetector",
-           "OracleDetector", "add_detector_arguments", "build_detector", "detector_record", "detector_spec_from_args"]
+from .base import Detection, FrameData
 
 
 @dataclass(frozen=True)
@@ -75,7 +68,7 @@ class OracleDetector:
         self.vocabulary = set(vocabulary) if vocabulary is not None else set(self.classes.values())
         self.corruption = corruption or Corruption()
         self.min_pixels = int(min_pixels)
-        objs = sorted(c for c in self.vocabulary if c not in STRUCTURE_CLASSES)
+        objs = sorted(c for c in self.vocabulary if c not in STRUCTURE_KINDS)
         self._confusable = objs
 
     def detect(self, frame: FrameData) -> list[Detection]:
@@ -106,7 +99,7 @@ class OracleDetector:
             if rng is not None:
                 if rng.random() < c.miss_rate:
                     continue
-                if cls not in STRUCTURE_CLASSES and self._confusable and rng.random() < c.confusion_rate:
+                if cls not in STRUCTURE_KINDS and self._confusable and rng.random() < c.confusion_rate:
                     others = [x for x in self._confusable if x != cls]
                     if others:
                         cls = others[int(rng.integers(len(others)))]
@@ -136,70 +129,3 @@ def _morph(mask: np.ndarray, r: int) -> np.ndarray:
     m = mask.astype(np.uint8)
     m = cv2.dilate(m, k) if r > 0 else cv2.erode(m, k)
     return m.astype(bool)
-
-
-@dataclass
-class DetectorSpec:
-    """How experiments name a detector: ``oracle`` (with corruption) or ``onnx`` (model file)."""
-
-    kind: str = "oracle"
-    corruption: Corruption = field(default_factory=Corruption)
-    model: str | None = None
-    class_map: str | None = None
-
-
-def build_detector(spec: DetectorSpec, classes: dict[int, str], vocabulary=None,
-                   config: DetectionConfig | None = None) -> Detector:
-    """The detector a spec names: ``oracle`` (tour label images, with its corruption) or ``onnx``."""
-    if spec.kind == "oracle":
-        cfg = config or DetectionConfig()
-        return OracleDetector(classes, vocabulary=vocabulary, corruption=spec.corruption,
-                              min_pixels=cfg.min_mask_pixels)
-    if spec.kind == "onnx":
-        if not spec.model:
-            raise UserError("--detector onnx needs --model FILE.onnx")
-        return OnnxDetector(spec.model, class_map=spec.class_map, vocabulary=vocabulary)
-    if spec.kind == "learned":
-        cfg = config or DetectionConfig()
-        return LearnedDetector(spec.model or SHIPPED_MODEL, vocabulary=vocabulary, min_pixels=cfg.min_mask_pixels)
-    raise UserError(f"unknown detector {spec.kind!r} (expected oracle, onnx or learned)")
-
-
-def detector_record(detector: Detector) -> dict:
-    """What a run records of its detector (run.json), so that a degraded run can be told from a
-    clean one by its files: the oracle's corruption settings and seed, the ONNX model and thresholds."""
-    rec: dict = {"name": getattr(detector, "name", type(detector).__name__)}
-    if isinstance(detector, OracleDetector):
-        rec["corruption"] = {**asdict(detector.corruption), "active": detector.corruption.active}
-        rec["min_pixels"] = detector.min_pixels
-    for k in ("model_path", "score_threshold", "iou_threshold", "max_detections", "mask_threshold",
-              "boundary_threshold", "min_pixels"):
-        v = getattr(detector, k, None)
-        if v is not None:
-            rec["model" if k == "model_path" else k] = str(v) if k == "model_path" else v
-    return rec
-
-
-def add_detector_arguments(p) -> None:
-    """The detector options shared by reloc's commands."""
-    g = p.add_argument_group("detector")
-    g.add_argument("--detector", choices=("oracle", "onnx", "learned"), default="oracle",
-                   help="oracle: the tour's rendered labels (default); onnx: a YOLO-style segmentation model; "
-                        "learned: the toolkit's own model (reloc detector train)")
-    g.add_argument("--model", help="ONNX model file (with --detector onnx; with learned, default: the shipped "
-                                   "models/detector_160x120.onnx)")
-    g.add_argument("--class-map", help="YAML/JSON mapping model class -> toolkit class (with --detector onnx)")
-    g.add_argument("--miss-rate", type=float, default=0.0, help="oracle corruption: probability of missing an instance")
-    g.add_argument("--confusion-rate", type=float, default=0.0, help="oracle corruption: probability of a wrong map class")
-    g.add_argument("--mask-px", type=int, default=0, help="oracle corruption: erode/dilate masks by up to N pixels")
-    g.add_argument("--spurious", type=float, default=0.0, help="oracle corruption: mean invented detections per frame")
-    g.add_argument("--detector-seed", type=int, default=0, help="oracle corruption seed")
-
-
-def detector_spec_from_args(args) -> DetectorSpec:
-    try:
-        c = Corruption(miss_rate=args.miss_rate, confusion_rate=args.confusion_rate, mask_px=args.mask_px,
-                       spurious_per_frame=args.spurious, seed=args.detector_seed)
-    except ValueError as e:
-        raise UserError(str(e)) from None
-    return DetectorSpec(kind=args.detector, corruption=c, model=args.model, class_map=args.class_map)

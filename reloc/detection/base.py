@@ -1,7 +1,8 @@
 """What every detector takes and gives (paper Sec. III-C): a frame in, class-labelled masks out.
 
-Shared by :mod:`reloc.frontend.detection` (the oracle, the factory) and :mod:`reloc.frontend.detection_onnx` (a
-user's ONNX model), so that neither imports the other's module for these types.
+Shared by every detector (:mod:`reloc.detection.oracle`, :mod:`reloc.detection.learned`,
+:mod:`reloc.detection.onnx_yolo`), by :mod:`reloc.detection.factory` and by the detectors' users
+(map building, the front-end), so that none imports another's module for these types.
 """
 
 from __future__ import annotations
@@ -10,8 +11,6 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
-
-STRUCTURE_CLASSES = ("wall", "floor", "ceiling")
 
 
 @dataclass

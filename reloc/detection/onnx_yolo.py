@@ -22,20 +22,13 @@ import cv2
 import numpy as np
 import yaml
 
-from reloc.frontend.detector_base import Detection, FrameData
-
-from formats.errors import UserError
+from formats.errors import UserError, one_line
 from formats.frames import srgb8
 
-
+from .base import Detection, FrameData
 
 PAD_VALUE = 114  # letterbox padding, out of 255 (as Ultralytics)
 MAX_NMS = 30000  # candidates kept for NMS, by score
-
-
-def _one_line(e: BaseException, limit: int = 240) -> str:
-    s = " ".join(str(e).split())
-    return s if len(s) <= limit else s[: limit - 3] + "..."
 
 
 # ---------------------------------------------------------------- image preparation
@@ -105,7 +98,7 @@ def load_class_map(source) -> tuple[dict[int | str, str | None], str]:
     try:
         data = yaml.safe_load(p.read_text())
     except (yaml.YAMLError, UnicodeDecodeError) as e:
-        raise UserError(f"{p}: class map is not valid YAML/JSON: {_one_line(e)}") from None
+        raise UserError(f"{p}: class map is not valid YAML/JSON: {one_line(e)}") from None
     return _normalize_class_map(data, str(p)), str(p)
 
 
@@ -193,11 +186,11 @@ def open_session(path, what: str, intra_op_num_threads: int = 1, providers: list
     try:
         return ort.InferenceSession(str(path), sess_options=opts, providers=providers or ["CPUExecutionProvider"])
     except Exception as e:
-        raise UserError(f"{path}: not a readable ONNX model: {_one_line(e)}") from None
+        raise UserError(f"{path}: not a readable ONNX model: {one_line(e)}") from None
 
 
 class OnnxDetector:
-    """A :class:`reloc.frontend.detection.Detector` running a YOLO-style ONNX segmentation model.
+    """A :class:`reloc.detection.base.Detector` running a YOLO-style ONNX segmentation model.
 
     ``model``: the .onnx file. ``class_map``: see :func:`load_class_map`; without one the model's
     ``names`` metadata is used. ``vocabulary``: class names to report (others are dropped), None =
@@ -305,7 +298,7 @@ class OnnxDetector:
         try:
             preds, protos = self.session.run([self._pred_name, self._proto_name], {self._input_name: x})
         except Exception as e:
-            raise UserError(f"{self.model_path}: inference failed: {_one_line(e)}") from None
+            raise UserError(f"{self.model_path}: inference failed: {one_line(e)}") from None
         preds = np.asarray(preds, np.float32)
         protos = np.asarray(protos, np.float32)
         P = self._predictions(preds, protos)  # (4 + nc + nm, N)

@@ -26,11 +26,11 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.errors import UserError
+from formats.errors import UserError, one_line
 from formats.tour import tonemap
 
-from .detection_onnx import _one_line, open_session
-from .detector_base import Detection, FrameData
+from .base import Detection, FrameData
+from .onnx_yolo import open_session
 
 MODEL_FORMAT = "videoreloc-segnet/1"
 # the model the toolkit ships (models/detector_160x120.md: its data, training and metrics); the
@@ -54,7 +54,7 @@ def depth_edges(depth: np.ndarray, rel: float, abs_m: float) -> np.ndarray:
 
 
 class LearnedDetector:
-    """A :class:`reloc.frontend.detection.Detector` running the toolkit's segmentation model."""
+    """A :class:`reloc.detection.base.Detector` running the toolkit's segmentation model."""
 
     name = "learned"
     needs_rgb = True
@@ -71,7 +71,7 @@ class LearnedDetector:
         try:
             self.classes = list(json.loads(meta["classes"]))
         except (KeyError, ValueError, TypeError) as e:
-            raise UserError(f"{where}: classes: missing or malformed in the model's metadata ({_one_line(e)})") from None
+            raise UserError(f"{where}: classes: missing or malformed in the model's metadata ({one_line(e)})") from None
         if vocabulary is not None:
             missing = sorted(set(vocabulary) - set(self.classes))
             if missing:

@@ -20,8 +20,8 @@ import time
 import numpy as np
 
 from ..config import Config
-from ..frontend.detection import Detector, detector_record
-from ..frontend.detector_base import check_rgb_schedule, needs_rgb
+from ..detection.base import Detector, check_rgb_schedule, needs_rgb
+from ..detection.factory import detector_record
 from .evaluation import summarize
 from ..frontend.stream import FrontEnd, StaticPoses, default_detector, make_pose_stream, read_frame
 from ..map.boxmap import BoxMap
@@ -148,7 +148,7 @@ def cmd_units(args) -> int:
     from formats.tour import Tour
 
     from ..config import Config, load_config
-    from ..frontend.detection import build_detector, detector_spec_from_args
+    from ..detection.factory import build_detector, detector_spec_from_args
     from formats.atomic import write_json_atomic
 
     tour = Tour(args.tour)
@@ -166,7 +166,7 @@ def cmd_units(args) -> int:
 
 
 def register_cli(subparsers) -> None:
-    from ..frontend.detection import add_detector_arguments
+    from ..detection.factory import add_detector_arguments
 
     p = subparsers.add_parser("units",
                               help="the paper's Table III: independent 1/30/100/250-frame units, recall per length")
