@@ -22,7 +22,7 @@ from synth.resources import REPO_ROOT
 
 
 
-SMOKE = REPO_ROOT / "render_jobs" / "smoke.yaml"
+from jobspecs import SMOKE  # noqa: E402  (one home: tests/jobspecs.py)
 
 
 
@@ -161,9 +161,8 @@ def _assert_same_job(a: Path, b: Path) -> None:
 
 @pytest.mark.blender
 @pytest.mark.slow
-def test_killed_job_resumes_to_the_same_result(tmp_path):
-    ref = tmp_path / "ref"
-    assert synth_main(["render", str(SMOKE), "--out", str(ref), "--quiet", "--workers", "2"]) == 0
+def test_killed_job_resumes_to_the_same_result(tmp_path, smoke_reference):
+    ref = smoke_reference
     out = tmp_path / "killed"
     proc = subprocess.Popen([sys.executable, "-m", "synth.cli", "render", str(SMOKE), "--out", str(out), "--quiet"],
                             start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -189,10 +188,9 @@ def test_killed_job_resumes_to_the_same_result(tmp_path):
 
 @pytest.mark.blender
 @pytest.mark.slow
-def test_ray_backend_on_loopback_renders_the_smoke_spec(tmp_path):
+def test_ray_backend_on_loopback_renders_the_smoke_spec(tmp_path, smoke_reference):
     pytest.importorskip("ray")
-    ref = tmp_path / "local"
-    assert synth_main(["render", str(SMOKE), "--out", str(ref), "--quiet", "--workers", "2"]) == 0
+    ref = smoke_reference
     out = tmp_path / "ray"
     s = jobs.run_job(jobs.load_spec(SMOKE), out, backend="ray", progress=False)
     assert s["failed"] == {} and s["frames_rendered_now"] == 36

@@ -20,7 +20,7 @@ from synth.jobs import ray_backend
 from synth.cli import main as synth_main
 from synth.resources import REPO_ROOT
 
-SMOKE = REPO_ROOT / "render_jobs" / "smoke.yaml"
+from jobspecs import SMOKE  # noqa: E402  (one home: tests/jobspecs.py)
 FRAME = re.compile(r"^\d{6}\.exr$")
 
 # Imported by every Python process whose PYTHONPATH starts with its folder (the tasks' workers and
