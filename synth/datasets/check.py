@@ -58,7 +58,7 @@ ROTATION_TOL = 1e-4
 # luminance (Rec. 709 weights, as formats.tour.tonemap; linear RGB at exposure 1) is below this:
 # 0.01 is sRGB 25/255 at exposure 1, i.e. the brightest 1 % of the frame is darker than a dim grey and
 # auto exposure would have to scale the frame by about 90 to show it. The toolkit's renders lie far
-# above (built-in apartment by day about 1.3; ReplicaCAD apt_0 with the stand-in stage: see README)
+# above (built-in apartment by day about 1.3; ReplicaCAD apt_0 with the stand-in stage: see docs/replicacad.md)
 DARK_P99_LUMINANCE = 0.01
 DARK_PERCENTILE = 99.0
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)  # formats.tour.tonemap's weights

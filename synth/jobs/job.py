@@ -956,17 +956,17 @@ def register_cli(subparsers) -> None:
     a = subparsers.add_parser("render", help="render a job spec (render_jobs/*.yaml): every tour of its design")
     a.add_argument("spec", help="job spec YAML")
     a.add_argument("--out", help="the job folder (default: the spec's out): a path, or with --backend ray a storage URI "
-                   "(file://, memory://, or another fsspec scheme: the driver writes the job there; docs/ray_cluster.md)")
+                   "(file://, memory://, or another fsspec scheme: the driver writes the job there; docs/cluster.md)")
     a.add_argument("--workers", type=int, default=1, help="chunks rendered at a time (local backend)")
     a.add_argument("--backend", choices=["local", "ray"], default="local")
     a.add_argument("--ray-address", help="address of a running Ray cluster, HOST:PORT (default: start a local one on loopback)")
     a.add_argument("--ray-runtime-env", choices=["auto", "full", "code", "none"], default="auto",
                    help="what the Ray nodes get from the driver: full (the toolkit's code and scenes/ as the working_dir, "
                         "and its pip requirements pinned to the driver's versions), code (only the working_dir), none "
-                        "(installed on every node); auto: full with --ray-address, else none (docs/ray_cluster.md)")
+                        "(installed on every node); auto: full with --ray-address, else none (docs/cluster.md)")
     a.add_argument("--resume", action="store_true", help="finish a job that was stopped; renders only what is missing")
     a.add_argument("--dry-run", action="store_true", help="print the plan and an estimate from a short calibration render")
-    g = a.add_argument_group("planning at scale (with --dry-run; docs/ray_cluster.md)")
+    g = a.add_argument_group("planning at scale (with --dry-run; docs/cluster.md)")
     g.add_argument("--nodes", metavar="N[,N...]", help="estimate the wall time on a Ray cluster of N nodes (a list: one row each)")
     g.add_argument("--cpus-per-node", metavar="C", help="cores of each node")
     g.add_argument("--gpus-per-node", metavar="G", help="GPUs of each node: one chunk per GPU; needs --calibration "

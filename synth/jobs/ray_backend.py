@@ -82,7 +82,7 @@ def _check_reachable(address: str) -> None:
     except OSError as e:
         why = "timed out" if isinstance(e, socket.timeout) else (e.strerror or str(e))
         raise UserError(f"--ray-address {address}: cannot reach a Ray cluster there ({why}); "
-                        f"start one with `ray start --head` (docs/ray_cluster.md)") from None
+                        f"start one with `ray start --head` (docs/cluster.md)") from None
 
 
 def _repo_root() -> Path:
@@ -191,7 +191,7 @@ def connect(address: str | None, env_mode: str = "auto", device: str = "cpu", ou
     return session
 
 
-PREFLIGHT_TIMEOUT_S = 1800.0  # a bare node pip-installs the requirements first (docs/ray_cluster.md: minutes)
+PREFLIGHT_TIMEOUT_S = 1800.0  # a bare node pip-installs the requirements first (docs/cluster.md: minutes)
 _MODULES = {"opencv-python-headless": "cv2", "pyyaml": "yaml", "pillow": "PIL"}  # requirement -> module, where they differ
 _ERROR_LINE = re.compile(r"^(?:[\w]+\.)*(\w*(?:Error|Exception|Exit|Interrupt))\b:?\s*(.*)$")
 
@@ -232,10 +232,10 @@ def _hint(mode: str, cause: str) -> str:
     if "virtualenv" in cause:
         return ("Ray's pip runtime env needs the virtualenv package on every node: `python -m pip install virtualenv` "
                 "with the Python that runs Ray there, then `ray stop` and `ray start` again; or install the toolkit's "
-                "requirements on the nodes and use --ray-runtime-env code (docs/ray_cluster.md)")
+                "requirements on the nodes and use --ray-runtime-env code (docs/cluster.md)")
     if mode == "full":
-        return "see the node's runtime env log (/tmp/ray/session_latest/logs/runtime_env_setup-*.log) and docs/ray_cluster.md"
-    return "install them there, or use --ray-runtime-env full (docs/ray_cluster.md)"
+        return "see the node's runtime env log (/tmp/ray/session_latest/logs/runtime_env_setup-*.log) and docs/cluster.md"
+    return "install them there, or use --ray-runtime-env full (docs/cluster.md)"
 
 
 def preflight(ray, mode: str, renderer: str = "blender", progress=None, timeout: float = PREFLIGHT_TIMEOUT_S) -> list[dict]:
@@ -276,7 +276,7 @@ def preflight(ray, mode: str, renderer: str = "blender", progress=None, timeout:
             results.append({"node": ip, **got})
             if got["python"].rsplit(".", 1)[0] != platform.python_version().rsplit(".", 1)[0]:
                 problems.append(f"node {ip} runs Python {got['python']}, the driver {platform.python_version()} "
-                                "(bpy 4.5 is built for Python 3.11; docs/ray_cluster.md)")
+                                "(bpy 4.5 is built for Python 3.11; docs/cluster.md)")
             elif got["missing"]:
                 problems.append(f"node {ip} lacks {', '.join(got['missing'])} (Python {got['executable']}); "
                                 f"{_hint(mode, '')}")
@@ -287,7 +287,7 @@ def preflight(ray, mode: str, renderer: str = "blender", progress=None, timeout:
                             (f" (and {len(problems) - 1} more node(s))" if len(problems) > 1 else ""))
         if waiting and time.monotonic() - t0 > timeout:
             raise UserError(f"--ray-runtime-env {mode}: {len(waiting)} node(s) did not set up the runtime env within "
-                            f"{timeout:.0f} s ({', '.join(refs[r] for r in waiting)}); see docs/ray_cluster.md")
+                            f"{timeout:.0f} s ({', '.join(refs[r] for r in waiting)}); see docs/cluster.md")
         if waiting and progress and time.monotonic() - said >= 30.0:
             said = time.monotonic()
             progress(f"ray: runtime env ({mode}) ready on {len(results)} of {len(refs)} node(s) after "

@@ -1,6 +1,6 @@
 """Render one tour (a layout x a lighting x a camera path) into a tour directory. No bpy here.
 
-Tour directory (documented in README, "Output format")::
+Tour directory (documented in docs/conventions.md, "The tour folder")::
 
     TOUR/camera.json  poses.txt  objects.json  meta.json  frames/NNNNNN.exr  [previews/NNNNNN.png]
 

@@ -1,6 +1,6 @@
 """Small geometry helpers shared by the scene model, checks and plots.
 
-Conventions (see README, "Conventions"): world frame right-handed, Z up, metres. Rotations are
+Conventions (docs/conventions.md): world frame right-handed, Z up, metres. Rotations are
 quaternions in (w, x, y, z) order. Yaw is the rotation about +Z in radians, counter-clockwise seen
 from above; yaw 0 means the object's local axes coincide with the world axes.
 """
