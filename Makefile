@@ -24,11 +24,13 @@ $(VENV)/.installed-train: $(VENV)/.installed
 setup: $(VENV)/.installed
 	@bash tools/system_deps.sh $(VENV)
 
+# demo, demo_experiment, demo_checks: the shipped specs synth/specs/demo.yaml, reloc/specs/demo_experiment.yaml
+# and reloc/specs/demo_checks.yaml (a bare name is a shipped spec; a path always wins)
 demo: setup
 	$(VENV)/bin/synth scene build --out $(OUT)/scenes
-	$(VENV)/bin/synth render render_jobs/demo.yaml --out $(OUT)/demo --workers 2 $(if $(wildcard $(OUT)/demo/job_state.json),--resume,)
-	$(VENV)/bin/reloc experiment render_jobs/demo_experiment.yaml --tours $(OUT)/demo --out $(OUT)/demo/experiment
-	$(VENV)/bin/reloc check render_jobs/demo_checks.yaml $(OUT)/demo/experiment
+	$(VENV)/bin/synth render demo --out $(OUT)/demo --workers 2 $(if $(wildcard $(OUT)/demo/job_state.json),--resume,)
+	$(VENV)/bin/reloc experiment demo_experiment --tours $(OUT)/demo --out $(OUT)/demo/experiment
+	$(VENV)/bin/reloc check demo_checks $(OUT)/demo/experiment
 
 test: setup $(VENV)/.installed-train
 	$(VENV)/bin/python -m pytest $(PYTEST_ARGS)

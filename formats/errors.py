@@ -11,7 +11,7 @@ class SceneFormatError(UserError):
     """A layout, class table or dataset file that does not parse or validate.
 
     The message always starts with the file and the field, e.g.
-    ``scenes/layouts/apt_0.yaml: objects[3].position: expected 3 numbers, got 'abc'``.
+    ``synth/data/layouts/apt_0.yaml: objects[3].position: expected 3 numbers, got 'abc'``.
     """
 
     def __init__(self, file, field: str | None, message: str):

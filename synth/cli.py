@@ -315,7 +315,7 @@ def build_parser() -> argparse.ArgumentParser:
     sc = sub.add_parser("scene", help="layouts: list, show, check, stats, preview, export boxes")
     ss = sc.add_subparsers(dest="cmd", required=True)
 
-    a = ss.add_parser("list", help="list the layouts in scenes/layouts")
+    a = ss.add_parser("list", help="list the layouts in synth/data/layouts")
     a.set_defaults(fn=cmd_list)
     a = ss.add_parser("show", help="summary of a layout")
     a.add_argument("name", help="layout name (apt_0) or file")
@@ -340,7 +340,7 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--out", required=True)
     a.set_defaults(fn=cmd_preview)
     a = ss.add_parser("generate", help="regenerate the built-in layouts apt_0..apt_5")
-    a.add_argument("--out-dir", help="default: scenes/layouts")
+    a.add_argument("--out-dir", help="default: synth/data/layouts")
     a.add_argument("--only", nargs="*", help="variant names to regenerate (apt_0 is always written)")
     a.add_argument("--quiet", action="store_true")
     a.set_defaults(fn=cmd_generate)

@@ -1,19 +1,52 @@
-"""Where the toolkit's data lives. ``SYNTH_SCENES_DIR`` overrides the shipped ``scenes/`` folder."""
+"""Where synth's shipped data lives: inside the package (``importlib.resources``), so an installed
+wheel finds it as a checkout does.
+
+- ``synth/data/``: the layouts (``layouts/``), lighting presets (``lighting/``), camera paths
+  (``paths/``), the class table (``classes.yaml``) and the ReplicaCAD lexicon
+  (``replicacad_lexicon.yaml``). ``SYNTH_SCENES_DIR`` overrides the whole folder (a user's own
+  scenes, or the scratch folder a Ray task materialises).
+- ``synth/specs/``: the shipped render job and trainset specs; ``synth render demo`` is
+  ``synth render synth/specs/demo.yaml`` (:func:`render_spec`, :func:`trainset_spec`).
+
+``REPO_ROOT`` is the folder above the package: a source checkout when run from one
+(:func:`checkout_root`), used only for the git commit and the Ray working_dir, never for data.
+"""
 
 from __future__ import annotations
 
 import os
 from pathlib import Path
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
+from formats.shipped import package_dir, resolve_spec, shipped_names
+
+PACKAGE_DIR = package_dir("synth")
+DATA_DIR = PACKAGE_DIR / "data"  # the shipped scenes
+SPECS_DIR = PACKAGE_DIR / "specs"  # the shipped render job and trainset specs
+REPO_ROOT = PACKAGE_DIR.resolve().parent  # a checkout, or site-packages when installed
+
+
+def checkout_root() -> Path | None:
+    """The source checkout the running toolkit comes from, or None when it is installed (a wheel)."""
+    root = REPO_ROOT
+    return root if (root / "pyproject.toml").is_file() and (root / "synth" / "resources.py").is_file() else None
 
 
 def scenes_dir() -> Path:
-    return Path(os.environ.get("SYNTH_SCENES_DIR", REPO_ROOT / "scenes"))
+    """The scenes folder: ``$SYNTH_SCENES_DIR``, else the shipped ``synth/data``."""
+    env = os.environ.get("SYNTH_SCENES_DIR")
+    return Path(env) if env else DATA_DIR
 
 
 def layouts_dir() -> Path:
     return scenes_dir() / "layouts"
+
+
+def lighting_dir() -> Path:
+    return scenes_dir() / "lighting"
+
+
+def paths_dir() -> Path:
+    return scenes_dir() / "paths"
 
 
 def classes_file() -> Path:
@@ -22,3 +55,18 @@ def classes_file() -> Path:
 
 def replicacad_lexicon_file() -> Path:
     return scenes_dir() / "replicacad_lexicon.yaml"
+
+
+def render_specs() -> list[str]:
+    """Names of the shipped render job specs (``synth render NAME``)."""
+    return shipped_names(SPECS_DIR, "designs")
+
+
+def render_spec(arg) -> Path:
+    """``synth render``'s argument: a file, or the name of a shipped render job spec."""
+    return resolve_spec(arg, SPECS_DIR, "render job spec", "designs")
+
+
+def trainset_spec(arg) -> Path:
+    """``synth trainset render``'s argument: a file, or the name of a shipped trainset spec."""
+    return resolve_spec(arg, SPECS_DIR, "trainset spec", "seeds")

@@ -6,11 +6,11 @@ from pathlib import Path
 
 import yaml
 
-SMOKE = Path(__file__).resolve().parents[1] / "render_jobs" / "smoke.yaml"
+SMOKE = Path(__file__).resolve().parents[1] / "synth" / "specs" / "smoke.yaml"
 
 
 def write_spec(tmp_path, name="spec.yaml", **changes) -> Path:
-    """render_jobs/smoke.yaml with ``changes`` applied, written to ``tmp_path / name``."""
+    """synth/specs/smoke.yaml with ``changes`` applied, written to ``tmp_path / name``."""
     doc = yaml.safe_load(SMOKE.read_text())
     doc.update(changes)
     p = Path(tmp_path) / name

@@ -25,6 +25,48 @@ def test_list_and_show(capsys):
     assert "rearranged from apt_0" in capsys.readouterr().out
 
 
+def test_a_bare_name_is_a_shipped_spec_and_a_file_wins(tmp_path, monkeypatch, capsys):
+    """synth render NAME, synth trainset render NAME: a bare name is a spec of synth/specs, a file of
+    that name wins, and an unknown name is one line listing the shipped ones of that kind (exit 2)."""
+    import yaml
+
+    from synth.datasets.trainset import load_trainset
+    from synth.jobs.job import load_spec
+    from synth.resources import SPECS_DIR, render_specs
+
+    monkeypatch.chdir(tmp_path)
+    assert load_spec("smoke").source == str(SPECS_DIR / "smoke.yaml")
+    assert load_trainset("detector_train").name == "detector_train"
+    assert {"demo", "smoke", "replicacad_6x3"} <= set(render_specs()) and "detector_train" not in render_specs()
+    doc = yaml.safe_load((SPECS_DIR / "smoke.yaml").read_text())
+    (tmp_path / "smoke").write_text(yaml.safe_dump({**doc, "name": "mine"}))
+    assert load_spec("smoke").name == "mine"
+    for argv, shipped in ((["render", "nosuch", "--dry-run"], "demo, detector_eval, reference, replicacad_6x3, "
+                                                             "replicacad_apt_6x3, smoke ("),
+                          (["trainset", "render", "nosuch"], "shipped: detector_train (")):
+        assert synth_main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and err.startswith("synth: error: nosuch: no such file") and shipped in err, err
+
+
+def test_a_user_scenes_folder_overrides_the_shipped_one(tmp_path, monkeypatch, capsys):
+    """SYNTH_SCENES_DIR replaces synth/data as a whole (class table included): its layouts are the
+    ones listed and found by name."""
+    import shutil
+
+    from synth.resources import DATA_DIR, layouts_dir
+
+    (tmp_path / "layouts").mkdir()
+    shutil.copy(DATA_DIR / "layouts" / "apt_0.yaml", tmp_path / "layouts" / "mine.yaml")
+    shutil.copy(DATA_DIR / "classes.yaml", tmp_path / "classes.yaml")  # the whole folder is replaced
+    monkeypatch.setenv("SYNTH_SCENES_DIR", str(tmp_path))
+    assert layouts_dir() == tmp_path / "layouts"
+    assert synth_main(["scene", "list"]) == 0
+    out = capsys.readouterr().out
+    assert "mine" in out and "apt_1" not in out
+    assert synth_main(["scene", "show", "mine"]) == 0 and "apt_0" in capsys.readouterr().out  # the file's own name
+
+
 def test_preview_cli_writes_png(tmp_path, capsys):
     out = tmp_path / "sub" / "d.png"
     assert synth_main(["scene", "preview", "apt_2", "--diff", "apt_0", "--out", str(out)]) == 0
@@ -89,6 +131,6 @@ def test_scene_build_is_the_main_job(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "paper" in text and "apt_5" in text and "FAIL" not in text
     for n in range(6):
-        assert (out / "layouts" / f"apt_{n}.yaml").read_bytes() == (REPO / "scenes" / "layouts" / f"apt_{n}.yaml").read_bytes()
+        assert (out / "layouts" / f"apt_{n}.yaml").read_bytes() == (REPO / "synth" / "data" / "layouts" / f"apt_{n}.yaml").read_bytes()
         assert (out / "previews" / f"apt_{n}.png").stat().st_size > 10_000
         assert json.loads((out / "boxes" / f"apt_{n}.json").read_text())["layout"] == f"apt_{n}"

@@ -108,8 +108,9 @@ def test_runtime_env_ships_code_scenes_and_pinned_requirements(tmp_path):
     assert ray_backend.runtime_env("auto", None) is None  # the local instance: the code is here
     assert ray_backend.runtime_env("none", "10.0.0.1:6379") is None
     env = ray_backend.runtime_env("auto", "10.0.0.1:6379", out=REPO_ROOT / "out" / "x", renderer="blender")
-    assert env["working_dir"] == str(REPO_ROOT) and (REPO_ROOT / "scenes").is_dir()
+    assert env["working_dir"] == str(REPO_ROOT) and (REPO_ROOT / "synth" / "data" / "layouts").is_dir()
     assert ".git" in env["excludes"] and "tests" in env["excludes"] and "/out/x" in env["excludes"]
+    assert "data" not in env["excludes"] and "/data" in env["excludes"]  # synth/data travels with the code
     pins = env["pip"]["packages"]
     assert f"numpy=={metadata.version('numpy')}" in pins and any(p.startswith("bpy") for p in pins)
     fast = ray_backend.runtime_env("full", "10.0.0.1:6379", renderer="fast")
@@ -117,6 +118,15 @@ def test_runtime_env_ships_code_scenes_and_pinned_requirements(tmp_path):
     assert "pip" not in ray_backend.runtime_env("code", "10.0.0.1:6379")
     with pytest.raises(jobs.UserError, match="--ray-runtime-env"):
         ray_backend.runtime_env("sometimes", None)
+
+
+def test_runtime_env_of_an_installed_toolkit_is_one_clear_error(monkeypatch):
+    """Installed from a wheel there is no checkout to ship: code and full say so; none still works."""
+    monkeypatch.setattr(ray_backend, "_checkout_root", lambda: None)
+    for mode in ("code", "full"):
+        with pytest.raises(jobs.UserError, match=f"--ray-runtime-env {mode}: .* not a source checkout"):
+            ray_backend.runtime_env(mode, "10.0.0.1:6379")
+    assert ray_backend.runtime_env("none", "10.0.0.1:6379") is None
 
 
 def test_a_packed_chunk_renders_anywhere_and_sends_its_frames_home(tmp_path):

@@ -128,12 +128,12 @@ def _feasible(name: str) -> tuple[float, float]:
 
 
 def test_every_demo_check_can_fail(monkeypatch, tmp_path):
-    """Each check of render_jobs/demo_checks.yaml passes on constructed values and fails when its
+    """Each check of reloc/specs/demo_checks.yaml passes on constructed values and fails when its
     metric moves (within what the metric can take) to the wrong side of its threshold: a check that
     no possible result can fail would be a defect."""
     from reloc.experiments import checks as ck
 
-    path = REPO / "render_jobs" / "demo_checks.yaml"
+    path = REPO / "reloc" / "specs" / "demo_checks.yaml"
     items = ck.parse_checks(path)
     known = set(ck.metric_table({"methods": {m: {"primary": "closure", "modes": {
         mode: {"all": {}, "factors": {}} for mode in ("causal", "closure")}} for m in
@@ -205,8 +205,8 @@ def test_check_file_or_results_missing_exit_2(tmp_path, capsys):
 
 
 def _spec(tmp_path, **changes) -> Path:
-    doc = yaml.safe_load((REPO / "render_jobs" / "demo_experiment.yaml").read_text())
-    doc["render"] = str(REPO / "render_jobs" / "demo.yaml")
+    doc = yaml.safe_load((REPO / "reloc" / "specs" / "demo_experiment.yaml").read_text())
+    doc["render"] = str(REPO / "synth" / "specs" / "demo.yaml")
     doc["out"] = str(tmp_path / "exp")
     doc["tours"] = str(tmp_path / "tours")
     doc.update(changes)
@@ -218,11 +218,35 @@ def _spec(tmp_path, **changes) -> Path:
 
 
 def test_shipped_experiment_spec_validates():
-    s = load_experiment(REPO / "render_jobs" / "demo_experiment.yaml")
+    s = load_experiment(REPO / "reloc" / "specs" / "demo_experiment.yaml")
     assert s.methods == ("videoreloc", "videoreloc_oracle", "fpfh_icp", "appearance", "one_frame")
     assert s.unchanged == "apt_0" and s.detector["kind"] == "learned"
-    assert s.detector["model"] == str(REPO / "models" / "detector_160x120.onnx")
-    assert s.render == (REPO / "render_jobs" / "demo.yaml").resolve()
+    assert s.detector["model"] == str(REPO / "reloc" / "models" / "detector_160x120.onnx")
+    assert s.render == (REPO / "synth" / "specs" / "demo.yaml").resolve()  # render: demo, a shipped name
+
+
+def test_a_bare_name_is_a_shipped_spec_and_a_file_wins(tmp_path, monkeypatch, capsys):
+    """reloc experiment NAME, reloc check NAME: a bare name is a spec of reloc/specs, a file of that
+    name wins, and an unknown name is one line listing the shipped ones (exit 2). An experiment
+    spec's render: is a file relative to it, or the name of a render spec synth ships."""
+    from formats.errors import SceneFormatError
+    from reloc.experiments.checks import parse_checks
+
+    monkeypatch.chdir(tmp_path)
+    assert load_experiment("demo_experiment").source == REPO / "reloc" / "specs" / "demo_experiment.yaml"
+    assert len(parse_checks("demo_checks")) == len(parse_checks(REPO / "reloc" / "specs" / "demo_checks.yaml")) > 5
+    (tmp_path / "demo_experiment").write_text(_spec(tmp_path, name="mine").read_text())
+    assert load_experiment("demo_experiment").name == "mine"
+    assert load_experiment(_spec(tmp_path, render="demo")).render == (REPO / "synth" / "specs" / "demo.yaml").resolve()
+    with pytest.raises(SceneFormatError, match=r"exp.yaml: render: .*nowhere: no such file, and no shipped render job "
+                                               r"spec of that name; shipped: demo, detector_eval, reference"):
+        load_experiment(_spec(tmp_path, render="nowhere"))
+    for argv, shipped in ((["experiment", "nosuch"], "demo_experiment, demo_sensors_experiment, demo_tables, "
+                                                     "reference_experiment"),
+                          (["check", "nosuch", str(tmp_path)], "demo_checks, demo_sensor_checks")):
+        assert reloc_main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and err.startswith("reloc: error: nosuch: no such file") and shipped in err, err
 
 
 @pytest.mark.parametrize("changes, message", [
@@ -251,8 +275,8 @@ def test_bad_experiment_specs_are_one_line_exit_2(tmp_path, capsys, changes, mes
 
 
 def _render_spec(tmp_path, **design_changes) -> Path:
-    """render_jobs/demo.yaml with its query design changed (its out stays the tests' tours folder)."""
-    doc = yaml.safe_load((REPO / "render_jobs" / "demo.yaml").read_text())
+    """synth/specs/demo.yaml with its query design changed (its out stays the tests' tours folder)."""
+    doc = yaml.safe_load((REPO / "synth" / "specs" / "demo.yaml").read_text())
     doc["designs"][0].update(design_changes)
     for k in [k for k, v in design_changes.items() if v is None]:
         del doc["designs"][0][k]
@@ -315,10 +339,10 @@ def test_a_foreign_onnx_model_is_named(tmp_path, capsys):
 
 
 def _planned_design(tmp_path) -> Path:
-    """design.json as ``synth render render_jobs/demo.yaml`` writes it before any frame is rendered."""
+    """design.json as ``synth render demo`` writes it before any frame is rendered."""
     from synth.jobs.job import expand, load_spec
 
-    plan = expand(load_spec(REPO / "render_jobs" / "demo.yaml"), out=tmp_path / "tours")
+    plan = expand(load_spec(REPO / "synth" / "specs" / "demo.yaml"), out=tmp_path / "tours")
     write_design(plan.out, plan.spec.name, plan.spec.source,
                  {n: {"layout": p.layout_name, "lighting": p.lighting_name, "path": p.path_name,
                       "n_frames": len(p.frame_ids)} for n, p in plan.tours.items()})

@@ -93,7 +93,7 @@ def results_dir(tmp_path):
     (tables / "factors.md").write_text(FACTORS_MD)
     rec = (N - len(MISSING)) / N
     results = {
-        "format": "videoreloc-experiment/1", "name": "test<exp>", "spec": "render_jobs/test.yaml",
+        "format": "videoreloc-experiment/1", "name": "test<exp>", "spec": "reloc/specs/test.yaml",
         "map": str(rd / "maps" / "videoreloc_map.json"),
         "tours": {TOUR: {"dir": str(tour_dir), "layout": "apt_t", "lighting": "day", "rearranged": False,
                          "frames": N, "fps": FPS}},

@@ -91,8 +91,8 @@ def test_sensor_factors_match_hand_computation():
 
 
 def _spec(tmp_path, **changes) -> Path:
-    doc = yaml.safe_load((REPO / "render_jobs" / "demo_experiment.yaml").read_text())
-    doc.update(render=str(REPO / "render_jobs" / "demo.yaml"), out=str(tmp_path / "exp"), tours=str(tmp_path / "tours"))
+    doc = yaml.safe_load((REPO / "reloc" / "specs" / "demo_experiment.yaml").read_text())
+    doc.update(render=str(REPO / "synth" / "specs" / "demo.yaml"), out=str(tmp_path / "exp"), tours=str(tmp_path / "tours"))
     doc.update(changes)
     p = tmp_path / "exp.yaml"
     p.write_text(yaml.safe_dump(doc))

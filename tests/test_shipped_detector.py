@@ -1,4 +1,4 @@
-"""The shipped learned detector (models/detector_160x120.onnx) against rendered ground truth.
+"""The shipped learned detector (reloc/models/detector_160x120.onnx) against rendered ground truth.
 
 Six random views of apt_0 (an experiment layout the model never trained on) are rendered here in
 day and night light; the model's per-pixel classes and its instances are compared with the
@@ -22,7 +22,7 @@ from synth.paths.views import plan_views
 from synth.scene.model import load_layout
 from synth.render.render_tour import TourSpec, render_tour
 
-MODEL = Path(__file__).resolve().parents[1] / "models" / "detector_160x120.onnx"
+MODEL = Path(__file__).resolve().parents[1] / "reloc" / "models" / "detector_160x120.onnx"
 FLOORS = {"day": (0.82, 0.52), "night": (0.76, 0.45)}  # pixel accuracy, mean best mask IoU
 
 

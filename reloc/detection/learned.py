@@ -29,13 +29,14 @@ import numpy as np
 from formats.errors import UserError, one_line
 from formats.tour import tonemap
 
+from .. import resources
 from .base import Detection, FrameData
 from .onnx_yolo import open_session
 
 MODEL_FORMAT = "videoreloc-segnet/1"
-# the model the toolkit ships (models/detector_160x120.md: its data, training and metrics); the
+# the model the toolkit ships (reloc/models/detector_160x120.md: its data, training and metrics); the
 # experiments' default detector
-SHIPPED_MODEL = Path(__file__).resolve().parents[2] / "models" / "detector_160x120.onnx"
+SHIPPED_MODEL = resources.SHIPPED_MODEL
 REGROW_PX = 3.0  # cut pixels this close to an instance rejoin it (predicted boundaries are 2-4 px wide)
 
 

@@ -65,7 +65,9 @@ class Check:
 def parse_checks(path) -> list[Check]:
     from formats.yamlfile import read_yaml
 
-    p = Path(path)
+    from ..resources import check_spec
+
+    p = check_spec(path)  # a file, or a shipped name (reloc/specs: demo_checks)
     if not p.is_file():
         raise UserError(f"{p}: check file not found")
     doc = read_yaml(p)
@@ -182,7 +184,7 @@ def cmd_check(args) -> int:
 
 def register_cli(subparsers) -> None:
     p = subparsers.add_parser("check", help="pass/fail robustness checks on experiment results (exit 1 on a failure)")
-    p.add_argument("checks", metavar="CHECKS.yaml")
+    p.add_argument("checks", metavar="CHECKS.yaml", help="check spec, or a shipped name (reloc/specs: demo_checks, ...)")
     p.add_argument("results", metavar="RESULTS_DIR", help="a reloc experiment results folder")
     p.add_argument("--json", action="store_true")
     p.set_defaults(fn=cmd_check)

@@ -433,7 +433,8 @@ def cmd_experiment(args) -> int:
 
 def register_cli(subparsers) -> None:
     p = subparsers.add_parser("experiment", help="VideoReloc and the baselines over a rendered design: tables, plots, report")
-    p.add_argument("spec", metavar="SPEC.yaml", help="experiment spec (see reloc/experiments/spec.py)")
+    p.add_argument("spec", metavar="SPEC.yaml", help="experiment spec (see reloc/experiments/spec.py), or a shipped name "
+                   "(reloc/specs: demo_experiment, ...)")
     p.add_argument("--out", help="results folder (default: the spec's out)")
     p.add_argument("--tours", help="folder of the rendered tours (default: the render spec's out)")
     p.add_argument("--workers", type=int, help="processes at a time (default: the spec's workers)")

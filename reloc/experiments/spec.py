@@ -2,11 +2,11 @@
 
 Read and validated here before anything runs (every error names the file and the key); run by
 :mod:`reloc.experiments.runner`. An experiment spec names the render job whose tours it reads
-(``render: demo.yaml``), the mapping tour, the query path, the unchanged layout, the methods and
+(``render: demo``), the mapping tour, the query path, the unchanged layout, the methods and
 the optional tables::
 
     name: demo
-    render: demo.yaml                  # render job spec, relative to this file
+    render: demo                       # render job spec: a file relative to this one, or a shipped name (synth/specs)
     out: out/demo/experiment           # results folder
     mapping: {layout: apt_0, lighting: day, path: mapping}
     query: query                       # every layout x lighting tour of this path is a query tour
@@ -15,7 +15,7 @@ the optional tables::
     methods: [videoreloc, videoreloc_oracle, fpfh_icp, appearance, one_frame]
     tables: [units, ablation]          # optional: Tables III and IV (Tables I and II, main and factors, always)
     one_frame_stride: 15               # one-frame units on every k-th frame (one registration each)
-    detector: learned                  # the default: the shipped model (models/detector_160x120.onnx)
+    detector: learned                  # the default: the shipped model (reloc/models/detector_160x120.onnx)
     # detector: {kind: learned, model: ../models/mine.onnx}   (a path relative to this file)
     # detector: {kind: oracle, miss_rate: 0.1}   (the rendered labels, optionally corrupted:
     #                                             reloc.detection.oracle.Corruption)
@@ -209,8 +209,9 @@ def _check_overrides(cls, d: dict, src, field) -> None:
 def load_experiment(path) -> ExperimentSpec:
     """Read and validate an experiment spec; every error names the file and the key."""
     from ..config import Config
+    from ..resources import experiment_spec, render_spec_of
 
-    src = Path(path)
+    src = experiment_spec(path)  # a file, or a shipped name (reloc/specs: demo_experiment)
     if not src.is_file():
         raise UserError(f"{src}: experiment spec not found")
     doc = read_yaml(src)
@@ -222,7 +223,7 @@ def load_experiment(path) -> ExperimentSpec:
     for k in ("name", "render", "out", "mapping", "query", "unchanged"):
         if doc.get(k) in (None, ""):
             _fail(src, k, "missing")
-    render = (src.parent / str(doc["render"])).resolve()
+    render = render_spec_of(src, doc["render"])  # a file relative to the spec, or a shipped name (synth/specs)
     if not render.is_file():
         _fail(src, "render", f"render job spec {render} not found")
     render_doc = read_yaml(render)

@@ -1,6 +1,6 @@
 """Detector training data (``synth trainset render SPEC``): apartments the experiments never see.
 
-A trainset spec (``render_jobs/detector_train.yaml``) names generator seeds, how many rearranged
+A trainset spec (``synth/specs/detector_train.yaml``, shipped as ``detector_train``) names generator seeds, how many rearranged
 variants of each apartment, the lighting presets and how many seeded jitters of each, and how many
 random views per (layout, lighting)::
 
@@ -44,7 +44,7 @@ from ..scene.lighting import jitter_preset, load_lighting, preset_document
 from ..paths.files import save_path
 from ..paths.views import plan_views
 from ..layout.rearrange import NoVariantFound, RearrangePlan, VariantSpec, make_variant
-from ..resources import layouts_dir
+from ..resources import layouts_dir, trainset_spec
 from ..scene.model import dump_yaml, layout_to_dict, load_layout
 
 SPEC_KEYS = {"name", "description", "out", "seeds", "variants", "lightings", "jitter", "views", "size", "quality",
@@ -113,7 +113,8 @@ def parse_trainset(doc, source: str) -> TrainsetSpec:
 
 
 def load_trainset(path) -> TrainsetSpec:
-    p = Path(path)
+    """A trainset spec: a file, or the name of a shipped one (``detector_train``: synth/specs)."""
+    p = trainset_spec(path)
     if not p.is_file():
         raise UserError(f"{p}: trainset spec not found")
     return parse_trainset(read_yaml(p), str(p))
@@ -206,7 +207,7 @@ def register_cli(subparsers) -> None:
     g = subparsers.add_parser("trainset", help="detector training data from apartments the experiments never use")
     ts = g.add_subparsers(dest="cmd", required=True)
     a = ts.add_parser("render", help="prepare layouts, jittered lights and random views, then render them (resumable)")
-    a.add_argument("spec", metavar="SPEC.yaml", help="trainset spec (see render_jobs/detector_train.yaml)")
+    a.add_argument("spec", metavar="SPEC.yaml", help="trainset spec, or a shipped name (detector_train: synth/specs/detector_train.yaml)")
     a.add_argument("--out", help="output folder (default: the spec's out)")
     a.add_argument("--workers", type=int, default=1, help="chunk processes at a time (default 1)")
     a.add_argument("--prepare-only", action="store_true", help="write the scenes and render.yaml, render nothing")

@@ -466,11 +466,12 @@ def measure_environment() -> dict:
     except metadata.PackageNotFoundError:
         env["toolkit_version"] = "unknown"
     try:
-        from ..resources import REPO_ROOT
+        from ..resources import checkout_root
 
-        commit = subprocess.run(["git", "-C", str(REPO_ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
-                                text=True, timeout=5)
-        if commit.returncode == 0 and commit.stdout.strip():
+        root = checkout_root()  # None when installed: site-packages may lie inside some other git tree
+        commit = subprocess.run(["git", "-C", str(root), "rev-parse", "--short", "HEAD"], capture_output=True,
+                                text=True, timeout=5) if root is not None else None
+        if commit is not None and commit.returncode == 0 and commit.stdout.strip():
             env["toolkit_version"] += f"+g{commit.stdout.strip()}"
     except (OSError, subprocess.SubprocessError):
         pass

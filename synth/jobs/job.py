@@ -1,4 +1,4 @@
-"""Render jobs: YAML experiment specs (``render_jobs/*.yaml``) and a resumable chunk runner.
+"""Render jobs: YAML experiment specs (``synth/specs/*.yaml``, or a shipped name: ``synth render demo``) and a resumable chunk runner.
 
 A spec names one or more *designs* (layouts x lightings x one camera path), the renderer, the
 quality, the image size, the seed and the output folder. It expands into tours
@@ -172,7 +172,10 @@ def _replicacad_section(doc: dict, source: str) -> dict | None:
 
 
 def load_spec(path) -> JobSpec:
-    p = Path(path)
+    """A render job spec: a file, or the name of a shipped one (``demo``: synth/specs/demo.yaml)."""
+    from ..resources import render_spec
+
+    p = render_spec(path)
     if not p.exists():
         raise UserError(f"{p}: job spec not found")
     return parse_spec(read_yaml(p), str(p))
@@ -953,15 +956,15 @@ def cmd_render(args) -> int:
 
 
 def register_cli(subparsers) -> None:
-    a = subparsers.add_parser("render", help="render a job spec (render_jobs/*.yaml): every tour of its design")
-    a.add_argument("spec", help="job spec YAML")
+    a = subparsers.add_parser("render", help="render a job spec: every tour of its design")
+    a.add_argument("spec", help="job spec YAML, or the name of a shipped one (synth/specs: demo, smoke, ...)")
     a.add_argument("--out", help="the job folder (default: the spec's out): a path, or with --backend ray a storage URI "
                    "(file://, memory://, or another fsspec scheme: the driver writes the job there; docs/cluster.md)")
     a.add_argument("--workers", type=int, default=1, help="chunks rendered at a time (local backend)")
     a.add_argument("--backend", choices=["local", "ray"], default="local")
     a.add_argument("--ray-address", help="address of a running Ray cluster, HOST:PORT (default: start a local one on loopback)")
     a.add_argument("--ray-runtime-env", choices=["auto", "full", "code", "none"], default="auto",
-                   help="what the Ray nodes get from the driver: full (the toolkit's code and scenes/ as the working_dir, "
+                   help="what the Ray nodes get from the driver: full (the toolkit's checkout, code and data, as the working_dir, "
                         "and its pip requirements pinned to the driver's versions), code (only the working_dir), none "
                         "(installed on every node); auto: full with --ray-address, else none (docs/cluster.md)")
     a.add_argument("--resume", action="store_true", help="finish a job that was stopped; renders only what is missing")

@@ -5,7 +5,7 @@ nodes share no disk with the driver.
   first: an unreachable address is one line, not minutes of retries) or to a local instance on
   127.0.0.1. The cluster must have a CPU, and a GPU when the spec says ``device: gpu``; all of this
   is checked before the job writes anything. ``--ray-runtime-env`` ships the toolkit to the nodes:
-  ``code`` (the repository as the ``working_dir``: the packages and ``scenes/``), ``full`` (that,
+  ``code`` (the checkout as the ``working_dir``: the packages with their shipped data), ``full`` (that,
   plus ``pip`` requirements pinned to the driver's versions, so a node needs only Python 3.11 and
   Ray), ``none``; ``auto`` is ``full`` for a remote address and ``none`` for the local instance.
 - **Frames come home** (``pack_chunk``, ``chunk_task``): the driver packs everything a chunk reads
@@ -49,8 +49,10 @@ BATCH_BYTES = 32 * 1024 * 1024  # a batch of frame files sent home at once (one 
 BATCH_SECONDS = 1.0  # ... or what finished within this long, whichever comes first
 CONNECT_TIMEOUT_S = 5.0  # the TCP check of --ray-address
 RUNTIME_ENV_MODES = ("auto", "full", "code", "none")
+# gitignore patterns; the checkout's data folder is anchored ("/data"): the packages' shipped data
+# (synth/data) travels
 _EXCLUDES = [".git", ".venv", "**/__pycache__", "*.egg-info", ".pytest_cache", "build", "dist", "out", "renders",
-             "data", ".gl", ".whl", "tests"]
+             "/data", ".gl", ".whl", "tests"]
 _FRAME = re.compile(r"^\d{6,}\.exr$")  # synth frame names (formats.frames.frame_name)
 _PREVIEW = re.compile(r"^\d{6,}\.png$")
 LOG_TAIL = 64 * 1024
@@ -86,9 +88,16 @@ def _check_reachable(address: str) -> None:
 
 
 def _repo_root() -> Path:
+    """The folder above the package: the source checkout when run from one (``checkout_root``)."""
     from ..resources import REPO_ROOT
 
     return REPO_ROOT
+
+
+def _checkout_root() -> Path | None:
+    from ..resources import checkout_root
+
+    return checkout_root()
 
 
 def _requirement_name(req: str) -> str:
@@ -127,10 +136,11 @@ def runtime_env(mode: str, address: str | None, out: Path | None = None, rendere
     mode = resolve_mode(mode, address)
     if mode == "none":
         return None
-    root = _repo_root()
-    if not (root / "pyproject.toml").is_file() or not (root / "scenes").is_dir():
-        raise UserError(f"--ray-runtime-env {mode}: the toolkit at {root} is not a source checkout (no pyproject.toml "
-                        "and scenes/) and cannot be shipped; install it on every node and use --ray-runtime-env none")
+    root = _checkout_root()
+    if root is None:
+        raise UserError(f"--ray-runtime-env {mode}: the toolkit at {_repo_root()} is installed, not a source checkout "
+                        "(no pyproject.toml beside synth/), so its sources cannot be shipped as the working_dir; install "
+                        "it on every node and use --ray-runtime-env none")
     excludes = list(_EXCLUDES)
     if out is not None:  # never upload the job's own output folder when it lies inside the checkout
         try:
