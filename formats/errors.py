@@ -74,7 +74,9 @@ def one_line(e: BaseException, limit: int = 240, with_type: bool = False) -> str
 
 
 def run_command(prog: str, fn, args) -> int:
-    """Run a CLI command function: a UserError prints one line and exits 2, Ctrl-C exits 130."""
+    """Run a CLI command function: a UserError prints one line and exits 2, Ctrl-C exits 130, and a
+    reader that closed the pipe (``synth scene show apt_0 | head``) ends it quietly."""
+    import os
     import sys
 
     try:
@@ -85,3 +87,7 @@ def run_command(prog: str, fn, args) -> int:
     except KeyboardInterrupt:
         print(f"{prog}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # stdout's reader is gone: point stdout at /dev/null so that the interpreter's final flush is quiet
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141

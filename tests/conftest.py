@@ -16,7 +16,7 @@ from jobspecs import SMOKE
 
 @pytest.fixture(scope="session")
 def smoke_reference(tmp_path_factory):
-    from synth.jobs import job as jobs
+    from synth import jobs
 
     out = tmp_path_factory.mktemp("smoke_reference") / "job"
     summary = jobs.run_job(jobs.load_spec(SMOKE), out, workers=2, progress=False)

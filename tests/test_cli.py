@@ -31,7 +31,7 @@ def test_a_bare_name_is_a_shipped_spec_and_a_file_wins(tmp_path, monkeypatch, ca
     import yaml
 
     from synth.datasets.trainset import load_trainset
-    from synth.jobs.job import load_spec
+    from synth.jobs import load_spec
     from synth.resources import SPECS_DIR, render_specs
 
     monkeypatch.chdir(tmp_path)

@@ -16,7 +16,8 @@ import pytest
 from jobspecs import write_spec
 
 from formats.tour import Tour
-from synth.jobs import job as jobs
+from formats.errors import UserError
+from synth import jobs
 from synth.cli import main as synth_main
 from synth.resources import REPO_ROOT
 
@@ -115,7 +116,7 @@ def test_failing_chunk_is_retried_then_reported_and_others_go_on(tmp_path, monke
     """The scheduler with a worker that always fails on one chunk (a stand-in for a crashing Blender)."""
     spec = jobs.load_spec(write_spec(tmp_path, renderer="fast", designs=[{"layouts": ["apt_0", "apt_1"], "path": {"name": "query", "frames": 6}}]))
     calls = []
-    real = jobs.run_chunk_process
+    real = jobs.chunk_queue.run_chunk_process
 
     def flaky(kind, job, job_file, log_file, on_frame=None):
         calls.append(job["frames"][0])
@@ -124,7 +125,7 @@ def test_failing_chunk_is_retried_then_reported_and_others_go_on(tmp_path, monke
             return 1, "RuntimeError: simulated crash", {}
         return real(kind, job, job_file, log_file, on_frame)
 
-    monkeypatch.setattr(jobs, "run_chunk_process", flaky)
+    monkeypatch.setattr(jobs.chunk_queue, "run_chunk_process", flaky)
     s = jobs.run_job(spec, tmp_path / "o", workers=1, progress=False)
     assert list(s["failed"]) == ["fast/apt_1__geometry__query/0001"]
     assert "simulated crash" in s["failed"]["fast/apt_1__geometry__query/0001"]
@@ -134,9 +135,9 @@ def test_failing_chunk_is_retried_then_reported_and_others_go_on(tmp_path, monke
     assert sum(c["state"] == "done" for c in state["chunks"].values()) == 3
     assert len(list((tmp_path / "o" / "apt_0__geometry__query" / "frames").glob("*.exr"))) == 6
     # the same job again without --resume is refused; with --resume only the failed chunk runs
-    with pytest.raises(jobs.UserError, match="--resume"):
+    with pytest.raises(UserError, match="--resume"):
         jobs.run_job(spec, tmp_path / "o", progress=False)
-    monkeypatch.setattr(jobs, "run_chunk_process", real)
+    monkeypatch.setattr(jobs.chunk_queue, "run_chunk_process", real)
     s2 = jobs.run_job(spec, tmp_path / "o", resume=True, progress=False)
     assert s2["failed"] == {} and s2["frames_rendered_now"] == 3
 
@@ -234,7 +235,7 @@ def test_dry_run_prints_plan_and_estimate_writes_nothing(tmp_path, capsys):
 def test_spec_document_of_a_plain_spec_is_unchanged_by_the_replicacad_key():
     """A job started before specs could name a ReplicaCAD root resumes: the state document of a spec
     without replicacad: holds no such key (job_state.json compares documents)."""
-    from synth.jobs.job import spec_document
+    from synth.jobs import spec_document
 
     plain = spec_document(jobs.load_spec(REPO_ROOT / "synth" / "specs" / "demo.yaml"))
     assert "replicacad" not in plain

@@ -11,7 +11,7 @@ import pytest
 from jobspecs import write_spec
 
 from synth.jobs import estimate as ce
-from synth.jobs import job as jobs
+from synth import jobs
 from synth.cli import main as synth_main
 
 NO_SETUP: dict = {}

@@ -15,7 +15,8 @@ import pytest
 from jobspecs import write_spec
 
 from formats import frames as fr
-from synth.jobs import job as jobs
+from formats.errors import UserError
+from synth import jobs
 from synth.jobs import ray_backend
 from synth.cli import main as synth_main
 from synth.resources import REPO_ROOT
@@ -116,7 +117,7 @@ def test_runtime_env_ships_code_scenes_and_pinned_requirements(tmp_path):
     fast = ray_backend.runtime_env("full", "10.0.0.1:6379", renderer="fast")
     assert not any(p.startswith("bpy") for p in fast["pip"]["packages"])  # the fast renderer needs no Blender
     assert "pip" not in ray_backend.runtime_env("code", "10.0.0.1:6379")
-    with pytest.raises(jobs.UserError, match="--ray-runtime-env"):
+    with pytest.raises(UserError, match="--ray-runtime-env"):
         ray_backend.runtime_env("sometimes", None)
 
 
@@ -124,7 +125,7 @@ def test_runtime_env_of_an_installed_toolkit_is_one_clear_error(monkeypatch):
     """Installed from a wheel there is no checkout to ship: code and full say so; none still works."""
     monkeypatch.setattr(ray_backend, "_checkout_root", lambda: None)
     for mode in ("code", "full"):
-        with pytest.raises(jobs.UserError, match=f"--ray-runtime-env {mode}: .* not a source checkout"):
+        with pytest.raises(UserError, match=f"--ray-runtime-env {mode}: .* not a source checkout"):
             ray_backend.runtime_env(mode, "10.0.0.1:6379")
     assert ray_backend.runtime_env("none", "10.0.0.1:6379") is None
 
@@ -214,8 +215,8 @@ def test_two_nodes_that_cannot_see_the_job_folder_render_what_the_local_backend_
         packs, updates, reported = [], [], []
         real_pack = ray_backend.pack_chunk
         monkeypatch.setattr(ray_backend, "pack_chunk", lambda ch: packs.append(real_pack(ch)) or packs[-1])
-        real_update = jobs._Bar.update
-        monkeypatch.setattr(jobs._Bar, "update", lambda self, n=1: (updates.append(n), real_update(self, n)))
+        real_update = jobs.chunk_queue.ProgressBar.update
+        monkeypatch.setattr(jobs.chunk_queue.ProgressBar, "update", lambda self, n=1: (updates.append(n), real_update(self, n)))
         monkeypatch.setattr(ray_backend, "on_frame_reported", lambda cid, i, node: reported.append((cid, i, node)))
         t0 = time.time()
         s = jobs.run_job(spec, out, backend="ray", progress=False)
@@ -280,8 +281,8 @@ def test_a_node_lost_mid_chunk_loses_nothing_and_no_half_file_is_ever_seen(clust
     real_pack = ray_backend.pack_chunk
     monkeypatch.setattr(ray_backend, "pack_chunk", lambda ch: packs.append((ch.id, real_pack(ch))) or packs[-1][1])
     monkeypatch.setattr(ray_backend, "on_frame_reported", on_report)
-    real_finished = jobs._Queue.finished
-    monkeypatch.setattr(jobs._Queue, "finished", lambda self, ch, rc, err, log, device=None: (
+    real_finished = jobs.chunk_queue.ChunkQueue.finished
+    monkeypatch.setattr(jobs.chunk_queue.ChunkQueue, "finished", lambda self, ch, rc, err, log, device=None: (
         ends.append((ch.id, rc, err)), real_finished(self, ch, rc, err, log, device))[1])
     stop = threading.Event()
 

@@ -12,10 +12,12 @@ import pytest
 
 from jobspecs import write_spec
 
-from synth.jobs import job as jobs
+from formats.errors import UserError
+from synth import jobs
 from synth.jobs import ray_backend
 from synth.jobs import storage
 from synth.cli import main as synth_main
+from cli_errors import one_line_error
 
 SKIP = {"job_state.json", "job_summary.json"}  # the job's bookkeeping: times, backend, paths
 
@@ -52,12 +54,8 @@ def job_files(tree: dict) -> dict:
 
 
 def one_line_exit_2(argv, capsys, *parts):
-    rc = synth_main(argv)
-    err = capsys.readouterr().err.strip()
-    assert rc == 2 and err.startswith("synth: error:") and len(err.splitlines()) == 1, err
-    for part in parts:
-        assert part in err, err
-    return err
+    assert synth_main(argv) == 2
+    return one_line_error(capsys, *parts, prog=("synth",))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -201,7 +199,7 @@ def test_memory_storage_holds_what_a_local_folder_holds_and_resumes(ray_local, t
     packs = []
     real_pack = ray_backend.pack_chunk
     monkeypatch.setattr(ray_backend, "pack_chunk", lambda ch: packs.append(real_pack(ch)) or packs[-1])
-    with pytest.raises(jobs.UserError, match="already holds a job"):
+    with pytest.raises(UserError, match="already holds a job"):
         jobs.run_job(spec, uri, backend="ray", progress=False)
     s2 = jobs.run_job(spec, uri, backend="ray", resume=True, progress=False)
     assert s2["failed"] == {} and [p["job"]["frames"] for p in packs] == [[4]]

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 import ray_loopback
-from synth.jobs import job as jobs
+from synth import jobs
 from synth.jobs import ray_backend
 from synth.cli import main as synth_main
 
@@ -85,7 +85,7 @@ def test_summary_counts_frames_on_disk_not_planned(tmp_path, monkeypatch, capsys
         Path(log).write_text("no renderer here\n")
         return 1, "the renderer could not start", {}
 
-    monkeypatch.setattr(jobs, "run_chunk_process", broken)
+    monkeypatch.setattr(jobs.chunk_queue, "run_chunk_process", broken)
     rc = synth_main(["render", str(spec), "--out", str(tmp_path / "out"), "--quiet"])
     out, err = capsys.readouterr()
     s = json.loads((tmp_path / "out" / "job_summary.json").read_text())

@@ -340,7 +340,7 @@ def test_a_foreign_onnx_model_is_named(tmp_path, capsys):
 
 def _planned_design(tmp_path) -> Path:
     """design.json as ``synth render demo`` writes it before any frame is rendered."""
-    from synth.jobs.job import expand, load_spec
+    from synth.jobs import expand, load_spec
 
     plan = expand(load_spec(REPO / "synth" / "specs" / "demo.yaml"), out=tmp_path / "tours")
     write_design(plan.out, plan.spec.name, plan.spec.source,
@@ -385,7 +385,7 @@ def test_malformed_design_file_is_one_line(tmp_path, capsys):
 
 @pytest.fixture(scope="module")
 def tiny_design(tmp_path_factory):
-    from synth.jobs.job import load_spec, run_job
+    from synth.jobs import load_spec, run_job
 
     root = tmp_path_factory.mktemp("design")
     render = {"name": "tiny", "out": str(root / "tours"), "renderer": "blender", "geometry": "fast",
@@ -683,7 +683,7 @@ def test_project_packages_are_the_ones_pyproject_ships():
 @pytest.fixture(scope="module")
 def fast_design(tmp_path_factory):
     """Two 150-frame geometry-only query tours (apt_0, apt_1) and a 30-frame mapping tour, 64x48."""
-    from synth.jobs.job import load_spec, run_job
+    from synth.jobs import load_spec, run_job
 
     root = tmp_path_factory.mktemp("fast_design")
     render = {"name": "fast", "out": str(root / "tours"), "renderer": "fast", "size": [64, 48], "chunk_size": 600,

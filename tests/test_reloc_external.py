@@ -51,7 +51,7 @@ def _predicted(frames=QUERY_FRAMES) -> float:
 
 @pytest.fixture(scope="module")
 def design(tmp_path_factory):
-    from synth.jobs.job import load_spec, run_job
+    from synth.jobs import load_spec, run_job
 
     root = tmp_path_factory.mktemp("external")
     render = {"name": "ext", "out": str(root / "tours"), "renderer": "blender", "geometry": "fast",

@@ -105,8 +105,8 @@ def _spec(tmp_path, **changes) -> Path:
     ({"sensors": []}, "exp.yaml", "sensors: expected a non-empty list"),
     ({"sensors": [3]}, "exp.yaml", "sensors[0]: expected a sensor preset name or a sensor YAML file"),
     ({"sensors": ["ideal", "missing.yaml"]}, "exp.yaml", "sensors[1]: sensor file"),
-    ({"sensors": ["ideal", "nan.yaml"]}, "nan.yaml", "depth.sigma_a: NaN is not allowed"),
-    ({"sensors": ["ideal", "neg.yaml"]}, "neg.yaml", "depth.lateral_px: must not be negative"),
+    ({"sensors": ["ideal", "nan.yaml"]}, "nan.yaml", "depth.sigma_a: expected a finite number, got nan"),
+    ({"sensors": ["ideal", "neg.yaml"]}, "neg.yaml", "depth.lateral_px: must be >= 0.0"),
     ({"sensors": ["ideal", "fake_ideal.yaml"]}, "exp.yaml", "the name 'ideal' is the preset without effects"),
     ({"sensors": ["ideal", "badname.yaml"]}, "badname.yaml", "name: expected a name of letters"),
     ({"map_sensor": "kinect9"}, "exp.yaml", "map_sensor: unknown sensor preset"),
@@ -132,7 +132,7 @@ def test_bad_sensor_specs_are_one_line_exit_2(tmp_path, capsys, changes, file, m
 def sensor_design(tmp_path_factory):
     """Two 150-frame geometry-only query tours (apt_0, apt_1) and a 30-frame mapping tour, 64x48;
     an experiment reading them through the ideal sensor and a user-defined one."""
-    from synth.jobs.job import load_spec, run_job
+    from synth.jobs import load_spec, run_job
 
     root = tmp_path_factory.mktemp("sensor_design")
     render = {"name": "fast", "out": str(root / "tours"), "renderer": "fast", "size": [64, 48], "chunk_size": 600,

@@ -25,7 +25,7 @@ from replicacad_fixture import (
 
 from synth.layout.validity import check_layout
 from synth.cli import main as synth_main
-from synth.jobs.job import load_spec
+from synth.jobs import load_spec
 from synth.replicacad.importer import load_replicacad
 from synth.replicacad.job import prepare
 from synth.scene.model import load_layout, object_box, structure_boxes
@@ -301,7 +301,7 @@ def test_replicacad_root_option_needs_a_replicacad_spec(root, capsys):
 
 def test_shipped_replicacad_spec_plans_the_paper_design(root, tmp_path):
     """synth/specs/replicacad_apt_6x3.yaml on the fixture: 18 query tours of 4,000 frames + the 6,000-frame mapping tour."""
-    from synth.jobs.job import expand
+    from synth.jobs import expand
 
     spec = load_spec(Path(__file__).resolve().parents[1] / "synth" / "specs" / "replicacad_apt_6x3.yaml")
     ready = prepare(spec, tmp_path / "job", cli_root=str(root), progress=lambda m: None)

@@ -19,7 +19,7 @@ from formats.design import read_design
 from formats.errors import SceneFormatError, UserError
 from formats.tour import Tour
 from synth.cli import main as synth_main
-from synth.jobs.job import load_spec
+from synth.jobs import load_spec
 from synth.scene.lighting import LightingJitter, jitter_preset, load_lighting, parse_preset, preset_document
 from synth.paths.model import BOB, Q_HEIGHT, Q_HEIGHT_VAR, Q_PITCH, Q_PITCH_VAR
 from synth.paths.views import plan_views

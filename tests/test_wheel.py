@@ -126,7 +126,7 @@ def test_installed_commands_find_the_shipped_data_outside_the_checkout(installed
     code = ("from reloc.resources import SHIPPED_MODEL\n"
             "from reloc.detection.learned import SHIPPED_MODEL as default, LearnedDetector\n"
             "from reloc.experiments.spec import load_experiment\n"
-            "from synth.jobs.job import load_spec\n"
+            "from synth.jobs import load_spec\n"
             "print('model', SHIPPED_MODEL, SHIPPED_MODEL.is_file(), default == SHIPPED_MODEL)\n"
             "print('opens', type(LearnedDetector(SHIPPED_MODEL)).__name__)\n"
             "e = load_experiment('demo_experiment')\n"

@@ -29,6 +29,7 @@ import numpy as np
 from formats.atomic import save_npz_atomic, write_json_atomic
 from formats.camera import write_tum
 from formats.errors import check_output_folder
+from formats.cli import add_quiet, add_sensor
 
 from .online import Backend, ClipState
 from ..frontend.clips import fuse
@@ -325,9 +326,7 @@ def register_cli(subparsers) -> None:
     p.add_argument("--no-run-level", action="store_true", help="ablation: no run-level decision")
     p.add_argument("--fixed-clips", action="store_true", help="ablation: fixed 100-frame clips")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--sensor", help="read the tour as this RGB-D camera measures it: a formats/sensor_presets name "
-                                    "(ideal, structured_light, tof) or a YAML file (default: the render as it is)")
-    p.add_argument("--sensor-seed", type=int, default=0, help="seed of the sensor noise (per frame: formats.sensors.frame_seed)")
-    p.add_argument("--quiet", action="store_true")
+    add_sensor(p, "read the tour")
+    add_quiet(p)
     add_detector_arguments(p)
     p.set_defaults(fn=cmd_run)

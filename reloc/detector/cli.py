@@ -12,6 +12,9 @@ from pathlib import Path
 from formats.design import list_tours
 from formats.errors import UserError, check_output_file, check_output_folder
 
+from .settings import TrainConfig
+from formats.cli import add_json, add_quiet
+
 
 def _tours(args_tours) -> list[Path]:
     """Tour folders from the arguments: a tour (has meta.json) or a design folder (its tours)."""
@@ -50,7 +53,7 @@ def cmd_pack(args) -> int:
 
 def cmd_train(args) -> int:
     _torch()
-    from .train import TrainConfig, export_onnx, train
+    from .train import export_onnx, train
 
     check_output_folder(args.out)
     if not Path(args.data).is_file():
@@ -89,20 +92,21 @@ def register_cli(subparsers) -> None:
     a.add_argument("tours", nargs="+", help="tour folders, or design folders holding tours")
     a.add_argument("--out", required=True, help="training set file (.npz)")
     a.add_argument("--every", type=int, default=1, help="every N-th frame (default 1)")
-    a.add_argument("--quiet", action="store_true")
+    add_quiet(a)
     a.set_defaults(fn=cmd_pack)
     a = ds.add_parser("train", help="train the segmentation model, then export it (needs PyTorch)")
     a.add_argument("data", help="training set (.npz) from reloc detector pack")
     a.add_argument("--out", required=True, help="folder: checkpoint.pt, train_log.json, model.onnx")
-    a.add_argument("--epochs", type=int, default=40)
-    a.add_argument("--batch", type=int, default=32)
-    a.add_argument("--lr", type=float, default=2e-3)
-    a.add_argument("--width", type=int, default=16, help="channels of the first stage (default 16)")
-    a.add_argument("--seed", type=int, default=0)
+    d = TrainConfig()
+    a.add_argument("--epochs", type=int, default=d.epochs, help=f"default {d.epochs}")
+    a.add_argument("--batch", type=int, default=d.batch, help=f"frames per step (default {d.batch})")
+    a.add_argument("--lr", type=float, default=d.lr, help=f"Adam's learning rate (default {d.lr:g})")
+    a.add_argument("--width", type=int, default=d.width, help=f"channels of the first stage (default {d.width})")
+    a.add_argument("--seed", type=int, default=d.seed, help=f"default {d.seed}")
     a.add_argument("--val-layouts", nargs="*", default=[], help="layouts held out for validation (default: the last)")
     a.add_argument("--device", default="cpu", help="cpu or cuda")
     a.add_argument("--resume", action="store_true", help="continue from the folder's checkpoint")
-    a.add_argument("--quiet", action="store_true")
+    add_quiet(a)
     a.set_defaults(fn=cmd_train)
     a = ds.add_parser("export", help="a checkpoint as ONNX (needs PyTorch)")
     a.add_argument("checkpoint")
@@ -114,6 +118,6 @@ def register_cli(subparsers) -> None:
     a.add_argument("tours", nargs="+", help="tour folders, or design folders holding tours")
     a.add_argument("--model", required=True, help="ONNX model (reloc detector export)")
     a.add_argument("--every", type=int, default=1)
-    a.add_argument("--json", action="store_true")
-    a.add_argument("--quiet", action="store_true")
+    add_json(a, "the report")
+    add_quiet(a)
     a.set_defaults(fn=cmd_eval)

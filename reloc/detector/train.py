@@ -1,4 +1,5 @@
-"""Train the learned detector (``reloc detector train``), and export it to ONNX.
+"""Train the learned detector, and export it to ONNX: the command is ``reloc detector train`` (its
+options and defaults are ``reloc.detector.cli``'s, from ``reloc.detector.settings.TrainConfig``).
 
 Loss: class-weighted cross-entropy on the per-pixel classes (weights ``freq ** -0.5``, normalised,
 so that small objects count) plus binary cross-entropy on instance boundaries (positive weight
@@ -14,13 +15,12 @@ epoch is written atomically, and ``--resume`` continues from it. Runs on the CPU
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import sys
 import time
 import warnings
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -30,23 +30,10 @@ import torch.nn.functional as F
 from formats.atomic import replacing, write_json_atomic
 
 from .data import boundaries, load
+from .settings import TrainConfig
 from .model import SegNet, parameter_count
 
 MODEL_FORMAT = "videoreloc-segnet/1"
-
-
-@dataclass
-class TrainConfig:
-    epochs: int = 40
-    batch: int = 32
-    lr: float = 2e-3
-    weight_decay: float = 1e-4
-    width: int = 16
-    boundary_pos_weight: float = 3.0
-    boundary_loss_weight: float = 1.0
-    exposure_log2: float = 0.7
-    seed: int = 0
-    val_layouts: list[str] = field(default_factory=list)  # default: the last layout of the set
 
 
 def _weights(sem: np.ndarray, n: int) -> torch.Tensor:
@@ -185,29 +172,3 @@ def export_onnx(checkpoint, out_onnx, height: int = 120, width: int = 160) -> Pa
             p.key, p.value = k, v
         onnx.save(m, str(tmp))
     return out_onnx
-
-
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m reloc.detector.train", description=__doc__.split("\n")[0])
-    ap.add_argument("data", help="packed training set (.npz, reloc detector pack)")
-    ap.add_argument("--out", required=True, help="output folder: checkpoint.pt, train_log.json, model.onnx")
-    ap.add_argument("--epochs", type=int, default=TrainConfig.epochs)
-    ap.add_argument("--batch", type=int, default=TrainConfig.batch)
-    ap.add_argument("--lr", type=float, default=TrainConfig.lr)
-    ap.add_argument("--width", type=int, default=TrainConfig.width)
-    ap.add_argument("--seed", type=int, default=TrainConfig.seed)
-    ap.add_argument("--val-layouts", nargs="*", default=[])
-    ap.add_argument("--device", default="cpu")
-    ap.add_argument("--resume", action="store_true")
-    ap.add_argument("--quiet", action="store_true")
-    a = ap.parse_args(argv)
-    cfg = TrainConfig(epochs=a.epochs, batch=a.batch, lr=a.lr, width=a.width, seed=a.seed, val_layouts=a.val_layouts)
-    log = train(a.data, a.out, cfg, device=a.device, resume=a.resume, progress=not a.quiet)
-    onnx_path = export_onnx(Path(a.out) / "checkpoint.pt", Path(a.out) / "model.onnx")
-    print(f"trained {len(log['epochs'])} epochs in {log.get('wall_time_s')} s; val mIoU {log['epochs'][-1]['val_miou']}; "
-          f"wrote {onnx_path}")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -8,6 +8,8 @@ second are given with and without io, as the median over ``--repeat`` runs (the 
 
 from __future__ import annotations
 
+from formats.cli import add_json
+
 import json
 import statistics
 import time
@@ -88,8 +90,7 @@ def cmd_frontend(args) -> int:
 def cmd_odometry(args) -> int:
     from . import bench_odometry
 
-    argv = [args.tour, "--frames", str(args.frames), "--widths", args.widths, "--strides", args.strides]
-    return bench_odometry.main(argv + (["--json", args.json] if args.json else []))
+    return bench_odometry.run(args)
 
 
 def register_cli(subparsers) -> None:
@@ -102,13 +103,11 @@ def register_cli(subparsers) -> None:
     a.add_argument("--poses", choices=("odometry", "gt"), default="odometry")
     a.add_argument("--repeat", type=int, default=3)
     a.add_argument("--config")
-    a.add_argument("--json", action="store_true")
+    add_json(a, "the report")
     a.set_defaults(fn=cmd_frontend)
     a = sub.add_parser("odometry", help="odometry speed against drift per metre for resolutions and strides")
-    a.add_argument("tour")
-    a.add_argument("--frames", type=int, default=900)
-    a.add_argument("--widths", default="640,320,160,80", help="odometry image widths to compare")
-    a.add_argument("--strides", default="1,2,3", help="frame strides to compare")
-    a.add_argument("--json", metavar="FILE", help="also write the rows to this JSON file")
+    from . import bench_odometry
+
+    bench_odometry.add_arguments(a)
     a.set_defaults(fn=cmd_odometry)
 

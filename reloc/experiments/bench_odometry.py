@@ -30,6 +30,10 @@ from pathlib import Path
 
 import numpy as np
 
+from formats.atomic import write_json_atomic
+from formats.cli import add_json, add_out
+from formats.errors import check_output_file, run_command
+
 from ..config import OdometryConfig
 from ..frontend.odometry import OdometryChain, rotation_deg
 
@@ -185,29 +189,40 @@ def format_table(rows: list[dict]) -> str:
     return "\n".join([HEADER] + [format_row(r) for r in rows])
 
 
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m reloc.experiments.bench_odometry",
-                                description="odometry speed / drift trade-off on a rendered tour")
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of ``reloc bench odometry`` (declared once: the ``python -m`` entry point is the same command)."""
     p.add_argument("tour", help="tour directory")
     p.add_argument("--frames", type=int, default=900, help="frames to load (default 900)")
     p.add_argument("--start", type=int, default=0, help="first frame position (default 0)")
-    p.add_argument("--window", type=int, default=300, help="frames per window (a clip-like length)")
+    p.add_argument("--window", type=int, default=300, help="frames per window (a clip-like length; default 300)")
     p.add_argument("--windows", type=int, help="number of windows (default: one every half window)")
-    p.add_argument("--widths", default="640,320,160,80")
-    p.add_argument("--strides", default="1,2,3")
+    p.add_argument("--widths", default="640,320,160,80", help="odometry image widths to compare (default 640,320,160,80)")
+    p.add_argument("--strides", default="1,2,3", help="frame strides to compare (default 1,2,3)")
     p.add_argument("--methods", default="point_to_plane", help="point_to_plane,hybrid (hybrid needs RGB)")
-    p.add_argument("--json", help="also write the rows to this JSON file")
-    a = p.parse_args(argv)
+    add_json(p, "the rows")
+    add_out(p, "also write the rows to this JSON file", required=False)
+
+
+def run(a) -> int:
+    if a.out:
+        check_output_file(a.out)
     settings = [(int(w), int(s), m) for w in a.widths.split(",") for s in a.strides.split(",")
                 for m in a.methods.split(",")]
     data = load_depths(a.tour, a.frames, a.start)
     print(f"{a.tour}: {len(data[0])} frames {data[4]}x{data[5]}, windows of {min(a.window, len(data[0]))}"
-          + ("" if data[6] else ", no RGB (hybrid skipped)"), flush=True)
+          + ("" if data[6] else ", no RGB (hybrid skipped)"), file=sys.stderr if a.json else sys.stdout, flush=True)
     rows = odometry_tradeoff(a.tour, settings=settings, window=a.window, windows=a.windows, data=data)
-    print(format_table(rows))
-    if a.json:
-        Path(a.json).write_text(json.dumps(rows, indent=1))
+    print(json.dumps(rows, indent=1) if a.json else format_table(rows))
+    if a.out:
+        write_json_atomic(a.out, rows, indent=1)
     return 0
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m reloc.experiments.bench_odometry",
+                                description="odometry speed / drift trade-off on a rendered tour (= reloc bench odometry)")
+    add_arguments(p)
+    return run_command("reloc", run, p.parse_args(argv))
 
 
 if __name__ == "__main__":

@@ -46,6 +46,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from formats.errors import SceneFormatError, UserError
+from formats.cli import add_json
 
 from .tables import FACTOR_KEYS, METRICS, read_results
 
@@ -186,5 +187,5 @@ def register_cli(subparsers) -> None:
     p = subparsers.add_parser("check", help="pass/fail robustness checks on experiment results (exit 1 on a failure)")
     p.add_argument("checks", metavar="CHECKS.yaml", help="check spec, or a shipped name (reloc/specs: demo_checks, ...)")
     p.add_argument("results", metavar="RESULTS_DIR", help="a reloc experiment results folder")
-    p.add_argument("--json", action="store_true")
+    add_json(p, "the table of checks")
     p.set_defaults(fn=cmd_check)

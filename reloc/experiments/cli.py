@@ -19,6 +19,7 @@ from pathlib import Path
 from formats.atomic import write_json_atomic
 from formats.camera import read_tum
 from formats.errors import SceneFormatError, UserError
+from formats.cli import add_json
 
 from .evaluation import summarize
 
@@ -135,6 +136,6 @@ def register_cli(subparsers) -> None:
                    help="for ace/colmap/mapfree: the export folder (its export.json) or a JSON file "
                         "{\"frames\": {file name: tour frame index}} mapping the file's names to frames")
     p.add_argument("--gt", required=True, metavar="TOUR_DIR", help="the tour with the ground-truth poses")
-    p.add_argument("--json", action="store_true")
+    add_json(p)
     p.add_argument("--save", metavar="FILE.json", help="also write the JSON here")
     p.set_defaults(fn=cmd_eval)

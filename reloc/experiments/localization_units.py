@@ -13,6 +13,8 @@ states.
 
 from __future__ import annotations
 
+from formats.cli import add_json, add_quiet
+
 import dataclasses
 import sys
 import time
@@ -180,8 +182,8 @@ def register_cli(subparsers) -> None:
                    help="evaluate one-frame units on every k-th frame only (the expensive row)")
     p.add_argument("--config", help="YAML overrides of the paper's thresholds")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--json", action="store_true", help="print JSON instead of the table")
+    add_json(p)
     p.add_argument("--out", help="also write the JSON report here")
-    p.add_argument("--quiet", action="store_true")
+    add_quiet(p)
     add_detector_arguments(p)
     p.set_defaults(fn=cmd_units)

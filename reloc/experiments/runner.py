@@ -28,6 +28,7 @@ from formats.design import DESIGN_FILE, list_tours, read_design, tour_name
 from formats.errors import SceneFormatError, UserError, check_output_folder
 from formats.sensors import load_sensor
 from formats.tour import Tour
+from formats.cli import add_quiet, add_workers
 
 from . import tables
 from .fingerprint import code_fingerprint, file_key, ground_truth_key, key_of
@@ -437,7 +438,7 @@ def register_cli(subparsers) -> None:
                    "(reloc/specs: demo_experiment, ...)")
     p.add_argument("--out", help="results folder (default: the spec's out)")
     p.add_argument("--tours", help="folder of the rendered tours (default: the render spec's out)")
-    p.add_argument("--workers", type=int, help="processes at a time (default: the spec's workers)")
+    add_workers(p, "processes", default=None)
     p.add_argument("--no-plots", action="store_true", help="tables only")
-    p.add_argument("--quiet", action="store_true")
+    add_quiet(p)
     p.set_defaults(fn=cmd_experiment)

@@ -10,6 +10,7 @@ from collections import Counter
 
 from formats.atomic import write_text_atomic
 from formats.errors import UserError, check_output_file
+from formats.cli import add_quiet
 
 from .build import build_map
 from .document import dumps_map, map_from_tour
@@ -96,7 +97,7 @@ def register_cli(subparsers) -> None:
     a.add_argument("--voxel", type=float, default=MappingSettings.voxel,
                    help=f"voxel size in metres (default {MappingSettings.voxel:g})")
     a.add_argument("--report", metavar="FILE.json", help="write the build report and per-box errors against the tour's ground truth")
-    a.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_quiet(a)
     from ..detection.factory import add_detector_arguments
 
     add_detector_arguments(a)

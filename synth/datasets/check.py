@@ -40,6 +40,7 @@ from formats.camera import Intrinsics
 from formats.errors import UserError
 from formats.tour import (CAMERA_FILE, FRAMES_DIR, META_FILE, OBJECTS_FILE, POSES_FILE, PREVIEWS_DIR, Tour,
                           images_from_channels, ranges_text, read_split_channels, scan_dir, tonemap)
+from formats.cli import add_json, add_quiet, add_sensor
 
 # depth consistency between neighbouring frames
 CONSISTENCY_ABS_TOL_M = 0.02  # a pixel agrees within max(2 cm, 1 % of its depth)
@@ -773,7 +774,7 @@ def register_cli(subparsers) -> None:
     a = ds.add_parser("check", help="completeness, channels, depth, ids and pose/depth consistency of a tour "
                                     "(exit 1 if problems are found)")
     a.add_argument("dir", help="tour directory (holds camera.json, poses.txt, frames/)")
-    a.add_argument("--json", action="store_true", help="print the full report as JSON")
+    add_json(a, "the full report")
     a.add_argument("--pairs", type=int, default=8, help="neighbouring frame pairs for the depth consistency test")
     a.set_defaults(fn=cmd_check)
     a = ds.add_parser("show", help="contact sheet of one frame: RGB, depth, instance, semantic")
@@ -791,8 +792,6 @@ def register_cli(subparsers) -> None:
     a.add_argument("--role", default="query", help="mapping (ACE train/, 7-Scenes train split) | query (default)")
     a.add_argument("--exposure", default="auto", help="auto (per frame, default) | fixed (one factor per tour: "
                                                       "the median auto factor) | FACTOR (linear RGB scale)")
-    a.add_argument("--sensor", help="export the frames as this RGB-D camera measures them: a formats/sensor_presets "
-                                    "name (ideal, structured_light, tof) or a sensor YAML file (default: ideal)")
-    a.add_argument("--sensor-seed", type=int, default=0, help="seed of the sensor noise (formats.sensors.frame_seed)")
-    a.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_sensor(a, "export the frames")
+    add_quiet(a)
     a.set_defaults(fn=cmd_export)

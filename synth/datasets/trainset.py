@@ -38,6 +38,7 @@ from formats.atomic import write_text_atomic
 from formats.errors import SceneFormatError, UserError
 from formats.fields import integer
 from formats.yamlfile import read_yaml
+from formats.cli import add_quiet, add_workers
 
 from ..layout.apartment import DEFAULT_SEED, generate_apartment
 from ..scene.lighting import jitter_preset, load_lighting, preset_document
@@ -186,7 +187,7 @@ def prepare(spec: TrainsetSpec, out: Path | None = None, progress: bool = True) 
 
 
 def cmd_render(args) -> int:
-    from ..jobs.job import load_spec, run_job
+    from ..jobs import load_spec, run_job
 
     spec = load_trainset(args.spec)
     out = Path(args.out) if args.out else Path(spec.out)
@@ -209,7 +210,7 @@ def register_cli(subparsers) -> None:
     a = ts.add_parser("render", help="prepare layouts, jittered lights and random views, then render them (resumable)")
     a.add_argument("spec", metavar="SPEC.yaml", help="trainset spec, or a shipped name (detector_train: synth/specs/detector_train.yaml)")
     a.add_argument("--out", help="output folder (default: the spec's out)")
-    a.add_argument("--workers", type=int, default=1, help="chunk processes at a time (default 1)")
+    add_workers(a, "chunk processes")
     a.add_argument("--prepare-only", action="store_true", help="write the scenes and render.yaml, render nothing")
-    a.add_argument("--quiet", action="store_true", help="no progress output")
+    add_quiet(a)
     a.set_defaults(fn=cmd_render)

@@ -1,6 +1,6 @@
 """Planning at scale: the wall time of a job's plan on a Ray cluster, from a calibration render.
 
-``synth render SPEC --dry-run --nodes N[,N...] --cpus-per-node C [--gpus-per-node G]`` (``synth.jobs.job``)
+``synth render SPEC --dry-run --nodes N[,N...] --cpus-per-node C [--gpus-per-node G]`` (``synth.jobs.cli``)
 prints the estimate; everything here but ``measure_environment`` is pure (plan work + calibration +
 cluster shape -> figures), so the tests check it against schedules worked out by hand.
 
@@ -29,7 +29,7 @@ The model (every assumption is printed with the estimate, ``describe_estimate``)
   ``geometry`` chunk has finished. Priority ``longest``: the longest path to the end of the job
   first (a chunk's own time plus its longest dependent), which for independent chunks is the
   classic longest-processing-time-first rule; ``plan``: the plan's order, which is what the Ray
-  driver does today (``synth.jobs.job._Queue`` hands out ready chunks in plan order).
+  driver does today (``synth.jobs.chunk_queue.ChunkQueue`` hands out ready chunks in plan order).
 - ``copy`` chunks (the frames between RGB frames with ``rgb_every``) run on the driver (hard links
   to the geometry cache) and take no node time.
 - **The driver's link**: every rendered frame comes home to the driver, and an ``rgb`` chunk takes
@@ -85,7 +85,7 @@ class Cluster:
 
 
 def plan_work(plan, missing_only: bool = True) -> list[Work]:
-    """The chunks of a ``synth.jobs.job.Plan`` as ``Work`` (only the frames still missing by default; a
+    """The chunks of a ``synth.jobs.plan.Plan`` as ``Work`` (only the frames still missing by default; a
     chunk with none left is dropped and counts as done for the chunks that wait for it)."""
     out = []
     for c in plan.chunks:

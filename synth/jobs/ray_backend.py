@@ -44,6 +44,7 @@ from formats.atomic import replacing, write_text_atomic
 from formats.errors import UserError, one_line
 
 from ..render.chunks import run_chunk_process
+from .chunk_queue import ChunkQueue, chunk_files
 
 BATCH_BYTES = 32 * 1024 * 1024  # a batch of frame files sent home at once (one object in the object store)
 BATCH_SECONDS = 1.0  # ... or what finished within this long, whichever comes first
@@ -310,7 +311,7 @@ def preflight(ray, mode: str, renderer: str = "blender", progress=None, timeout:
 
 
 def pack_chunk(c) -> dict:
-    """Everything chunk ``c`` (``synth.jobs.job.Chunk``) reads, as bytes, and its job with paths relative to
+    """Everything chunk ``c`` (``synth.jobs.plan.Chunk``) reads, as bytes, and its job with paths relative to
     the scratch folder the task makes: no path of the driver's travels. Only the frames still
     missing are asked for (a retry renders what has not come home)."""
     from ..scene.lighting import lighting_file
@@ -480,9 +481,9 @@ def copy_stored(c, store, bar) -> tuple[int, str | None]:
     return 0, None
 
 
-def run(plan, state, todo: list, bar, work: Path, queue_cls, files_of) -> dict:
-    """Run ``todo`` on the connected cluster (``connect``); ``queue_cls`` is ``synth.jobs.job._Queue``,
-    ``files_of(work, c)`` the chunk's job and log files on the driver."""
+def run(plan, state, todo: list, bar, work: Path) -> dict:
+    """Run ``todo`` on the connected cluster (``connect``), handed out by ``synth.jobs.chunk_queue.ChunkQueue``;
+    each chunk's job and log files on the driver are ``chunk_files(work, c)``."""
     ray = _ray()
     from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
 
@@ -507,7 +508,7 @@ def run(plan, state, todo: list, bar, work: Path, queue_cls, files_of) -> dict:
         return limits[1]
 
     info: dict = {}
-    q = queue_cls(plan, state, todo, bar)
+    q = ChunkQueue(plan, state, todo, bar)
     running: dict = {}  # generator -> _Attempt
     by_token: dict[str, _Attempt] = {}  # the attempts running now
     chunk_of: dict[str, str] = {}  # every token handed out -> chunk id
@@ -578,7 +579,7 @@ def run(plan, state, todo: list, bar, work: Path, queue_cls, files_of) -> dict:
     try:
         while True:
             for c in q.take_ready(max(0, limit() - len(running))):
-                jf, log = files_of(work, c)
+                jf, log = chunk_files(work, c)
                 if c.kind == "copy":  # no rendering: the driver links the frames of its own geometry cache
                     if store is not None:
                         rc, err = copy_stored(c, store, bar)

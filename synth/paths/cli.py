@@ -9,6 +9,7 @@ import numpy as np
 
 from formats import camera
 from formats.errors import UnknownNameError, UserError
+from formats.cli import add_json
 
 from .clearance import CLEARANCE_TOL, _range_text, _what, clearance_report, declared_clearance, replan_command
 from .files import load_path, save_path
@@ -209,14 +210,14 @@ def register_cli(subparsers) -> None:
     a = sub.add_parser("show", help="frames, length, duration, speed, heights, rooms visited")
     a.add_argument("path", help="path name (synth/data/paths/NAME.txt) or file")
     a.add_argument("--layout", help="layout for rooms and clearance (default: the first it was planned on)")
-    a.add_argument("--json", action="store_true")
+    add_json(a)
     a.set_defaults(fn=_cmd_show)
     a = sub.add_parser("check", help="does the path keep its declared clearance in these layouts? (exit 1 if not)")
     a.add_argument("path", help="path name or file")
     a.add_argument("--layout", action="append", metavar="LAYOUT",
                    help="layout to check (repeat for several; default: the layouts it was planned on)")
     a.add_argument("--clearance", type=float, help="m (default: the clearance the path was planned with)")
-    a.add_argument("--json", action="store_true")
+    add_json(a)
     a.set_defaults(fn=_cmd_check)
     a = sub.add_parser("preview", help="top-down plot of a path over a layout")
     a.add_argument("path", help="path name or file")

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from formats.camera import Intrinsics, write_tum
+from formats.cli import add_json
 
 from .settings import QUALITY
 
@@ -135,5 +136,5 @@ def register_cli(subparsers) -> None:
     a = subparsers.add_parser("bench", help="seconds per frame of each renderer and quality on this machine")
     a.add_argument("--frames", type=int, default=5, help="frames per measurement (median reported)")
     a.add_argument("--quality", action="append", choices=list(QUALITY), help="RGB presets to time (default: all)")
-    a.add_argument("--json", action="store_true")
+    add_json(a)
     a.set_defaults(fn=cmd_bench)

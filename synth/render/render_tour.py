@@ -28,12 +28,13 @@ import numpy as np
 
 from formats import frames as fr
 from formats.atomic import replacing, write_json_atomic
-from formats.camera import CAMERA_DOC, Intrinsics, write_tum
+from formats.camera import Intrinsics, camera_document, write_tum
+from formats.tour import CAMERA_FILE
 from formats.errors import UserError, check_output_folder
 
 from .. import __version__
 from .chunks import chunk_job, missing_frames, run_chunk_process, split
-from .settings import DEVICES, quality
+from .settings import DEFAULTS, DEVICES, quality
 from ..scene.model import boxes_document, load_layout, resolve_layout_path
 
 
@@ -47,16 +48,16 @@ class TourSpec:
     path: str  # camera path name or file
     out: str  # tour directory
     lighting: str | None = None  # preset name or file; None = geometry only
-    renderer: str = "blender"  # blender | fast
-    quality: str = "preview"
-    width: int = 640
-    height: int = 480
-    hfov_deg: float = 75.0
+    renderer: str = DEFAULTS.renderer  # blender | fast
+    quality: str = DEFAULTS.quality
+    width: int = DEFAULTS.width
+    height: int = DEFAULTS.height
+    hfov_deg: float = DEFAULTS.hfov_deg
     frames: int | None = None  # the first N frames of the path (default: all)
-    seed: int = 0
-    device: str = "cpu"  # cpu | gpu | auto
-    previews: bool = False
-    chunk_size: int = 50
+    seed: int = DEFAULTS.seed
+    device: str = DEFAULTS.device  # cpu | gpu | auto
+    previews: bool = DEFAULTS.previews
+    chunk_size: int = DEFAULTS.chunk_size
     workers: int = 1
     threads: int = 0  # Cycles threads per worker (0 = all)
     geometry_cache: str | None = None  # default: <out parent>/_geometry
@@ -155,8 +156,7 @@ def prepare(spec: TourSpec, create: bool = True) -> Prepared:
 
 def write_static_files(p: Prepared) -> None:
     """camera.json, poses.txt, objects.json (atomically; identical on every re-run)."""
-    cam = {**p.intr.to_dict(), "fps": p.path_fps, "hfov_deg": p.spec.hfov_deg, **CAMERA_DOC}
-    write_json_atomic(p.out / "camera.json", cam, indent=1)
+    write_json_atomic(p.out / CAMERA_FILE, camera_document(p.intr, p.path_fps, p.spec.hfov_deg), indent=1)
     write_tum(p.out / "poses.txt", p.poses, fps=p.path_fps, frames=p.frame_ids,
               header=f"camera-to-world poses (OpenCV camera axes) of path '{p.path_name}'\nt tx ty tz qx qy qz qw, t = frame / {p.path_fps:g}")
     write_json_atomic(p.out / "objects.json", boxes_document(load_layout(p.layout_file)), indent=1)

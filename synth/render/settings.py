@@ -1,9 +1,36 @@
-"""Render settings shared by the renderers and the CLI (no bpy): quality presets and devices."""
+"""Render settings shared by the renderers, the job specs and the CLIs (no bpy): the render defaults,
+quality presets and devices.
+
+``DEFAULTS`` is the one home of what a tour or a job renders with when nothing says otherwise:
+``synth.render.render_tour.TourSpec``, ``synth.jobs.spec.JobSpec`` and its parser, and the options
+of ``synth tour render`` read it."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
+from formats.camera import DEFAULT_HEIGHT, DEFAULT_HFOV_DEG, DEFAULT_WIDTH
 from formats.errors import UnknownNameError
 
+
+@dataclass(frozen=True)
+class RenderDefaults:
+    renderer: str = "blender"  # blender | fast
+    quality: str = "preview"  # a key of QUALITY
+    width: int = DEFAULT_WIDTH
+    height: int = DEFAULT_HEIGHT
+    hfov_deg: float = DEFAULT_HFOV_DEG
+    seed: int = 0  # Cycles seed
+    device: str = "cpu"  # a member of DEVICES
+    chunk_size: int = 50  # frames per Blender process
+    previews: bool = False  # 8-bit PNG previews beside the EXR frames
+
+    @property
+    def size(self) -> str:
+        return f"{self.width}x{self.height}"
+
+
+DEFAULTS = RenderDefaults()
 
 
 # Cycles settings per quality preset. Geometry passes (depth, ids) ignore these: they are traced with

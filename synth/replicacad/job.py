@@ -87,7 +87,7 @@ def _sha(path: Path) -> str:
 def prepare(spec, out: Path, cli_root: str | None = None, progress=print):
     """Import the spec's scenes and plan its paths under ``out/replicacad``; return the rewritten spec.
 
-    ``spec`` is a ``synth.jobs.job.JobSpec`` with ``replicacad`` set. Raises SceneFormatError naming the
+    ``spec`` is a ``synth.jobs.spec.JobSpec`` with ``replicacad`` set. Raises SceneFormatError naming the
     spec file and the field for an unknown scene, a bad dataset file (the dataset file and field), a
     path name that is not a kind, or a path that cannot be planned on the imported layouts."""
     from ..paths.files import load_path, save_path

@@ -1,0 +1,57 @@
+"""Command-line options that both halves share, declared once so that they mean the same everywhere.
+
+- ``--json``: print the command's result as JSON on stdout instead of its table (a flag, never a
+  file name; a command that also writes a file takes ``--out FILE``);
+- ``--quiet``: no progress bar or progress lines; the result line and errors still print;
+- ``--workers N``: how many processes work at a time (a positive integer);
+- ``--sensor NAME|FILE`` and ``--sensor-seed S``: read (or export) frames as an RGB-D camera
+  measures them (``formats.sensors``);
+- ``--out``: where the command writes, with the command's own description of what it writes.
+
+Each ``add_*`` returns the argparse action, so a caller can still adjust it.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+
+def positive_int(text: str) -> int:
+    """argparse ``type`` of a count: a positive integer, or argparse's one-line usage error."""
+    try:
+        v = int(text)
+    except ValueError:
+        v = 0
+    if v <= 0:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return v
+
+
+def add_json(p: argparse.ArgumentParser, what: str = "the result"):
+    return p.add_argument("--json", action="store_true", help=f"print {what} as JSON on stdout instead of the table")
+
+
+def add_quiet(p: argparse.ArgumentParser):
+    return p.add_argument("--quiet", action="store_true",
+                          help="no progress bar or progress lines (the result line and errors still print)")
+
+
+def add_workers(p: argparse.ArgumentParser, what: str, default: int | None = 1):
+    shown = f"default {default}" if default is not None else "default: the spec's workers"
+    return p.add_argument("--workers", type=positive_int, default=default, metavar="N",
+                          help=f"{what} at a time ({shown})")
+
+
+def add_out(p: argparse.ArgumentParser, what: str, required: bool = True, default: str | None = None):
+    if default is not None:
+        what = f"{what} (default {default})"
+    return p.add_argument("--out", required=required, default=default, help=what)
+
+
+def add_sensor(p: argparse.ArgumentParser, verb: str = "read the frames", default: str = "ideal: the render as it is"):
+    """``--sensor`` and ``--sensor-seed``."""
+    p.add_argument("--sensor", metavar="NAME|FILE",
+                   help=f"{verb} as this RGB-D camera measures them: a formats/sensor_presets name (ideal, "
+                        f"structured_light, tof) or a sensor YAML file (default: {default})")
+    return p.add_argument("--sensor-seed", type=int, default=0, metavar="S",
+                          help="seed of the sensor noise (per frame: formats.sensors.frame_seed; default 0)")

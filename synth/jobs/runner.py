@@ -1,0 +1,227 @@
+"""Running a render job: ``run_job`` renders everything a spec asks for that is not on disk yet,
+locally (``synth.jobs.queue``) or on a Ray cluster (``synth.jobs.ray_backend``), into a folder or
+onto a storage URI (``synth.jobs.storage``), and writes each tour's ``meta.json`` and the job's
+``job_summary.json``. Killed, it loses nothing: ``--resume`` finishes what is missing
+(``synth.jobs.state``)."""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+from formats.atomic import write_json_atomic
+from formats.design import write_design
+from formats.errors import UserError, check_output_folder
+
+from ..render.render_tour import make_output_folder, tour_meta, write_static_files
+from ..render.settings import quality
+from .plan import Chunk, Plan, _out_error, expand
+from .chunk_queue import ProgressBar, run_local
+from .spec import JobSpec, spec_difference, spec_document
+from .state import DONE, FAILED, STATE_FILE, JobState, load_stored_state
+
+
+def run_ray(plan: Plan, state: JobState, todo: list[Chunk], bar: ProgressBar, work: Path) -> dict:
+    """Ray backend, on the cluster ``run_job`` connected to (``synth.jobs.ray_backend.connect``): each chunk is
+    a Ray task (CPU or GPU request) that gets everything it reads in its arguments, renders in a
+    node-local scratch folder and sends its frames home, where they are written atomically into the
+    job folder; progress advances per frame (``synth.jobs.ray_backend``)."""
+    from . import ray_backend
+
+    return ray_backend.run(plan, state, todo, bar, work)
+
+
+
+def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, backend: str = "local",
+            ray_address: str | None = None, resume: bool = False, progress: bool = True,
+            allow_clearance_breach: bool = False, replicacad_root: str | None = None,
+            ray_runtime_env: str = "auto") -> dict:
+    """Render everything the spec asks for that is not on disk yet. Returns a summary.
+
+    A spec with ``replicacad:`` first imports its scenes and plans its paths into ``OUT/replicacad``
+    (``synth.replicacad.job.prepare``; ``replicacad_root`` overrides the spec's dataset folder).
+
+    ``backend="ray"``: the cluster at ``ray_address`` (default: a local instance on loopback, or the
+    connection this process already has) is connected to and checked (a CPU; a GPU for ``device:
+    gpu``) before anything is written; ``ray_runtime_env`` is ``synth.jobs.ray_backend.runtime_env``'s mode.
+
+    ``out`` (else the spec's ``out``) may be a storage URI (``synth.jobs.storage``): ``file://PATH`` is the
+    folder PATH for the local backend; with the Ray backend any fsspec URI (``file://``, ``memory://``,
+    ...) puts the job folder on that file system, written by the driver."""
+    t0 = time.time()
+    if workers <= 0:
+        raise UserError(f"--workers must be positive, got {workers}")
+    if backend not in ("local", "ray"):
+        raise UserError(f"unknown backend '{backend}'; use local or ray")
+    from_cli = out is not None
+    out, store = _job_folder(spec, out, backend)
+    if spec.replicacad is not None:
+        from ..replicacad.job import prepare as prepare_replicacad
+
+        target = Path(out or spec.out)
+        try:
+            check_output_folder(target)
+        except UserError as e:
+            _out_error(spec, from_cli, e)
+        spec = prepare_replicacad(spec, target, replicacad_root,
+                                  progress=(lambda m: print(m, file=sys.stderr)) if progress else (lambda m: None))
+    staging = None
+    session = None
+    try:
+        if store is None:
+            plan = expand(spec, out, check_clearance=not allow_clearance_breach)
+            state_path = plan.out / STATE_FILE
+            old = JobState.load(state_path)
+            shown = str(state_path)
+        else:  # the job's small files are staged here and copied up; its frames go straight to the storage
+            import tempfile
+
+            staging = Path(tempfile.mkdtemp(prefix="synth_stage_")).resolve()  # chunk jobs hold resolved paths
+            plan = expand(spec, staging / "job", check_clearance=not allow_clearance_breach)
+            plan.use_storage(store)
+            old = load_stored_state(store)
+            shown = store.url(STATE_FILE)
+        if old is not None and not resume:
+            raise UserError(f"{plan.where} already holds a job (its {STATE_FILE}); add --resume to finish it, or use another --out")
+        if old is not None and old.get("spec") != spec_document(spec):
+            raise UserError(f"{shown}: {spec_difference(old.get('spec'), spec_document(spec))}: the job in this folder was "
+                            "started from a different spec; use another --out")
+        if backend == "ray":  # an unreachable cluster, or one without the GPUs asked for, is refused before any write
+            from . import ray_backend
+            from .storage import local_path
+
+            session = ray_backend.connect(ray_address, ray_runtime_env, spec.device,  # out: kept out of the upload
+                                          plan.out if store is None else local_path(store.uri), spec.renderer,
+                                          progress=(lambda m: print(m, file=sys.stderr)) if progress else None)
+        return _run_plan(plan, old, backend, workers, progress, t0, from_cli=from_cli)
+    finally:
+        if session is not None:
+            session.close()
+        if staging is not None:
+            import shutil
+
+            shutil.rmtree(staging, ignore_errors=True)
+
+
+def _job_folder(spec: JobSpec, out, backend: str):
+    """(local folder or None, ``synth.jobs.storage.Storage`` or None) of ``--out`` (else the spec's ``out``).
+    An unknown scheme, or a non-local one with the local backend, is a one-line UserError."""
+    from . import storage
+
+    target = str(out) if out is not None else spec.out
+    if not storage.is_uri(target):
+        return (Path(out) if out is not None else None), None
+    option = "--out" if out is not None else f"{spec.source or '<spec>'}: out:"
+    store = storage.Storage(target, option)
+    if backend == "local":
+        path = storage.local_path(target)
+        if path is None:
+            raise UserError(f"{option} {target}: a job folder on {storage.scheme(target)}:// storage needs --backend ray "
+                            "(its driver writes the frames that come home); the local backend writes to a folder "
+                            "(a path or file://)")
+        return path, None
+    if spec.replicacad is not None:
+        raise UserError(f"{option} {target}: a spec with a replicacad: section renders into a local folder (a path), "
+                        "not a storage URI")
+    store.check_writable()
+    return None, store
+
+
+
+
+def _run_plan(plan: Plan, old: dict | None, backend: str, workers: int, progress: bool, t0: float,
+              from_cli: bool) -> dict:
+    spec = plan.spec
+    try:
+        make_output_folder(plan.out)
+    except UserError as e:
+        _out_error(spec, from_cli, e)
+    state_path = plan.out / STATE_FILE
+    store = plan.store
+    state = JobState(state_path, plan.chunks, spec_document(spec), store)
+    state.merge(old)
+    for p in plan.tours.values():
+        make_output_folder(p.out)
+        if p.geometry_dir:
+            make_output_folder(p.geometry_dir)
+        write_static_files(p)
+    # the planned tours, before any frame: readers of the design know what is still missing
+    write_design(plan.out, spec.name, spec.source, {
+        name: {"layout": p.layout_name, "lighting": p.lighting_name, "path": p.path_name, "n_frames": len(p.frame_ids)}
+        for name, p in plan.tours.items()})
+    if store is not None:  # the static files and the design, before any frame
+        store.push_tree(plan.out)
+    todo, missing_before = [], 0
+    for c in plan.chunks:
+        if m := c.missing():
+            todo.append(c)
+            missing_before += len(m)
+        else:
+            state.doc["chunks"][c.id]["state"] = DONE
+    state.save()
+    done_frames = plan.frames_total - missing_before
+    bar = ProgressBar(plan.frames_total, done_frames, progress, f"{spec.name}")
+    work = plan.out / ".work"
+    work.mkdir(parents=True, exist_ok=True)
+    try:
+        if backend == "local":
+            run_local(plan, state, todo, workers, bar, work)
+        else:
+            run_ray(plan, state, todo, bar, work)
+    finally:
+        bar.close()
+    counts = state.counts()
+    wall = round(time.time() - t0, 2)
+    # what is on disk now, not what was planned: a chunk that failed before it rendered counts nothing
+    missing_after = {c.id: len(c.missing()) for c in todo}
+    rendered = missing_before - sum(missing_after.values())
+    failed_ids = [cid for cid, c in state.doc["chunks"].items() if c["state"] == FAILED]
+    for name, p in plan.tours.items():
+        mine = [c for c in plan.chunks if c.tour == name or (p.geometry_dir and c.out_dir == str(p.geometry_dir))]
+        meta = job_tour_meta(p, spec, state.devices(mine))
+        if store is not None:  # the frames are in the storage, not in the staging folder
+            meta["complete"] = not store.missing(p.out / "frames", p.frame_ids)
+        write_json_atomic(p.out / "meta.json", meta, indent=1)
+        if store is not None:
+            store.write_bytes(p.out / "meta.json", (p.out / "meta.json").read_bytes())
+    summary = {"job": spec.name, "out": plan.where, "tours": len(plan.tours), "chunks": counts,
+               "frames_total": plan.frames_total, "frames_rendered_now": rendered, "wall_time_s": wall,
+               "frames_per_s": round(rendered / wall, 3) if wall > 0 else None, "backend": backend, "workers": workers,
+               "frames_missing": sum(missing_after.values()),
+               "frames_failed": sum(missing_after.get(cid, 0) for cid in failed_ids), "chunks_failed": len(failed_ids),
+               "failed": {cid: state.doc["chunks"][cid]["error"] for cid in failed_ids}}
+    write_json_atomic(plan.out / "job_summary.json", summary, indent=1)
+    if store is not None:
+        store.write_bytes(plan.out / "job_summary.json", (plan.out / "job_summary.json").read_bytes())
+    if not summary["failed"]:
+        import shutil
+
+        shutil.rmtree(work, ignore_errors=True)
+        if store is not None:
+            store.remove_tree(work)  # the logs the driver copied up
+    return summary
+
+
+def job_tour_meta(p, spec: JobSpec, render_devices: dict | None = None) -> dict:
+    """meta.json of a job's tour (``synth.render.render_tour.tour_meta``). Deterministic (a resumed job writes the
+    same file); timing and progress of the job are in ``job_summary.json``.
+
+    ``render_devices``: pass -> the devices its chunks reported rendering on (``CPU``, ``OPTIX``,
+    ``CUDA``...), kept per chunk in ``job_state.json`` so a resumed job writes the same."""
+    return tour_meta(
+        p, renderer=spec.renderer, seed=spec.seed, blender=_blender_version() if spec.renderer == "blender" else None,
+        settings={"quality": spec.quality, "quality_settings": quality(spec.quality) if p.lighting_name else None,
+                  "width": spec.width, "height": spec.height, "hfov_deg": spec.hfov_deg, "device": spec.device,
+                  "chunk_size": spec.chunk_size, "previews": spec.previews, "rgb_every": p.extra.get("rgb_every")},
+        geometry_renderer=spec.geometry, job=spec.name, render_devices=render_devices or {},
+    )
+
+
+def _blender_version() -> str | None:
+    from importlib import metadata
+
+    try:
+        return metadata.version("bpy")
+    except metadata.PackageNotFoundError:
+        return None
