@@ -135,6 +135,15 @@ CAMERA_DOC = {
 }
 
 
+def camera_document(intr: "Intrinsics", fps: float, hfov_deg: float | None = None) -> dict:
+    """A tour's ``camera.json``: the intrinsics, the frame rate (and the field of view it was made
+    with), and the conventions above."""
+    doc = {**intr.to_dict(), "fps": fps}
+    if hfov_deg is not None:
+        doc["hfov_deg"] = hfov_deg
+    return {**doc, **CAMERA_DOC}
+
+
 def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
     """Camera-to-world pose (OpenCV axes) of a camera at ``eye`` looking at ``target``."""
     eye, target, up = (np.asarray(v, dtype=float) for v in (eye, target, up))

@@ -132,6 +132,7 @@ import numpy as np
 
 from .camera import Intrinsics
 from .errors import SceneFormatError
+from .fields import number
 from .yamlfile import read_yaml
 
 PRESET_DIR = Path(__file__).parent / "sensor_presets"
@@ -249,17 +250,6 @@ _POSITIVE = {"focal_px", "disparity_step_px", "exposure_percentile", "exposure_t
              "exposure_max_ms", "blur_samples_max"}
 
 
-def _number(v, file: str, field: str) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise SceneFormatError(file, field, f"expected a number, got {v!r}")
-    v = float(v)
-    if math.isnan(v):
-        raise SceneFormatError(file, field, "NaN is not allowed")
-    if v < 0:
-        raise SceneFormatError(file, field, f"must not be negative, got {v}")
-    return v
-
-
 def _section(doc, cls, file: str, key: str):
     if doc is None:
         return cls()
@@ -279,7 +269,7 @@ def _section(doc, cls, file: str, key: str):
                 raise SceneFormatError(file, field, f"expected true or false, got {v!r}")
             out[k] = v
             continue
-        x = _number(v, file, field)
+        x = number(file, v, field, lo=0.0)
         if math.isinf(x) and k not in _INF_OK:
             raise SceneFormatError(file, field, "must be finite")
         if k in _PROBABILITIES and x > 1:

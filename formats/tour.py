@@ -17,7 +17,6 @@ A tour directory, as the renderers write it::
 
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,8 +25,10 @@ from typing import Iterator
 import numpy as np
 
 from . import frames as fr
-from .camera import Intrinsics, read_tum
+from .atomic import write_json_atomic
+from .camera import DEFAULT_FPS, Intrinsics, camera_document, read_tum, write_tum
 from .errors import SceneFormatError, UserError
+from .fields import fail, number
 from .yamlfile import read_json
 
 CAMERA_FILE = "camera.json"
@@ -88,16 +89,13 @@ def _read_json(path: Path, what: str) -> dict:
 
 
 def _number(d: dict, key: str, path: Path, positive: bool = False, integer: bool = False) -> float:
+    """``d[key]`` checked by ``formats.fields.number``; ``integer``: a whole number (640 or 640.0)."""
     if key not in d:
-        raise SceneFormatError(path, key, "missing")
-    v = d[key]
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise SceneFormatError(path, key, f"expected a finite number, got {v!r}")
+        fail(path, key, "missing")
+    v = number(path, d[key], key, positive=positive)
     if integer and v != int(v):
-        raise SceneFormatError(path, key, f"expected an integer, got {v!r}")
-    if positive and v <= 0:
-        raise SceneFormatError(path, key, f"expected a positive number, got {v!r}")
-    return int(v) if integer else float(v)
+        fail(path, key, f"expected an integer, got {d[key]!r}")
+    return int(v) if integer else v
 
 
 def _parse_camera(path: Path) -> tuple[Intrinsics, float, dict]:
@@ -380,3 +378,31 @@ def tonemap(rgb: np.ndarray, exposure: float | None = None) -> tuple[np.ndarray,
     else:
         scale = float(exposure)
     return fr.srgb_encode(rgb * scale).astype(np.float32), scale
+
+
+def write_tour(root, poses, intrinsics: Intrinsics, frames: dict | None = None, *, fps: float = DEFAULT_FPS,
+               frame_ids=None, meta: dict | None = None, objects: dict | None = None, hfov_deg: float | None = None,
+               header: str | None = None) -> "Tour":
+    """Write a tour folder in the format ``Tour`` reads, for a tool that makes tours without the
+    renderers (an importer of another dataset, a test): ``frames`` (frame id -> keyword arguments of
+    ``formats.frames.write_frame``: ``rgb``, ``depth``, ``instance``, ``semantic``), ``camera.json``
+    (``formats.camera.camera_document``), ``poses.txt`` (camera-to-world, one pose per ``frame_ids``,
+    default 0..n-1), ``meta.json`` (``meta`` over a header naming the frames, with ``layout``,
+    ``lighting``, ``path`` and ``renderer`` defaulting to placeholders) and ``objects.json`` when
+    ``objects`` is given. Every file is written atomically; returns the ``Tour``."""
+    root = Path(root)
+    poses = np.asarray(poses, dtype=float).reshape(-1, 4, 4)
+    ids = list(range(len(poses))) if frame_ids is None else [int(i) for i in frame_ids]
+    if len(ids) != len(poses) or not ids:
+        raise ValueError(f"write_tour: {len(poses)} poses for {len(ids)} frame ids")
+    for i, images in (frames or {}).items():
+        fr.write_frame(root / FRAMES_DIR / fr.frame_name(int(i)), **images)
+    write_json_atomic(root / CAMERA_FILE, camera_document(intrinsics, fps, hfov_deg), indent=1)
+    write_tum(root / POSES_FILE, poses, fps=fps, frames=None if frame_ids is None else ids, header=header)
+    if objects is not None:
+        write_json_atomic(root / OBJECTS_FILE, objects, indent=1)
+    head = {"layout": "unnamed", "lighting": None, "path": "unnamed", "renderer": "none", "seed": 0, "settings": {},
+            "frames": [ids[0], ids[-1]], "n_frames": len(ids)}
+    write_json_atomic(root / META_FILE, {**head, **(meta or {})}, indent=1)
+    return Tour(root)
+

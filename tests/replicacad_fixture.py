@@ -79,6 +79,7 @@ from pathlib import Path
 
 import numpy as np
 import trimesh
+from meshes import box_mesh, write_glb
 from PIL import Image
 from trimesh.visual import TextureVisuals
 from trimesh.visual.material import PBRMaterial
@@ -171,62 +172,55 @@ CEILING_COLOR_FACTOR = (255, 255, 255, 255)
 # object meshes, HABITAT local frame (x, y up, z); front faces habitat +z (= our -y) unless noted
 
 
-def _hbox(lo, hi) -> trimesh.Trimesh:
-    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    b = trimesh.creation.box(extents=hi - lo)
-    b.apply_translation((lo + hi) / 2.0)
-    return b
-
-
 def _table_parts():  # 1.2 x 0.75 x 0.8 standing on y = 0; bounds x[-0.6,0.6] y[0,0.75] z[-0.4,0.4]
-    parts = [_hbox((-0.6, 0.7, -0.4), (0.6, 0.75, 0.4))]
+    parts = [box_mesh((-0.6, 0.7, -0.4), (0.6, 0.75, 0.4))]
     for x0 in (-0.6, 0.55):
         for z0 in (-0.4, 0.35):
-            parts.append(_hbox((x0, 0.0, z0), (x0 + 0.05, 0.7, z0 + 0.05)))
+            parts.append(box_mesh((x0, 0.0, z0), (x0 + 0.05, 0.7, z0 + 0.05)))
     return parts
 
 
 def _chair_parts():  # bounds x[-0.225,0.225] y[0,0.9] z[-0.225,0.225]; backrest at -z (our +y)
-    parts = [_hbox((-0.225, 0.42, -0.225), (0.225, 0.47, 0.225)),  # seat
-             _hbox((-0.225, 0.47, -0.225), (0.225, 0.9, -0.185))]  # backrest
+    parts = [box_mesh((-0.225, 0.42, -0.225), (0.225, 0.47, 0.225)),  # seat
+             box_mesh((-0.225, 0.47, -0.225), (0.225, 0.9, -0.185))]  # backrest
     for x0 in (-0.225, 0.185):
         for z0 in (-0.225, 0.185):
-            parts.append(_hbox((x0, 0.0, z0), (x0 + 0.04, 0.42, z0 + 0.04)))
+            parts.append(box_mesh((x0, 0.0, z0), (x0 + 0.04, 0.42, z0 + 0.04)))
     return parts
 
 
 def _sofa_parts():  # centred: bounds x[-0.9,0.9] y[-0.4,0.4] z[-0.425,0.425]; seat top at y = 0
-    return [_hbox((-0.9, -0.4, -0.425), (0.9, 0.0, 0.425)),  # base
-            _hbox((-0.9, 0.0, -0.425), (0.9, 0.4, -0.225)),  # backrest (our +y)
-            _hbox((-0.9, 0.0, -0.225), (-0.75, 0.15, 0.425)),  # armrests
-            _hbox((0.75, 0.0, -0.225), (0.9, 0.15, 0.425))]
+    return [box_mesh((-0.9, -0.4, -0.425), (0.9, 0.0, 0.425)),  # base
+            box_mesh((-0.9, 0.0, -0.425), (0.9, 0.4, -0.225)),  # backrest (our +y)
+            box_mesh((-0.9, 0.0, -0.225), (-0.75, 0.15, 0.425)),  # armrests
+            box_mesh((0.75, 0.0, -0.225), (0.9, 0.15, 0.425))]
 
 
 def _lamp_parts():  # bounds x[-0.2,0.2] y[0,1.65] z[-0.2,0.2]
-    return [_hbox((-0.15, 0.0, -0.15), (0.15, 0.03, 0.15)),  # foot
-            _hbox((-0.015, 0.03, -0.015), (0.015, 1.35, 0.015)),  # pole
-            _hbox((-0.2, 1.35, -0.2), (0.2, 1.65, 0.2))]  # shade
+    return [box_mesh((-0.15, 0.0, -0.15), (0.15, 0.03, 0.15)),  # foot
+            box_mesh((-0.015, 0.03, -0.015), (0.015, 1.35, 0.015)),  # pole
+            box_mesh((-0.2, 1.35, -0.2), (0.2, 1.65, 0.2))]  # shade
 
 
 def _bowl_parts():  # bounds x[-0.1,0.1] y[0,0.08] z[-0.1,0.1]
     t = 0.015
-    return [_hbox((-0.1, 0.0, -0.1), (0.1, t, 0.1)),
-            _hbox((-0.1, t, -0.1), (0.1, 0.08, -0.1 + t)),
-            _hbox((-0.1, t, 0.1 - t), (0.1, 0.08, 0.1)),
-            _hbox((-0.1, t, -0.1 + t), (-0.1 + t, 0.08, 0.1 - t)),
-            _hbox((0.1 - t, t, -0.1 + t), (0.1, 0.08, 0.1 - t))]
+    return [box_mesh((-0.1, 0.0, -0.1), (0.1, t, 0.1)),
+            box_mesh((-0.1, t, -0.1), (0.1, 0.08, -0.1 + t)),
+            box_mesh((-0.1, t, 0.1 - t), (0.1, 0.08, 0.1)),
+            box_mesh((-0.1, t, -0.1 + t), (-0.1 + t, 0.08, 0.1 - t)),
+            box_mesh((0.1 - t, t, -0.1 + t), (0.1, 0.08, 0.1 - t))]
 
 
 def _cushion_parts():  # centred: bounds x[-0.2,0.2] y[-0.06,0.06] z[-0.2,0.2]
-    return [_hbox((-0.2, -0.06, -0.2), (0.2, 0.06, 0.2))]
+    return [box_mesh((-0.2, -0.06, -0.2), (0.2, 0.06, 0.2))]
 
 
 def _counter_parts():  # URDF link "body", link frame: x[-0.75,0.75] y[0,0.9] z[-0.3,0.3], front +z
-    return [_hbox((-0.75, 0.0, -0.3), (0.75, 0.9, 0.3))]
+    return [box_mesh((-0.75, 0.0, -0.3), (0.75, 0.9, 0.3))]
 
 
 def _drawer_parts():  # URDF link "drawer", link frame: centred 0.5 x 0.15 x 0.55
-    return [_hbox((-0.25, -0.075, -0.275), (0.25, 0.075, 0.275))]
+    return [box_mesh((-0.25, -0.075, -0.275), (0.25, 0.075, 0.275))]
 
 
 # URDF joint (habitat frame, relative to the body link): the closed drawer spans body-frame
@@ -396,14 +390,6 @@ def _plain(parts, name: str, factor) -> trimesh.Trimesh:
     return mesh
 
 
-def _write_glb(path: Path, named: list[tuple[str, trimesh.Trimesh]]) -> None:
-    scene = trimesh.Scene()
-    for name, mesh in named:
-        scene.add_geometry(mesh, node_name=name, geom_name=name)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(trimesh.exchange.gltf.export_glb(scene))
-
-
 def _write_json(path: Path, doc) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
@@ -413,9 +399,9 @@ def _stage_meshes() -> list[tuple[str, trimesh.Trimesh]]:
     """Floor, walls, ceiling built in OUR frame, then moved to habitat's (C^T)."""
     T = np.eye(4)
     T[:3, :3] = _C.T
-    floor = _textured([_hbox(*FLOOR_SLAB)], "frl_apartment_stage:floor", tile=0.5)  # UVs planar in ours
-    walls = _plain([_hbox(*b) for b in WALL_PIECES], "walls", WALL_COLOR_FACTOR)
-    ceiling = _plain([_hbox(*CEILING_SLAB)], "ceiling", CEILING_COLOR_FACTOR)
+    floor = _textured([box_mesh(*FLOOR_SLAB)], "frl_apartment_stage:floor", tile=0.5)  # UVs planar in ours
+    walls = _plain([box_mesh(*b) for b in WALL_PIECES], "walls", WALL_COLOR_FACTOR)
+    ceiling = _plain([box_mesh(*CEILING_SLAB)], "ceiling", CEILING_COLOR_FACTOR)
     out = []
     for name, m in (("floor", floor), ("walls", walls), ("ceiling", ceiling)):
         m.apply_transform(T)
@@ -524,13 +510,13 @@ def make_fixture(root: Path) -> Path:
         "scene_instances": {"paths": {".json": ["configs/scenes"]}},
     })
     # stage
-    _write_glb(root / f"stages/{STAGE_TEMPLATE}.glb", _stage_meshes())
+    write_glb(root / f"stages/{STAGE_TEMPLATE}.glb", _stage_meshes())
     _write_json(root / f"configs/stages/{STAGE_TEMPLATE}.stage_config.json", {
         "render_asset": f"../../stages/{STAGE_TEMPLATE}.glb", "up": [0, 1, 0], "front": [0, 0, -1],
         "origin": [0, 0, 0], "requires_lighting": True})
     # objects
     for template, (folder, parts, extra) in _OBJECTS.items():
-        _write_glb(root / f"objects/{template}.glb", [(template, _textured(parts(), template))])
+        write_glb(root / f"objects/{template}.glb", [(template, _textured(parts(), template))])
         depth = folder.count("/") + 1
         cfg = {"render_asset": "../" * depth + f"objects/{template}.glb", "up": [0, 1, 0], "front": [0, 0, -1],
                "requires_lighting": True}
@@ -538,8 +524,8 @@ def make_fixture(root: Path) -> Path:
         _write_json(root / folder / f"{template}.object_config.json", cfg)
     # articulated object
     udir = root / "urdf" / COUNTER_TEMPLATE
-    _write_glb(udir / "kitchen_counter.glb", [("kitchen_counter", _textured(_counter_parts(), "kitchen_counter:body"))])
-    _write_glb(udir / "drawer1.glb", [("drawer1", _textured(_drawer_parts(), "kitchen_counter:drawer", tile=0.1))])
+    write_glb(udir / "kitchen_counter.glb", [("kitchen_counter", _textured(_counter_parts(), "kitchen_counter:body"))])
+    write_glb(udir / "drawer1.glb", [("drawer1", _textured(_drawer_parts(), "kitchen_counter:drawer", tile=0.1))])
     udir.mkdir(parents=True, exist_ok=True)
     (udir / "kitchen_counter.urdf").write_text(_URDF, encoding="utf-8")
     _write_json(udir / "kitchen_counter.ao_config.json", {"urdf_filepath": "kitchen_counter.urdf"})

@@ -22,6 +22,7 @@ from formats.tour import Tour
 from synth.cli import main as synth_main
 from synth.scene.model import boxes_document, load_layout
 from synth.render.render_tour import TourSpec, render_tour
+from cli_errors import nothing_left, one_line_error
 
 
 W, H, N = 64, 48, 30
@@ -44,22 +45,6 @@ def blocker(tmp_path):
     f = tmp_path / "a_file"
     f.write_text("not a folder\n")
     return f
-
-
-def one_line_error(err: str, *names) -> str:
-    """The one stderr line of a user error; it names every one of ``names``."""
-    lines = err.strip().splitlines()
-    assert len(lines) == 1, err
-    assert "Traceback" not in err and lines[0].startswith(("reloc: error:", "synth: error:")), err
-    for n in names:
-        assert str(n) in lines[0], (n, err)
-    return lines[0]
-
-
-def nothing_left(folder, keep=()) -> None:
-    """No output and no temporary file appeared in ``folder`` (besides ``keep``)."""
-    left = sorted(p.name for p in folder.iterdir() if p.name not in keep)
-    assert left == [], left
 
 
 def _tour_with(world, tmp_path, frame: int, data: bytes):

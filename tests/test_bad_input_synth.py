@@ -35,16 +35,10 @@ from synth.paths.model import CameraPath
 from synth.scene.model import load_layout, object_box, save_layout
 from synth.scene.stats import PAPER_RANGES, change_stats
 from synth.render.render_tour import TourSpec, render_tour
+from cli_errors import one_line_error
 
 W, H = 32, 24
 VARIANT_SEED = 12345  # the trial's variant: the query path passes 0.225 m from an object near frame 2817
-
-
-def one_line_error(capsys) -> str:
-    err = capsys.readouterr().err.strip()
-    assert err.startswith("synth: error: ") or err.startswith("reloc: error: "), err
-    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
-    return err
 
 
 @pytest.fixture(scope="module")

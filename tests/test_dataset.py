@@ -18,6 +18,7 @@ import formats.frames as frames_mod
 from formats import camera as cam
 from formats.errors import SceneFormatError, UserError
 from formats.frames import FrameFileError, write_frame
+from formats.tour import write_tour
 from synth.cli import main as synth_main
 from synth.datasets.check import (
     Tour,
@@ -91,17 +92,13 @@ def make_tour(root, rgb=True, n=N_FRAMES):
     """Write a complete tour directory; returns the poses and the images written."""
     root.mkdir(parents=True, exist_ok=True)
     poses = tour_poses(n)
-    truth = []
+    truth, frames = [], {}
     for i, T in enumerate(poses):
         depth, inst, sem, col = render(T)
-        write_frame(root / "frames" / f"{i:06d}.exr", rgb=col if rgb else None, depth=depth, instance=inst, semantic=sem)
+        frames[i] = dict(rgb=col if rgb else None, depth=depth, instance=inst, semantic=sem)
         truth.append((depth, inst, sem, col))
-    (root / "camera.json").write_text(json.dumps({**INTR.to_dict(), "fps": FPS, **cam.CAMERA_DOC}, indent=1))
-    cam.write_tum(root / "poses.txt", poses, fps=FPS)
-    (root / "objects.json").write_text(json.dumps(objects_doc(), indent=1))
-    meta = {"toolkit": {"synth": "test"}, "layout": "testroom", "lighting": "day" if rgb else None, "path": "test",
-            "renderer": "test", "seed": 0, "settings": {}, "frames": [0, n - 1], "wall_time_s": 0.0}
-    (root / "meta.json").write_text(json.dumps(meta, indent=1))
+    write_tour(root, poses, INTR, frames, fps=FPS, objects=objects_doc(),
+               meta={"layout": "testroom", "lighting": "day" if rgb else None, "path": "test", "renderer": "test"})
     return poses, truth
 
 

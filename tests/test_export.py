@@ -11,7 +11,6 @@ No Blender.
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 
@@ -22,9 +21,9 @@ from scipy.spatial.transform import Rotation
 
 from formats import camera as cam
 from formats.errors import SceneFormatError, UserError
-from formats.frames import write_frame
 from synth.cli import main as synth_main
 from formats.export import FORMATS, export_tour, read_manifest, summary_line
+from formats.tour import write_tour
 
 W, H = 48, 36
 INTR = cam.Intrinsics.from_fov(W, H, 70.0)
@@ -43,7 +42,7 @@ def make_tour(root: Path, n=N, rgb_every=RGB_EVERY, shift=0.0, seed=0, rgb=True)
     """A tour folder; returns {frame: (pose, depth, rgb or None)} with the values as stored (RGB half-float)."""
     rng = np.random.default_rng(seed)
     poses = tour_poses(n, shift)
-    truth = {}
+    truth, frames = {}, {}
     for i, T in enumerate(poses):
         depth = rng.uniform(0.3, 12.0, (H, W)).astype(np.float32)
         depth[:5, :7] = 0.0  # no surface
@@ -52,14 +51,11 @@ def make_tour(root: Path, n=N, rgb_every=RGB_EVERY, shift=0.0, seed=0, rgb=True)
         if rgb and i % rgb_every == 0:
             col = (rng.uniform(0.0, 1.0, (H, W, 3)) ** 2 * (0.5 + i)).astype(np.float16).astype(np.float32)
         inst = np.ones((H, W), np.uint32)
-        write_frame(root / "frames" / f"{i:06d}.exr", rgb=col, depth=depth, instance=inst, semantic=inst)
+        frames[i] = dict(rgb=col, depth=depth, instance=inst, semantic=inst)
         truth[i] = (T, depth, col)
-    (root / "camera.json").write_text(json.dumps({**INTR.to_dict(), "fps": FPS, **cam.CAMERA_DOC}))
-    cam.write_tum(root / "poses.txt", poses, fps=FPS)
-    meta = {"toolkit": {"synth": "test"}, "layout": "testroom", "lighting": "day" if rgb else None, "path": "test",
-            "renderer": "test", "seed": seed, "settings": {"rgb_every": rgb_every}, "frames": [0, n - 1],
-            "n_frames": n}
-    (root / "meta.json").write_text(json.dumps(meta))
+    write_tour(root, poses, INTR, frames, fps=FPS, meta={"layout": "testroom", "lighting": "day" if rgb else None,
+                                                         "path": "test", "renderer": "test", "seed": seed,
+                                                         "settings": {"rgb_every": rgb_every}})
     return truth
 
 

@@ -37,6 +37,7 @@ from formats.errors import SceneFormatError
 from formats.tour import Tour
 from synth.scene.classes import class_table
 from synth.scene.model import LightFixture, Room, Wall, load_layout, save_layout
+from meshes import write_glb
 
 REPO = Path(__file__).resolve().parents[1]
 C = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # habitat (Y up) -> ours (Z up), by hand
@@ -110,14 +111,6 @@ def stage_meshes() -> list[trimesh.Trimesh]:
                                                        metallicFactor=0.0, roughnessFactor=0.9))
         out.append(m)
     return out
-
-
-def write_glb(path: Path, meshes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    sc = trimesh.Scene()
-    for k, m in enumerate(meshes):
-        sc.add_geometry(m, node_name=f"n{k}", geom_name=f"g{k}")
-    path.write_bytes(trimesh.exchange.gltf.export_glb(sc))
 
 
 def write_json(path: Path, doc) -> None:

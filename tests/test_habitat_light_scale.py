@@ -109,7 +109,7 @@ def test_bad_dataset_light_defaults_name_the_file_and_field(tmp_path, doc, field
         assert e.value.file == str(cfg) and e.value.field == field
         assert len(str(e.value).splitlines()) == 1
     (tmp_path / "broken.scene_dataset_config.json").write_text("{not json")
-    with pytest.raises(SceneFormatError, match="malformed JSON"):
+    with pytest.raises(SceneFormatError, match="not valid JSON"):
         dataset_light_defaults(tmp_path / "broken.scene_dataset_config.json")
 
 

@@ -41,6 +41,7 @@ from synth.layout.rearrange import (
 )
 from synth.scene.model import Layout, ObjectInstance, Room, Stage, layout_to_dict, load_layout, object_box
 from synth.scene.stats import PAPER_RANGES, change_stats, flat_mean_distance, scaled_ranges
+from meshes import box_mesh, write_glb
 
 C = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # by hand, not imported
 
@@ -49,76 +50,64 @@ C = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # by hand, n
 # meshes, HABITAT local frame (x, y up, z)
 
 
-def _hbox(lo, hi) -> trimesh.Trimesh:
-    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    b = trimesh.creation.box(extents=hi - lo)
-    b.apply_translation((lo + hi) / 2.0)
-    return b
-
-
 def _join(parts):
     return trimesh.util.concatenate(parts)
 
 
 def _table():  # top board y[0.72, 0.75] over x[-0.6,0.6] z[-0.4,0.4], four legs: the whole top is covered
-    parts = [_hbox((-0.6, 0.72, -0.4), (0.6, 0.75, 0.4))]
+    parts = [box_mesh((-0.6, 0.72, -0.4), (0.6, 0.75, 0.4))]
     for x0 in (-0.6, 0.55):
         for z0 in (-0.4, 0.35):
-            parts.append(_hbox((x0, 0.0, z0), (x0 + 0.05, 0.72, z0 + 0.05)))
+            parts.append(box_mesh((x0, 0.0, z0), (x0 + 0.05, 0.72, z0 + 0.05)))
     return _join(parts)
 
 
 def _chair():  # 0.44 x 0.9 x 0.44; the backrest top (0.44 x 0.04) is all that is at the top
-    parts = [_hbox((-0.22, 0.42, -0.22), (0.22, 0.46, 0.22)), _hbox((-0.22, 0.46, -0.22), (0.22, 0.9, -0.18))]
+    parts = [box_mesh((-0.22, 0.42, -0.22), (0.22, 0.46, 0.22)), box_mesh((-0.22, 0.46, -0.22), (0.22, 0.9, -0.18))]
     for x0 in (-0.22, 0.18):
         for z0 in (-0.22, 0.18):
-            parts.append(_hbox((x0, 0.0, z0), (x0 + 0.04, 0.42, z0 + 0.04)))
+            parts.append(box_mesh((x0, 0.0, z0), (x0 + 0.04, 0.42, z0 + 0.04)))
     return _join(parts)
 
 
 def _shelf():  # a closed 0.8 x 1.2 x 0.3 box: top covered
-    return _hbox((-0.4, 0.0, -0.15), (0.4, 1.2, 0.15))
+    return box_mesh((-0.4, 0.0, -0.15), (0.4, 1.2, 0.15))
 
 
 def _sofa():  # seat at y = 0.42, backrest at habitat -z (our +y) up to 0.85: top covers 0.2 / 0.9 of the box top
-    return _join([_hbox((-0.9, 0.0, -0.45), (0.9, 0.42, 0.45)), _hbox((-0.9, 0.42, -0.45), (0.9, 0.85, -0.25))])
+    return _join([box_mesh((-0.9, 0.0, -0.45), (0.9, 0.42, 0.45)), box_mesh((-0.9, 0.42, -0.45), (0.9, 0.85, -0.25))])
 
 
 def _bowl():  # open: base and four 1.5 cm walls, 0.2 x 0.08 x 0.2
     t = 0.015
-    return _join([_hbox((-0.1, 0.0, -0.1), (0.1, t, 0.1)), _hbox((-0.1, t, -0.1), (0.1, 0.08, -0.1 + t)),
-                  _hbox((-0.1, t, 0.1 - t), (0.1, 0.08, 0.1)), _hbox((-0.1, t, -0.1 + t), (-0.1 + t, 0.08, 0.1 - t)),
-                  _hbox((0.1 - t, t, -0.1 + t), (0.1, 0.08, 0.1 - t))])
+    return _join([box_mesh((-0.1, 0.0, -0.1), (0.1, t, 0.1)), box_mesh((-0.1, t, -0.1), (0.1, 0.08, -0.1 + t)),
+                  box_mesh((-0.1, t, 0.1 - t), (0.1, 0.08, 0.1)), box_mesh((-0.1, t, -0.1 + t), (-0.1 + t, 0.08, 0.1 - t)),
+                  box_mesh((0.1 - t, t, -0.1 + t), (0.1, 0.08, 0.1 - t))])
 
 
 def _lamp():  # foot, pole, open shade (a ring): 0.4 x 1.6 x 0.4
     t = 0.01
-    return _join([_hbox((-0.15, 0.0, -0.15), (0.15, 0.03, 0.15)), _hbox((-0.015, 0.03, -0.015), (0.015, 1.3, 0.015)),
-                  _hbox((-0.2, 1.3, -0.2), (0.2, 1.6, -0.2 + t)), _hbox((-0.2, 1.3, 0.2 - t), (0.2, 1.6, 0.2)),
-                  _hbox((-0.2, 1.3, -0.2 + t), (-0.2 + t, 1.6, 0.2 - t)), _hbox((0.2 - t, 1.3, -0.2 + t), (0.2, 1.6, 0.2 - t))])
+    return _join([box_mesh((-0.15, 0.0, -0.15), (0.15, 0.03, 0.15)), box_mesh((-0.015, 0.03, -0.015), (0.015, 1.3, 0.015)),
+                  box_mesh((-0.2, 1.3, -0.2), (0.2, 1.6, -0.2 + t)), box_mesh((-0.2, 1.3, 0.2 - t), (0.2, 1.6, 0.2)),
+                  box_mesh((-0.2, 1.3, -0.2 + t), (-0.2 + t, 1.6, 0.2 - t)), box_mesh((0.2 - t, 1.3, -0.2 + t), (0.2, 1.6, 0.2 - t))])
 
 
 def _counter():
-    return _hbox((-0.75, 0.0, -0.3), (0.75, 0.9, 0.3))
+    return box_mesh((-0.75, 0.0, -0.3), (0.75, 0.9, 0.3))
 
 
 def _cushion():
-    return _hbox((-0.2, 0.0, -0.2), (0.2, 0.12, 0.2))
+    return box_mesh((-0.2, 0.0, -0.2), (0.2, 0.12, 0.2))
 
 
 def _vase():
-    return _hbox((-0.05, 0.0, -0.05), (0.05, 0.25, 0.05))
+    return box_mesh((-0.05, 0.0, -0.05), (0.05, 0.25, 0.05))
 
 
 MESHES = {"table": _table, "chair": _chair, "shelf": _shelf, "sofa": _sofa, "bowl": _bowl, "lamp": _lamp,
           "counter": _counter, "cushion": _cushion, "vase": _vase}
 CLASSES = {"table": "dining_table", "chair": "chair", "shelf": "bookshelf", "sofa": "sofa", "bowl": "bowl",
            "lamp": "floor_lamp", "counter": "kitchen_counter", "cushion": "cushion", "vase": "vase"}
-
-
-def _write_glb(path: Path, mesh: trimesh.Trimesh) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(trimesh.exchange.gltf.export_glb(trimesh.Scene(mesh)))
 
 
 def _proto(name: str, movable: bool = True) -> ObjectInstance:
@@ -133,7 +122,7 @@ def _proto(name: str, movable: bool = True) -> ObjectInstance:
 
 def _write_meshes(root: Path) -> None:
     for name, fn in MESHES.items():
-        _write_glb(root / f"objects/{name}.glb", fn())
+        write_glb(root / f"objects/{name}.glb", fn())
 
 
 def _imported_layout(root: Path, seed: int = 3) -> Layout:
@@ -502,7 +491,7 @@ def test_bad_lighting_config_names_file_and_field(tmp_path, doc, field):
 
 def test_malformed_lighting_json(tmp_path):
     p = _config(tmp_path, "{not json")
-    with pytest.raises(SceneFormatError, match="malformed JSON") as e:
+    with pytest.raises(SceneFormatError, match="not valid JSON") as e:
         read_lighting_config(p)
     assert e.value.file == str(p)
 

@@ -17,8 +17,9 @@ from scipy.spatial.transform import Rotation
 from formats.camera import Intrinsics, write_tum
 from formats.errors import SceneFormatError, UserError
 from formats.poses import CONVENTIONS, frame_names, load_names, read_poses, write_poses
-from formats.tour import Tour
+from formats.tour import Tour, write_tour
 from reloc.cli import main as reloc_main
+from cli_errors import one_line_error
 
 N, FPS = 40, 30.0
 
@@ -45,11 +46,7 @@ def tour(tmp_path_factory) -> Tour:
     poses[2][:3, :3] = _rot([0.3, -0.5, 0.8], 179.99)
     poses[3][:3, :3] = _rot([0, 1, 1], 180.0)
     poses[4][:3, :3] = np.eye(3)
-    cam = Intrinsics.from_fov(64, 48).to_dict() | {"fps": FPS}
-    (root / "camera.json").write_text(json.dumps(cam))
-    (root / "meta.json").write_text(json.dumps({"n_frames": N}))
-    write_tum(root / "poses.txt", poses, fps=FPS)
-    t = Tour(root)
+    t = write_tour(root, poses, Intrinsics.from_fov(64, 48), fps=FPS)
     assert len(t) == N
     return t
 
@@ -316,15 +313,6 @@ def test_eval_of_a_run_folder_is_unchanged(tour, tmp_path, capsys):
 # 4. bad input: one line naming the file and field, exit 2, nothing written
 
 
-def _one_line(err: str, *names) -> str:
-    lines = err.strip().splitlines()
-    assert len(lines) == 1, err
-    assert lines[0].startswith("reloc: error:") and "Traceback" not in err, err
-    for n in names:
-        assert str(n) in lines[0], (n, err)
-    return lines[0]
-
-
 def _bad_line(tmp_path, conv, line_no: int, text: str | None, est=None):
     """A valid file of the tour's first 8 poses in ``conv`` with line ``line_no`` replaced by ``text``
     (None: inserted duplicate of line 2 at ``line_no``)."""
@@ -343,7 +331,7 @@ def _run_bad(capsys, tmp_path, args, *names) -> str:
     out = tmp_path / "out"
     out.mkdir(exist_ok=True)
     assert reloc_main(["eval", *map(str, args), "--save", str(out / "rep.json")]) == 2
-    line = _one_line(capsys.readouterr().err, *names)
+    line = one_line_error(capsys, *names, prog=("reloc",))
     assert sorted(p.name for p in out.iterdir()) == []
     return line
 

@@ -21,8 +21,7 @@ from reloc.geometry import exp_so3, inv_T, make_T, pose_distance
 
 from formats import camera as cam
 from formats.errors import UserError
-from formats.frames import frame_name, write_frame
-from formats.tour import Tour
+from formats.tour import Tour, write_tour
 
 
 ROOM_LO = np.array([0.0, 0.0, 0.0])
@@ -78,16 +77,11 @@ def night(rgb, seed=0):
     return np.clip(dim + rng.normal(0.0, 0.003, rgb.shape), 0, None).astype(np.float32)
 
 
-def write_tour(root, poses, images):
-    """A tour directory in the real format; images[i] = (rgb or None, depth)."""
-    root.mkdir(parents=True, exist_ok=True)
-    for i, (rgb, depth) in enumerate(images):
-        write_frame(root / "frames" / frame_name(i), rgb=rgb, depth=depth)
-    (root / "camera.json").write_text(json.dumps({**INTR.to_dict(), "fps": FPS, **cam.CAMERA_DOC}, indent=1))
-    cam.write_tum(root / "poses.txt", poses, fps=FPS)
-    meta = {"toolkit": {"synth": "test"}, "layout": "texroom", "lighting": "day", "path": "test", "renderer": "test",
-            "seed": 0, "settings": {}, "frames": [0, len(poses) - 1], "wall_time_s": 0.0}
-    (root / "meta.json").write_text(json.dumps(meta, indent=1))
+def make_tour(root, poses, images):
+    """A tour directory in the real format (``formats.tour.write_tour``); images[i] = (rgb or None, depth)."""
+    frames = {i: dict(rgb=rgb, depth=depth) for i, (rgb, depth) in enumerate(images)}
+    write_tour(root, poses, INTR, frames, fps=FPS,
+               meta={"layout": "texroom", "lighting": "day", "path": "test", "renderer": "test"})
     return root
 
 
@@ -113,13 +107,13 @@ def tours(tmp_path_factory):
     for j, T in enumerate(mp):
         rgb, depth = render(T)
         imgs.append((rgb if j % 2 == 0 else None, depth))
-    mapping = write_tour(base / "mapping", mp, imgs)
+    mapping = make_tour(base / "mapping", mp, imgs)
     rgb_a, depth_a = render(QUERY_A)
     rgb_b, depth_b = render(QUERY_B)
     q_poses = [QUERY_A, QUERY_B, QUERY_A, QUERY_A, QUERY_B]
     q_imgs = [(rgb_a, depth_a), (None, depth_b), (np.zeros_like(rgb_a), depth_a), (night(rgb_a), depth_a),
               (rgb_b, depth_b)]
-    query = write_tour(base / "query", q_poses, q_imgs)
+    query = make_tour(base / "query", q_poses, q_imgs)
     t0 = time.perf_counter()
     amap = AppearanceMap.build(Tour(mapping))
     build_s = time.perf_counter() - t0

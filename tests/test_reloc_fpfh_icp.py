@@ -17,8 +17,7 @@ from reloc.baselines.fpfh_icp import FpfhConfig, PointMap, clip_frames, constrai
 
 from formats import camera as cam
 from formats.errors import UserError
-from formats.frames import write_frame
-from formats.tour import Tour
+from formats.tour import Tour, write_tour
 from synth.render.fast_render import FastRenderer
 from synth.paths.files import load_path
 from synth.scene.model import load_layout
@@ -32,18 +31,11 @@ BLANK = range(420, 430)  # frames without depth
 SPECK = range(430, 432)  # frames with a handful of depth pixels
 
 
-def write_tour(root, poses: dict[int, np.ndarray], depths: dict[int, np.ndarray]) -> Tour:
+def make_tour(root, poses: dict[int, np.ndarray], depths: dict[int, np.ndarray]) -> Tour:
     """A tour directory in the renderers' format (depth-only frames)."""
-    root.mkdir(parents=True, exist_ok=True)
     idx = sorted(poses)
-    for i in idx:
-        write_frame(root / "frames" / f"{i:06d}.exr", depth=depths[i])
-    (root / "camera.json").write_text(json.dumps({**INTR.to_dict(), "fps": FPS, **cam.CAMERA_DOC}))
-    cam.write_tum(root / "poses.txt", [poses[i] for i in idx], fps=FPS, frames=idx)
-    meta = {"toolkit": {"synth": "test"}, "layout": "apt_0", "lighting": None, "path": "test", "renderer": "fast",
-            "seed": 0, "settings": {}, "frames": [idx[0], idx[-1]], "wall_time_s": 0.0}
-    (root / "meta.json").write_text(json.dumps(meta))
-    return Tour(root)
+    return write_tour(root, [poses[i] for i in idx], INTR, {i: dict(depth=depths[i]) for i in idx}, fps=FPS,
+                      frame_ids=idx, meta={"layout": "apt_0", "path": "test", "renderer": "fast"})
 
 
 def random_T(rng, t_scale=5.0) -> np.ndarray:
@@ -77,7 +69,7 @@ def world(tmp_path_factory):
     rend = FastRenderer(load_layout("apt_0"))
     mp = load_path("mapping").poses[::MAP_EVERY]
     mposes = {k: T for k, T in enumerate(mp)}
-    mapping = write_tour(base / "mapping", mposes, {k: rend.render(T, INTR)[0] for k, T in mposes.items()})
+    mapping = make_tour(base / "mapping", mposes, {k: rend.render(T, INTR)[0] for k, T in mposes.items()})
     qp = load_path("query").poses
     qposes = {i: qp[i] for i in (*CLIP, *WALL, *BLANK, *SPECK)}
     depths = {i: rend.render(qp[i], INTR)[0] for i in CLIP}
@@ -89,7 +81,7 @@ def world(tmp_path_factory):
         d = np.zeros((INTR.height, INTR.width), np.float32)
         d[30:33, 40:43] = 1.5
         depths[i] = d
-    query = write_tour(base / "query", qposes, depths)
+    query = make_tour(base / "query", qposes, depths)
     X = random_T(np.random.default_rng(7))
     Xinv = np.linalg.inv(X)
     clips = {

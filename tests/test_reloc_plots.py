@@ -19,6 +19,7 @@ from reloc.experiments.plots import box_corners, error_colors, per_frame, plot_e
 from reloc.experiments.report import markdown_to_html, split_row, table_to_html, write_report
 
 from formats import camera as cam
+from formats.tour import write_tour
 
 
 FPS = 30.0
@@ -36,10 +37,8 @@ def gt_poses(n=N):
 
 def make_tour(root, n=N):
     root.mkdir(parents=True)
-    intr = cam.Intrinsics.from_fov(64, 48, 75.0)
-    (root / "camera.json").write_text(json.dumps({**intr.to_dict(), "fps": FPS, **cam.CAMERA_DOC}))
-    cam.write_tum(root / "poses.txt", gt_poses(n), fps=FPS)
-    (root / "meta.json").write_text(json.dumps({"layout": "apt_t", "lighting": "day", "frames": [0, n - 1]}))
+    write_tour(root, gt_poses(n), cam.Intrinsics.from_fov(64, 48, 75.0), fps=FPS,
+               meta={"layout": "apt_t", "lighting": "day"})
 
 
 def map_doc():

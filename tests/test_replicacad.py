@@ -23,6 +23,7 @@ from formats.errors import SceneFormatError, UnknownNameError
 from synth.scene.classes import parse_class_table
 from synth.replicacad.importer import Y_UP_TO_Z_UP, list_scenes, load_asset_mesh, load_replicacad
 from synth.scene.model import load_layout, object_box, save_layout
+from meshes import box_mesh, write_glb
 
 
 
@@ -45,27 +46,20 @@ CLASSES = parse_class_table(
 )
 
 
-def _box(lo, hi) -> trimesh.Trimesh:
-    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    b = trimesh.creation.box(extents=hi - lo)
-    b.apply_translation((lo + hi) / 2.0)
-    return b
-
-
 # Meshes in habitat/glTF coordinates (x, y up, z).
-CHAIR = _box((-0.2, 0.0, -0.25), (0.2, 0.9, 0.25))  # 0.4 x 0.9 x 0.5, standing on y = 0
-TABLE = _box((-0.6, 0.0, -0.4), (0.6, 0.75, 0.4))  # 1.2 x 0.75 x 0.8
+CHAIR = box_mesh((-0.2, 0.0, -0.25), (0.2, 0.9, 0.25))  # 0.4 x 0.9 x 0.5, standing on y = 0
+TABLE = box_mesh((-0.6, 0.0, -0.4), (0.6, 0.75, 0.4))  # 1.2 x 0.75 x 0.8
 LAMP = trimesh.util.concatenate([  # asymmetric, bounds off-centre: x [0.1, 0.5], y [0, 1.5], z [-0.3, -0.1]
-    _box((0.1, 0.0, -0.3), (0.5, 0.1, -0.1)),  # foot
-    _box((0.25, 0.1, -0.25), (0.35, 1.5, -0.15)),  # pole
+    box_mesh((0.1, 0.0, -0.3), (0.5, 0.1, -0.1)),  # foot
+    box_mesh((0.25, 0.1, -0.25), (0.35, 1.5, -0.15)),  # pole
 ])
-GADGET = _box((-0.05, 0.0, -0.05), (0.05, 0.1, 0.05))
+GADGET = box_mesh((-0.05, 0.0, -0.05), (0.05, 0.1, 0.05))
 STAGE = trimesh.util.concatenate([
-    _box((-3.0, 0.0, -4.0), (3.0, 0.1, 4.0)),  # floor slab
-    _box((-3.1, 0.0, -4.1), (3.1, 2.6, -4.0)),  # walls, 2.6 m tall
-    _box((-3.1, 0.0, 4.0), (3.1, 2.6, 4.1)),
-    _box((-3.1, 0.0, -4.0), (-3.0, 2.6, 4.0)),
-    _box((3.0, 0.0, -4.0), (3.1, 2.6, 4.0)),
+    box_mesh((-3.0, 0.0, -4.0), (3.0, 0.1, 4.0)),  # floor slab
+    box_mesh((-3.1, 0.0, -4.1), (3.1, 2.6, -4.0)),  # walls, 2.6 m tall
+    box_mesh((-3.1, 0.0, 4.0), (3.1, 2.6, 4.1)),
+    box_mesh((-3.1, 0.0, -4.0), (-3.0, 2.6, 4.0)),
+    box_mesh((3.0, 0.0, -4.0), (3.1, 2.6, 4.0)),
 ])
 
 # a general rotation (about a tilted axis), (w, x, y, z)
@@ -92,18 +86,13 @@ def _write_json(path: Path, doc) -> None:
     path.write_text(json.dumps(doc, indent=2))
 
 
-def _write_glb(path: Path, mesh: trimesh.Trimesh) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(trimesh.exchange.gltf.export_glb(trimesh.Scene(mesh)))
-
-
 def _make_dataset(root: Path, instances=None) -> Path:
     _write_json(root / "test.scene_dataset_config.json", {})  # the dataset's root holds one (habitat-sim loads it)
-    _write_glb(root / "stages/test_stage.glb", STAGE)
-    _write_glb(root / "objects/frl_apartment_chair_01.glb", CHAIR)
-    _write_glb(root / "objects/frl_apartment_table_01.glb", TABLE)
-    _write_glb(root / "objects/lamp.glb", LAMP)
-    _write_glb(root / "objects/gadget.glb", GADGET)
+    write_glb(root / "stages/test_stage.glb", STAGE)
+    write_glb(root / "objects/frl_apartment_chair_01.glb", CHAIR)
+    write_glb(root / "objects/frl_apartment_table_01.glb", TABLE)
+    write_glb(root / "objects/lamp.glb", LAMP)
+    write_glb(root / "objects/gadget.glb", GADGET)
     _write_json(root / "configs/stages/test_stage.stage_config.json",
                 {"render_asset": "../../stages/test_stage.glb", "up": [0, 1, 0], "front": [0, 0, -1],
                  "origin": [0, 0, 0], "scale": [1, 1, 1], "requires_lighting": True})
@@ -320,7 +309,7 @@ def test_malformed_json(tmp_path):
     root = _make_dataset(tmp_path / "d")
     _scene_file(root).write_text('{"stage_instance": {"template_name": ')
     msg = _error(root)
-    assert msg.startswith(f"{_scene_file(root)}: ") and "malformed JSON" in msg
+    assert msg.startswith(f"{_scene_file(root)}: ") and "not valid JSON" in msg
 
 
 @pytest.mark.parametrize("field, value, expect", [

@@ -23,16 +23,10 @@ from formats.boxes import CEILING_ID_BASE, FLOOR_ID_BASE, WALL_ID_BASE
 from formats.errors import SceneFormatError
 from synth.scene.model import Stage, structure_boxes
 from synth.replicacad.stage_structure import DEFAULT_THICKNESS, derive_structure, face_ids
+from meshes import box_mesh
 
 TOL = 0.05  # m
 YAW_TOL = math.radians(2.0)
-
-
-def _box(lo, hi) -> trimesh.Trimesh:
-    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    b = trimesh.creation.box(extents=hi - lo)
-    b.apply_translation((lo + hi) / 2.0)
-    return b
 
 
 FLOOR_SLAB = ((-0.1, -0.1, -0.1), (7.2, 3.1, 0.0))
@@ -60,7 +54,7 @@ ROOM_A, ROOM_B = (0.0, 0.0, 4.0, 3.0), (4.1, 0.0, 7.1, 3.0)
 
 def two_room_stage(extra=()) -> trimesh.Trimesh:
     boxes = [FLOOR_SLAB, CEILING_SLAB] + [b for pcs in WALL_PIECES.values() for b in pcs] + list(extra)
-    return trimesh.util.concatenate([_box(*b) for b in boxes])
+    return trimesh.util.concatenate([box_mesh(*b) for b in boxes])
 
 
 def _stage(s) -> Stage:
@@ -291,12 +285,12 @@ def test_face_ids_of_the_box_triangles():
     walls = _match_walls(stage, WALL_BOXES)
     for name, pieces in WALL_PIECES.items():
         for lo, hi in pieces:
-            b = _box(lo, hi)
+            b = box_mesh(lo, hi)
             ids = face_ids(stage, b.triangles_center, b.face_normals)
             assert (ids == WALL_ID_BASE + walls[name]).all(), (name, lo, hi, ids)
 
     def slab_ids(lo, hi):
-        b = _box(lo, hi)
+        b = box_mesh(lo, hi)
         return b.triangles_center, b.face_normals, face_ids(stage, b.triangles_center, b.face_normals)
 
     # floor slab: its top is floor, of the room holding each triangle's centroid (A: x < 4.05);
@@ -330,7 +324,7 @@ def test_face_ids_of_the_box_triangles():
 
 
 def test_no_floor_is_a_scene_format_error():
-    walls = [_box(*b) for pcs in WALL_PIECES.values() for b in pcs] + [_box(*CEILING_SLAB)]
+    walls = [box_mesh(*b) for pcs in WALL_PIECES.values() for b in pcs] + [box_mesh(*CEILING_SLAB)]
     with pytest.raises(SceneFormatError) as e:
         derive_structure(trimesh.util.concatenate(walls), "stages/no_floor.glb")
     msg = str(e.value)
@@ -340,7 +334,7 @@ def test_no_floor_is_a_scene_format_error():
 
 def test_no_walls_is_a_scene_format_error():
     with pytest.raises(SceneFormatError) as e:
-        derive_structure(trimesh.util.concatenate([_box(*FLOOR_SLAB), _box(*CEILING_SLAB)]), "stages/slabs.glb")
+        derive_structure(trimesh.util.concatenate([box_mesh(*FLOOR_SLAB), box_mesh(*CEILING_SLAB)]), "stages/slabs.glb")
     msg = str(e.value)
     assert msg.startswith("stages/slabs.glb: stage: no walls found:") and "\n" not in msg
     assert "vertical" in msg
@@ -354,7 +348,7 @@ def test_entrance_door_and_a_terrace_without_a_ceiling():
                        ((5.0, -0.1, 2.1), (5.9, 0.0, 2.5))]
     terrace = ((-0.1, -2.0, -0.1), (7.2, -0.1, 0.0))
     boxes = [FLOOR_SLAB, CEILING_SLAB, terrace] + [b for pcs in pieces.values() for b in pcs]
-    s = derive_structure(trimesh.util.concatenate([_box(*b) for b in boxes]), "entrance.glb")
+    s = derive_structure(trimesh.util.concatenate([box_mesh(*b) for b in boxes]), "entrance.glb")
     stage = _stage(s)
     walls = _match_walls(stage, WALL_BOXES)
     assert len(s.rooms) == 2 and s.report["rooms"]["rejected_components"] == {"no ceiling above": 1}
@@ -371,7 +365,7 @@ def test_entrance_door_and_a_terrace_without_a_ceiling():
 
 def test_stage_without_a_ceiling_takes_the_top_of_the_mesh():
     boxes = [FLOOR_SLAB] + [b for pcs in WALL_PIECES.values() for b in pcs]
-    s = derive_structure(trimesh.util.concatenate([_box(*b) for b in boxes]), "open.glb")
+    s = derive_structure(trimesh.util.concatenate([box_mesh(*b) for b in boxes]), "open.glb")
     assert abs(s.ceiling_height - 2.5) <= 1e-6 and s.report["ceiling"]["source"].startswith("top of the mesh")
     assert len(s.rooms) == 2
     assert np.allclose(s.rooms[0].rect, ROOM_A, atol=TOL) and np.allclose(s.rooms[1].rect, ROOM_B, atol=TOL)
@@ -422,7 +416,7 @@ def stairs_room(stairs=True) -> trimesh.Trimesh:
              ((-0.1, 1.0, 0.0), (0.0, 2.2, 0.9)), ((-0.1, 1.0, 2.0), (0.0, 2.2, H)),
              ((-0.1, 4.0, 0.0), (6.1, 4.1, H)), ((6.0, 0.0, 0.0), (6.1, 4.0, H)),
              ((1.5, 2.0, 0.0), (3.0, 2.1, 1.1))]
-    parts = [_box(*b) for b in boxes]
+    parts = [box_mesh(*b) for b in boxes]
     if stairs:
         for k in range(1, 6):
             x0, z0, z1 = 3.5 + TREAD * (k - 1), RISE * (k - 1), RISE * k
@@ -496,7 +490,7 @@ def l_room(notch=False) -> trimesh.Trimesh:
                  ((-0.1, -0.1, H), (6.1, 3.0, H + 0.1)), ((-0.1, 3.0, H), (3.1, 5.1, H + 0.1)),
                  ((6.0, 0.0, 0.0), (6.1, 3.1, H)), ((3.0, 3.0, 0.0), (6.1, 3.1, H)), ((-0.1, 5.0, 0.0), (3.0, 5.1, H))]
     boxes += [((-0.1, -0.1, 0.0), (6.1, 0.0, H)), ((3.0, 3.1, 0.0), (3.1, 5.0, H)), ((-0.1, 0.0, 0.0), (0.0, 5.0, H))]
-    return trimesh.util.concatenate([_box(*b) for b in boxes])
+    return trimesh.util.concatenate([box_mesh(*b) for b in boxes])
 
 
 def _ccw(q) -> bool:

@@ -12,13 +12,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import trimesh
 
 from formats.errors import SceneFormatError, UnknownNameError
 from synth.scene import geometry as geo
 from synth.scene.classes import parse_class_table
 from synth.scene.model import object_box
 from synth.replicacad.urdf import find_urdf, load_articulated_instances, parse_urdf, urdf_geometry, urdf_visuals
+from meshes import box_mesh, write_glb
 
 CLASSES = parse_class_table(
     {
@@ -33,17 +33,10 @@ CLASSES = parse_class_table(
 )
 
 
-def _box(lo, hi) -> trimesh.Trimesh:
-    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    b = trimesh.creation.box(extents=hi - lo)
-    b.apply_translation((lo + hi) / 2.0)
-    return b
-
-
 # GLB meshes, habitat/glTF coordinates (x, y up, z).
-BODY = _box((-0.75, 0.0, -0.3), (0.75, 0.45, 0.3))  # drawn with <mesh scale="1 2 1">: 1.5 wide, 0.9 tall, 0.6 deep
-DRAWER = _box((-0.25, -0.075, -0.275), (0.25, 0.075, 0.275))  # 0.5 x 0.15 x 0.55; turned 90 deg about Y by its visual rpy
-DOOR = _box((0.0, 0.0, -0.01), (0.6, 0.8, 0.01))  # a panel 0.6 wide from its hinge edge x = 0
+BODY = box_mesh((-0.75, 0.0, -0.3), (0.75, 0.45, 0.3))  # drawn with <mesh scale="1 2 1">: 1.5 wide, 0.9 tall, 0.6 deep
+DRAWER = box_mesh((-0.25, -0.075, -0.275), (0.25, 0.075, 0.275))  # 0.5 x 0.15 x 0.55; turned 90 deg about Y by its visual rpy
+DOOR = box_mesh((0.0, 0.0, -0.01), (0.6, 0.8, 0.01))  # a panel 0.6 wide from its hinge edge x = 0
 
 URDF = """<?xml version="1.0"?>
 <robot name="test_counter">
@@ -132,15 +125,10 @@ def _drawer_expected(v, q=0.0):
     return np.stack([v[:, 2] + 0.2, v[:, 0] - 0.1 - q, v[:, 1] + 0.6], axis=1)
 
 
-def _write_glb(mesh: trimesh.Trimesh, path: Path) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    mesh.export(str(path), file_type="glb")
-
-
 def _counter_dir(folder: Path, urdf_text: str = URDF, name: str = "test_counter") -> Path:
     folder.mkdir(parents=True, exist_ok=True)
-    _write_glb(BODY, folder / "meshes" / "body.glb")
-    _write_glb(DRAWER, folder / "meshes" / "drawer.glb")
+    write_glb(folder / "meshes" / "body.glb", BODY)
+    write_glb(folder / "meshes" / "drawer.glb", DRAWER)
     p = folder / f"{name}.urdf"
     p.write_text(urdf_text)
     return p
@@ -154,8 +142,8 @@ def counter(tmp_path) -> Path:
 @pytest.fixture
 def door(tmp_path) -> Path:
     d = tmp_path / "door"
-    _write_glb(BODY, d / "body.glb")
-    _write_glb(DOOR, d / "door.glb")
+    write_glb(d / "body.glb", BODY)
+    write_glb(d / "door.glb", DOOR)
     (d / "door.urdf").write_text(DOOR_URDF)
     return d / "door.urdf"
 
@@ -204,7 +192,7 @@ def test_revolute_state_rotates_door(door):
 
 def test_visual_origin_roll_and_yaw(tmp_path):
     d = tmp_path / "rpy"
-    _write_glb(DRAWER, d / "drawer.glb")
+    write_glb(d / "drawer.glb", DRAWER)
     (d / "rpy.urdf").write_text(
         '<robot name="rpy"><link name="l"><visual>'
         '<origin xyz="0.1 0.2 0.3" rpy="1.5707963267948966 0 1.5707963267948966"/>'
@@ -231,7 +219,7 @@ def test_urdf_geometry_and_asset(tmp_path, counter):
 
 def test_movable_joint_order(tmp_path):
     d = tmp_path / "order"
-    _write_glb(BODY, d / "body.glb")
+    write_glb(d / "body.glb", BODY)
     (d / "order.urdf").write_text(ORDER_URDF)
     # depth first from base, children in joint-name order: a_hinge, m_fixed (no dof), z_slide, then z_slide's child a: b_sub
     assert parse_urdf(d / "order.urdf").movable_joints() == ["a_hinge", "z_slide", "b_sub"]
@@ -302,7 +290,7 @@ def test_load_instance_pose_box_and_params(tmp_path, counter):
 
 def test_initial_joint_pose_order_and_dict(tmp_path):
     d = tmp_path / "urdf" / "order"
-    _write_glb(BODY, d / "body.glb")
+    write_glb(d / "body.glb", BODY)
     (d / "order.urdf").write_text(ORDER_URDF)
     classes = parse_class_table({"classes": {"cabinet": {"id": 1, "support": "floor", "movable": False}},
                                  "replicacad": {"aliases": {"order": "cabinet"}}}, "<t>")

@@ -17,7 +17,6 @@ orientation cues.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from itertools import permutations
@@ -26,7 +25,8 @@ from pathlib import Path
 import numpy as np
 
 from formats.boxes import BOXES_FORMAT, STRUCTURE_KINDS
-from formats.errors import SceneFormatError, UserError
+from formats.errors import SceneFormatError
+from formats.yamlfile import read_json
 
 from ..config import MapConfig
 from ..geometry import non_degenerate_triangles
@@ -74,12 +74,7 @@ class BoxMap:
     @staticmethod
     def load(path, config: MapConfig | None = None) -> "BoxMap":
         path = Path(path)
-        if not path.is_file():
-            raise UserError(f"{path}: map file not found")
-        try:
-            doc = json.loads(path.read_text())
-        except (json.JSONDecodeError, UnicodeDecodeError) as e:
-            raise SceneFormatError(path, None, f"not valid JSON ({e})") from None
+        doc = read_json(path, missing="map file not found")
         m = BoxMap(doc, source=str(path), config=config)
         m.size_bytes = path.stat().st_size
         return m

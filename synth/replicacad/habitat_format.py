@@ -11,7 +11,6 @@ rotation (+90 deg about X). A habitat pose ``T_h`` becomes ``C T_h C^T``, a vert
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 
@@ -19,6 +18,7 @@ import numpy as np
 
 from formats.fields import fail, mapping, number, numbers, string  # noqa: F401  (re-exported)
 from formats.fields import unit_quat as quat  # noqa: F401
+from formats.yamlfile import read_json  # noqa: F401  (re-exported: every habitat config is read with it)
 
 from ..scene.geometry import Y_UP_TO_Z_UP  # noqa: F401  (the readers import it from here too)
 from ..scene.model import GLB_ASSET_PREFIX, URDF_ASSET_PREFIX
@@ -35,18 +35,6 @@ _DEFAULT_FRONT = (0.0, 0.0, -1.0)
 _C = Y_UP_TO_Z_UP
 
 # field checks (every error names the file and the field): formats.fields, re-exported for the readers
-
-
-def read_json(path: Path):
-    if not path.is_file():
-        fail(path, None, "file not found")
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError) as e:
-        problem = f"cannot read: {e}"
-    except ValueError as e:  # json.JSONDecodeError
-        problem = f"malformed JSON: {e}"
-    fail(path, None, problem)
 
 
 def check_frame(file, cfg: dict) -> None:

@@ -66,7 +66,6 @@ From lights to fixtures (``fixtures_for_imported``)
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -197,16 +196,10 @@ def read_lighting_config(path, dataset_config=None) -> list[HabitatLight]:
     defaults = None
     if dataset_config is not None:
         defaults = dict(dataset_config) if isinstance(dataset_config, dict) else dataset_light_defaults(dataset_config)
+    from .habitat_format import read_json
+
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as e:
-        raise SceneFormatError(p, None, f"cannot read: {e.strerror or e}") from None
-    try:
-        doc = json.loads(text)
-    except ValueError as e:
-        raise SceneFormatError(p, None, f"malformed JSON: {e}") from None
-    return parse_lighting_config(doc, str(p), defaults)
+    return parse_lighting_config(read_json(p, expect_object=False), str(p), defaults)
 
 
 def color_temperature(rgb) -> float:
