@@ -227,6 +227,7 @@ def variant(tmp_path_factory):
     return save_layout(var, tmp_path_factory.mktemp("variant") / "apt_x.yaml")
 
 
+@pytest.mark.slow
 def test_rearrange_makes_a_checked_variant_in_the_paper_ranges(variant, tmp_path, capsys):
     made = tmp_path / "apt_x.yaml"
     assert synth_main(["scene", "rearrange", "apt_0", "--seed", str(VARIANT_SEED), "--out", str(made)]) == 0
@@ -357,6 +358,7 @@ def test_tour_render_refuses_a_clearance_breach(variant, short_query, tmp_path, 
     assert len(Tour(out)) == 16
 
 
+@pytest.mark.slow
 def test_render_spec_refuses_a_clearance_breach_before_rendering(variant, short_query, tmp_path, capsys):
     spec = _spec(tmp_path, designs=[{"layouts": ["apt_0", str(variant)], "path": {"name": str(short_query)}}])
     assert synth_main(["render", str(spec), "--quiet"]) == 2

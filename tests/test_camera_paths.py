@@ -231,6 +231,7 @@ def test_mapping_covers_every_room_from_several_directions(mapping, layouts):
         assert (n >= 30).sum() >= 3, f"{room}: heading quadrants {dict(zip(q.tolist(), n.tolist()))}"
 
 
+@pytest.mark.slow
 def test_mapping_keeps_all_rooms_when_short():
     apt0 = load_layout("apt_0")
     p = plan_mapping_path(apt0, frames=2700, seed=1)
@@ -245,6 +246,7 @@ def test_mapping_keeps_all_rooms_when_short():
 # no drift: the shipped files are what the planner makes now
 
 
+@pytest.mark.slow
 def test_shipped_paths_are_what_the_planner_makes(query, mapping):
     for saved in (query, mapping):
         again = replan(saved)

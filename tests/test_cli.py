@@ -101,6 +101,7 @@ def test_console_script_reports_errors_with_status_2(tmp_path):
     assert r.stderr.strip() == f"synth: error: {bad}: stage.ceiling_height: must be > 0, got -2.0"
 
 
+@pytest.mark.slow
 def test_model_and_reloc_do_not_import_bpy():
     code = (
         "import sys, pkgutil, importlib, formats, synth, reloc\n"

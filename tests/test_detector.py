@@ -40,6 +40,7 @@ def tiny(tmp_path_factory):
     return root
 
 
+@pytest.mark.slow
 @pytest.mark.blender
 def test_pack_round_trip_against_the_renders(tiny):
     ds = load(tiny / "set.npz")
@@ -65,6 +66,7 @@ def test_boundaries_cut_touching_instances():
     assert b[0, 2] and b[1, 2] and not b[3, 2]  # the border with the background
 
 
+@pytest.mark.slow
 @pytest.mark.blender
 def test_training_learns_and_onnx_matches_pytorch(tiny):
     log = json.loads((tiny / "run" / "train_log.json").read_text())

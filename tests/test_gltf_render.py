@@ -741,6 +741,7 @@ def mask_of(inst: np.ndarray, iid: int) -> np.ndarray:
 
 
 
+@pytest.mark.slow
 @pytest.mark.blender
 def test_blender_geometry_matches_the_fast_renderer_on_the_textured_scene(renders):
     tb, tf = renders["blender"], renders["fast"]
@@ -934,6 +935,7 @@ def rcad_tours(tmp_path_factory, rcad):
     return Tour(base / "blender"), Tour(base / "fast"), lay
 
 
+@pytest.mark.slow
 @pytest.mark.blender
 def test_fixture_geometry_blender_matches_fast_renderer(rcad_tours):
     tb, tf, _ = rcad_tours

@@ -586,6 +586,7 @@ def test_builtin_fixtures_unchanged():
 # camera paths on an imported layout
 
 
+@pytest.mark.slow
 def test_camera_paths_plan_on_an_imported_layout(rc, rc_variant):
     from synth.paths.mapping import plan_mapping_path
     from synth.paths.query import plan_query_path

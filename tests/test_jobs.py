@@ -28,6 +28,7 @@ from jobspecs import SMOKE  # noqa: E402  (one home: tests/jobspecs.py)
 
 
 
+@pytest.mark.slow
 def test_shipped_specs_validate_and_expand():
     for name in ("smoke", "demo", "replicacad_6x3"):
         plan = jobs.expand(jobs.load_spec(REPO_ROOT / "synth" / "specs" / f"{name}.yaml"), out=Path("/nonexistent/x"))
@@ -112,6 +113,7 @@ def test_malformed_yaml_and_unwritable_out(tmp_path, capsys):
     assert "is not a folder" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_failing_chunk_is_retried_then_reported_and_others_go_on(tmp_path, monkeypatch):
     """The scheduler with a worker that always fails on one chunk (a stand-in for a crashing Blender)."""
     spec = jobs.load_spec(write_spec(tmp_path, renderer="fast", designs=[{"layouts": ["apt_0", "apt_1"], "path": {"name": "query", "frames": 6}}]))
@@ -198,6 +200,7 @@ def test_ray_backend_on_loopback_renders_the_smoke_spec(tmp_path, smoke_referenc
     _assert_same_job(ref, out)
 
 
+@pytest.mark.slow
 @pytest.mark.blender
 def test_fast_geometry_with_sparse_rgb_renders_a_checked_tour(tmp_path):
     """Depth and ids of every frame from the fast renderer, Cycles RGB on every 3rd frame only."""

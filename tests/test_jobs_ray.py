@@ -130,6 +130,7 @@ def test_runtime_env_of_an_installed_toolkit_is_one_clear_error(monkeypatch):
     assert ray_backend.runtime_env("none", "10.0.0.1:6379") is None
 
 
+@pytest.mark.slow
 def test_a_packed_chunk_renders_anywhere_and_sends_its_frames_home(tmp_path):
     """The task's side without Ray: pack a chunk, run it in a scratch folder, get its files back."""
     spec = jobs.load_spec(write_spec(tmp_path, renderer="fast", chunk_size=4,

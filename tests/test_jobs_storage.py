@@ -142,6 +142,7 @@ def test_a_folder_holding_another_spec_is_refused(tmp_path, mem, capsys, kind, m
     assert stored_tree(fs, root) == before and not connected  # refused before the cluster and before any write
 
 
+@pytest.mark.slow
 def test_a_plain_folder_names_the_field_that_differs(tmp_path, capsys):
     a = fast_spec(tmp_path, "a.yaml")
     assert synth_main(["render", str(a), "--out", str(tmp_path / "o"), "--quiet"]) == 0
@@ -150,6 +151,7 @@ def test_a_plain_folder_names_the_field_that_differs(tmp_path, capsys):
                     f"{tmp_path / 'o' / 'job_state.json'}: designs[0].frames: 6 there, 3 in this spec")
 
 
+@pytest.mark.slow
 def test_file_uri_with_the_local_backend_is_the_folder(tmp_path, capsys):
     spec = fast_spec(tmp_path)
     assert synth_main(["render", str(spec), "--out", str(tmp_path / "plain"), "--quiet"]) == 0
@@ -158,6 +160,7 @@ def test_file_uri_with_the_local_backend_is_the_folder(tmp_path, capsys):
     assert job_files(a) == job_files(b) and len([k for k in a if k.endswith(".exr")]) == 6
 
 
+@pytest.mark.slow
 def test_dry_run_reads_what_is_stored(tmp_path, mem, capsys):
     uri, fs, root = mem
     spec = fast_spec(tmp_path)

@@ -259,6 +259,7 @@ def _top_z(s, pts):
     return out
 
 
+@pytest.mark.slow
 def test_cells_added_for_an_object_go_to_the_level_of_its_bottom(plain):
     nav = read_navmesh(NAV / "empty_stage.navmesh")
     keep = [np.array(BIKE), _quad_xy(LANDING_PLANT)]

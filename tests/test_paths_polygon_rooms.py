@@ -169,6 +169,7 @@ def test_outside_the_polygon_scores_zero_with_a_reason():
 # plan then check: the same clearance (a layout file named like a built-in one)
 
 
+@pytest.mark.slow
 def test_cli_plan_then_check_agree_on_a_layout_file_named_like_a_builtin(tmp_path, capsys):
     lay = l_layout(name="apt_0")  # an imported ReplicaCAD apartment is named apt_0 too
     f = save_layout(lay, tmp_path / "apt_0.yaml")

@@ -42,6 +42,7 @@ def _relative(parent, child) -> np.ndarray:
     return np.linalg.inv(parent.matrix()) @ child.matrix()
 
 
+@pytest.mark.slow
 def test_variant_in_scaled_ranges(apt0, variant):
     ranges = scaled_ranges(apt0)
     # the fixture's apt_0 holds 91 movable objects that are not free (the built-in apt_0: 82)

@@ -138,6 +138,7 @@ def read_tum_independently(path):
     return out
 
 
+@pytest.mark.slow
 def test_run_and_eval_on_a_rearranged_tour(data, tmp_path, capsys):
     from reloc.cli import main
 
@@ -176,6 +177,7 @@ def test_run_and_eval_on_a_rearranged_tour(data, tmp_path, capsys):
         f"propagated {s}" for s in ("graph", "anchors", "fallback", "tracking", "run-level", "propagation")}
 
 
+@pytest.mark.slow
 def test_causal_poses_do_not_depend_on_later_frames(data, tmp_path):
     tour, bmap = data["tour"], data["map"]
     full = relocalize(tour, bmap, tmp_path / "full", progress=False)
@@ -201,6 +203,7 @@ def test_causal_poses_do_not_depend_on_later_frames(data, tmp_path):
             assert np.allclose(ca[i], cb[i], atol=1e-4)
 
 
+@pytest.mark.slow
 def test_ablation_switches_run(data, tmp_path, capsys, monkeypatch):
     """Each ablation flag of reloc run switches its mechanism off, and nothing else, with a visible effect.
 

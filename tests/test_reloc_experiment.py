@@ -349,6 +349,7 @@ def _planned_design(tmp_path) -> Path:
     return plan.out
 
 
+@pytest.mark.slow
 def test_unrendered_design_names_the_missing_tours_and_the_command(tmp_path, capsys):
     assert reloc_main(["experiment", str(_spec(tmp_path)), "--quiet"]) == 2  # nothing on disk at all
     err = capsys.readouterr().err.strip()
@@ -638,6 +639,7 @@ def fresh_fingerprint():
     code_fingerprint.cache_clear()
 
 
+@pytest.mark.slow
 def test_code_fingerprint_covers_reloc_and_the_format_modules_it_imports(tmp_path, fresh_fingerprint):
     from reloc.experiments import fingerprint as E
 
@@ -796,6 +798,7 @@ def test_map_built_with_the_learned_detector(tiny_design, tmp_path, capsys):
     assert "GT unobserved" in line and f"{len(doc['boxes'])} boxes" in line
 
 
+@pytest.mark.slow
 def test_experiment_with_the_learned_detector_and_the_oracle_row(tiny_design, capsys):
     """The default detector is the learned one; ``videoreloc_oracle`` adds the labelled upper-bound
     row with its own map; both maps are scored against the ground truth in results.json."""

@@ -146,6 +146,7 @@ def test_external_command_and_trajectories_through_tables_and_checks(design, cap
     assert "5 runs and 0 maps" in capsys.readouterr().out  # noisy's map_command and its four query runs, nothing else
 
 
+@pytest.mark.slow
 @pytest.mark.blender
 def test_external_command_reads_exports_through_every_sensor(design, capsys):
     """With sensors, the command's exports are the tours read through each sensor (the frames every

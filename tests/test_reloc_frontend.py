@@ -75,6 +75,7 @@ def test_frontend_places_clips_of_unchanged_layout(tours):
     assert fe.timings["detection"] > 0 and fe.timings["registration"] > 0
 
 
+@pytest.mark.slow
 def test_units_recall_rises_with_unit_length_on_rearranged_layout(tours):
     rep = run_units(tours["apt_1"], tours["map"], lengths=(1, 30, 100), poses="gt", one_frame_stride=4,
                     progress=False)

@@ -164,6 +164,7 @@ def _boxes_by_hand(layout_file) -> dict[int, tuple]:
     return out
 
 
+@pytest.mark.slow
 def test_ground_truth_map_equals_the_layout_by_hand(tmp_path, capsys, tour):
     out = tmp_path / "gt.json"
     code, stdout, _ = run_cli(["map", "ground-truth", str(tour.root), "--out", str(out)], capsys)

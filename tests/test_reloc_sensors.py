@@ -149,6 +149,7 @@ def sensor_design(tmp_path_factory):
     return root
 
 
+@pytest.mark.slow
 def test_experiment_through_two_sensors(sensor_design, capsys):
     root = sensor_design
     exp = root / "exp"

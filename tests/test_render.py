@@ -57,6 +57,7 @@ def assert_renders_agree(a, b) -> None:
 # ---- geometry: Blender against Open3D ----------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.blender
 def test_blender_geometry_matches_open3d_ray_casting(tmp_path):
     path = spread_path(tmp_path, 5)

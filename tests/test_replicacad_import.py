@@ -264,6 +264,7 @@ def test_spec_from_a_replicacad_root_prepares_layouts_and_paths_once(root, tmp_p
         del os.environ["REPLICACAD_ROOT"]
 
 
+@pytest.mark.slow
 def test_dry_run_shows_the_plan_and_writes_nothing(root, tmp_path, capsys):
     spec_file = tmp_path / "spec.yaml"
     spec_file.write_text(SPEC % (root, tmp_path / "job"))
@@ -299,6 +300,7 @@ def test_replicacad_root_option_needs_a_replicacad_spec(root, capsys):
     assert "has no replicacad: section" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_shipped_replicacad_spec_plans_the_paper_design(root, tmp_path):
     """synth/specs/replicacad_apt_6x3.yaml on the fixture: 18 query tours of 4,000 frames + the 6,000-frame mapping tour."""
     from synth.jobs import expand

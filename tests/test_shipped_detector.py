@@ -32,6 +32,7 @@ def views(tmp_path_factory):
     return save_path(plan_views([load_layout("apt_0")], 6, seed=0), root / "views.txt")
 
 
+@pytest.mark.slow
 @pytest.mark.blender
 @pytest.mark.parametrize("lighting", ["day", "night"])
 def test_shipped_model_finds_apt_0_in_day_and_night(views, lighting):

@@ -142,6 +142,7 @@ def test_trainset_cli_refuses_an_experiment_seed_in_one_line(tmp_path, capsys):
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow
 def test_prepare_is_deterministic_and_makes_a_valid_render_job(tmp_path):
     spec = parse_trainset(_doc(variants=1, lightings=["day", "night"], jitter=2), "spec.yaml")
     render = prepare(spec, tmp_path / "a", progress=False)
@@ -161,6 +162,7 @@ def test_prepare_is_deterministic_and_makes_a_valid_render_job(tmp_path):
     assert {(o.cls, o.position) for o in a.objects} != {(o.cls, o.position) for o in b.objects}
 
 
+@pytest.mark.slow
 @pytest.mark.blender
 def test_tiny_trainset_renders_rgb_and_labels(tmp_path):
     spec_file = tmp_path / "t.yaml"
