@@ -145,3 +145,42 @@ def test_detection_min_mask_pixels_reaches_the_oracle_everywhere():
     assert default_detector(FakeTour(), FakeMap(), cfg).min_pixels == 3
     assert default_detector(FakeTour(), FakeMap()).min_pixels == Config().detection.min_mask_pixels == 20
     assert build_detector(DetectorSpec(), {1: "chair"}, config=cfg.detection).min_pixels == 3
+
+
+def test_the_map_section_reaches_every_loaded_box_map(tmp_path, monkeypatch):
+    """``Config.map`` (the triangle index of a loaded map) is what the experiment tasks and
+    ``reloc run`` load the map with: a shorter edge range keeps fewer edges than the paper's."""
+    import json
+
+    from reloc.experiments import tasks
+    from reloc.map.boxmap import BoxMap
+    from synth.scene.model import boxes_document, load_layout
+
+    path = tmp_path / "map.json"
+    path.write_text(json.dumps(boxes_document(load_layout("apt_0"))))
+    cfg = _load(tmp_path, "map:\n  triangle_edge_max_m: 2.0\n")
+    paper = tasks._load("boxes", str(path), Config().map)
+    short = tasks._load("boxes", str(path), cfg.map)
+    assert paper.config.triangle_edge_max_m == 8.0 and short.config.triangle_edge_max_m == 2.0
+    assert 0 < len(short.edges) < len(paper.edges)
+    # reloc run: the map is loaded with the --config's map section (stopped right after the load)
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def load(p, config=None):
+        seen.append(config)
+        raise Stop
+
+    monkeypatch.setattr(BoxMap, "load", staticmethod(load))
+    import formats.tour
+    from reloc.cli import build_parser
+
+    monkeypatch.setattr(formats.tour, "Tour", lambda *a, **k: None)  # cmd_run imports it when it runs
+    (tmp_path / "cfg.yaml").write_text("map:\n  triangle_edge_max_m: 2.0\n")
+    args = build_parser().parse_args(["run", "--tour", "T", "--map", str(path), "--out", str(tmp_path / "out"),
+                                      "--config", str(tmp_path / "cfg.yaml")])
+    with pytest.raises(Stop):
+        args.fn(args)
+    assert seen and seen[0].triangle_edge_max_m == 2.0

@@ -289,8 +289,8 @@ def cmd_run(args) -> int:
 
     check_output_folder(args.out)
     tour = Tour(args.tour, sensor=args.sensor, sensor_seed=args.sensor_seed)
-    bmap = BoxMap.load(args.map)
     cfg = load_config(args.config) if args.config else Config()
+    bmap = BoxMap.load(args.map, config=cfg.map)
     if args.point_to_point:
         cfg = cfg.replace("refinement.orientation_aware", False)
     if args.no_run_level:

@@ -80,8 +80,8 @@ def cmd_frontend(args) -> int:
     from ..config import load_config
 
     tour = Tour(args.tour)
-    bmap = BoxMap.load(args.map)
     cfg = load_config(args.config) if args.config else Config()
+    bmap = BoxMap.load(args.map, config=cfg.map)
     rep = bench_frontend(tour, bmap, frames=args.frames, poses=args.poses, cfg=cfg, repeat=args.repeat)
     print(json.dumps(rep, indent=2) if args.json else format_frontend(rep))
     return 0

@@ -154,8 +154,8 @@ def cmd_units(args) -> int:
     from formats.atomic import write_json_atomic
 
     tour = Tour(args.tour)
-    bmap = BoxMap.load(args.map)
     cfg = load_config(args.config) if args.config else Config()
+    bmap = BoxMap.load(args.map, config=cfg.map)
     det = build_detector(detector_spec_from_args(args), tour.class_names(), vocabulary=bmap.class_set,
                          config=cfg.detection)
     rep = run_units(tour, bmap, lengths=_lengths(args.lengths), detector=det, poses=args.poses, cfg=cfg,

@@ -60,13 +60,15 @@ def _detector(det: dict, tour, bmap, cfg):
 _CACHE: dict = {}
 
 
-def _load(kind: str, path: str):
-    k = (kind, path, os.stat(path).st_mtime_ns)
+def _load(kind: str, path: str, map_config=None):
+    """A map, cached per process (per file version and, for a box map, per ``Config.map``: the
+    triangle index it builds depends on it)."""
+    k = (kind, path, os.stat(path).st_mtime_ns, map_config)
     if k not in _CACHE:
         if kind == "boxes":
             from ..map.boxmap import BoxMap
 
-            _CACHE[k] = BoxMap.load(path)
+            _CACHE[k] = BoxMap.load(path, config=map_config)
         elif kind == "appearance":
             from ..baselines.appearance import AppearanceMap
 
@@ -127,8 +129,8 @@ def run_tour_task(task: dict) -> dict:
     method = task["method"]
     extra: dict = {}
     if method in ("videoreloc", "videoreloc_oracle") or method.startswith("ablation_"):
-        bmap = _load("boxes", task["map"])
         cfg = _config(task["config"], task.get("variant"))
+        bmap = _load("boxes", task["map"], cfg.map)
         s = relocalize(tour, bmap, d, cfg=cfg, detector=_detector(task["detector"], tour, bmap, cfg), seed=task["seed"],
                        progress=False)
         extra = {"fps": s["fps"], "clips": s["clips"]}
@@ -147,10 +149,10 @@ def run_tour_task(task: dict) -> dict:
     elif method == "one_frame":
         from .localization_units import run_units
 
-        bmap = _load("boxes", task["map"])
+        cfg = _config(task["config"])
+        bmap = _load("boxes", task["map"], cfg.map)
         lengths = tuple(task["lengths"])
         est: dict = {}
-        cfg = _config(task["config"])
         rep = run_units(tour, bmap, lengths=lengths, detector=_detector(task["detector"], tour, bmap, cfg),
                         cfg=cfg, one_frame_stride=task["stride"], seed=task["seed"],
                         progress=False, estimates=est)
