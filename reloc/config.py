@@ -31,7 +31,7 @@ class MapConfig:
     registration (the center-distance edges and class-keyed triangles of ``reloc.map.boxmap.BoxMap``).
 
     Not how a map is built from a mapping tour: those knobs are
-    :class:`reloc.map.settings.MappingSettings` (``reloc map build``), which is no part of Config."""
+    :class:`reloc.map.settings.MapBuildSettings` (``reloc map build``), which is no part of Config."""
 
     # Sec. III-B: "nearby object pairs form center-distance edges, and non-degenerate triples form
     # an index keyed by vertex classes and edge lengths". Edge range from Sec. IV-A (0.2-8 m).

@@ -28,7 +28,7 @@ from synth.scene.model import boxes_document, load_layout
 from reloc.map.fitting import fit_box
 from reloc.map.scoring import box_errors
 from reloc.map.segmentation import _moments, _reduce, voxel_keys
-from reloc.map.settings import MappingSettings
+from reloc.map.settings import MapBuildSettings
 
 from formats.errors import UserError
 from formats.frames import write_frame
@@ -222,7 +222,7 @@ def test_built_map_is_valid_small_and_keeps_track_ids(built, tour):
     m = BoxMap(doc)
     gt = _gt_by_id(tour)
     assert len(m) > 50
-    assert report["frames_visited"] == TOUR_FRAMES // MappingSettings().stride
+    assert report["frames_visited"] == TOUR_FRAMES // MapBuildSettings().stride
     assert report["frames_used"] == report["frames_visited"] and report["frames_no_depth"] == 0
     for b in doc["boxes"]:
         g = gt[b["id"]]  # every box carries the id of the instance it was built from
@@ -485,13 +485,13 @@ def test_low_wall_strips_are_no_walls():
     from collections import Counter
 
     from reloc.map.build import _boxes
-    from reloc.map.settings import MappingSettings
+    from reloc.map.settings import MapBuildSettings
 
     def grid(x1, z0, z1):
         g = np.mgrid[0:x1:0.05, 0:0.1:0.05, z0:z1:0.05].reshape(3, -1).T + 0.025
         return g, np.zeros((len(g), 4))
 
-    s = MappingSettings()
+    s = MapBuildSettings()
     strip, tall = grid(2.0, 2.55, 2.7), grid(2.0, 0.0, 2.6)
     cam = np.array([1.0, 2.0, 1.5])
     dropped = Counter()

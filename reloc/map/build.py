@@ -3,7 +3,7 @@
 The paper builds its map from the mapping video with a class-agnostic 3D segmentation whose
 segments get open-vocabulary labels, and stores one gravity-aligned box per segment for objects,
 walls, floors and ceilings. Here detector masks stand in for that pipeline (:func:`build_map`,
-with the knobs of :class:`~reloc.map.settings.MappingSettings`):
+with the knobs of :class:`~reloc.map.settings.MapBuildSettings`):
 
 * every ``stride``-th frame of the mapping tour is run through a detector (by default the
   :class:`~reloc.detection.oracle.OracleDetector` of the tour's classes); a detector that sees
@@ -69,7 +69,7 @@ from .document import kind_of
 from .fitting import fit_box
 from .pixels import _Backprojector, _depth_edges, _mask_pixels
 from .segmentation import _absorb_across_classes, _associate, _merge_overlapping, _moments, _reduce, _Segment, _vote_voxels, voxel_keys
-from .settings import MappingSettings
+from .settings import MapBuildSettings
 from .structure import _structure_camera, split_rooms, split_walls
 
 
@@ -80,13 +80,13 @@ def _struct_slab() -> float:
 
 
 def build_map(tour_dir, detector=None, stride: int | None = None, voxel: float | None = None, progress: bool = True,
-              settings: MappingSettings | None = None, max_frames: int | None = None) -> tuple[dict, dict]:
+              settings: MapBuildSettings | None = None, max_frames: int | None = None) -> tuple[dict, dict]:
     """Build a box map from a mapping tour: ``(videoreloc-boxes/1 document, report)``.
 
     ``tour_dir``: the tour's folder, or a ``formats.tour.Tour`` (one read through a sensor model:
     the map then sees what that camera measures). ``detector``: anything with ``detect(FrameData) -> list[Detection]`` (default: the oracle of
     the tour's classes). ``stride``/``voxel`` (default 5 frames / 0.05 m, see
-    :class:`MappingSettings`) override ``settings``. ``max_frames``: stop after that many visited
+    :class:`MapBuildSettings`) override ``settings``. ``max_frames``: stop after that many visited
     frames. ``progress``: a tqdm bar on stderr. Frames without depth or without detections are
     skipped and counted in the report; a tour from which nothing can be built gives an empty
     (valid) map and a ``warnings`` entry. A missing or unreadable frame file is an error naming
@@ -132,16 +132,16 @@ def build_map(tour_dir, detector=None, stride: int | None = None, voxel: float |
     return doc, report
 
 
-def _settings(settings: MappingSettings | None, stride: int | None, voxel: float | None) -> MappingSettings:
-    """``settings`` (default: :class:`MappingSettings`), with ``stride`` and ``voxel`` where given."""
-    s = settings or MappingSettings()
+def _settings(settings: MapBuildSettings | None, stride: int | None, voxel: float | None) -> MapBuildSettings:
+    """``settings`` (default: :class:`MapBuildSettings`), with ``stride`` and ``voxel`` where given."""
+    s = settings or MapBuildSettings()
     over = {}
     if stride is not None:
         over["stride"] = stride
     if voxel is not None:
         over["voxel"] = voxel
     if over:
-        s = MappingSettings(**{**asdict(s), **over})
+        s = MapBuildSettings(**{**asdict(s), **over})
     return s
 
 
@@ -150,7 +150,7 @@ class _Accumulator:
     class, pooled structure (walls, floors, ceilings without track ids) per kind; and the counts of
     frames and detections for the report."""
 
-    def __init__(self, K: np.ndarray, s: MappingSettings):
+    def __init__(self, K: np.ndarray, s: MapBuildSettings):
         self.K = K
         self.s = s
         self.bp: _Backprojector | None = None
@@ -229,7 +229,7 @@ class _Accumulator:
                 + list(self.pooled.values()))
 
 
-def _pieces(acc: _Accumulator, s: MappingSettings, dropped: Counter) -> list[tuple]:
+def _pieces(acc: _Accumulator, s: MapBuildSettings, dropped: Counter) -> list[tuple]:
     """The point sets to fit boxes to, ``(class, voxel centroids, voxel spreads, camera, track id,
     frames)``: each tracked segment; the untracked object segments, overlapping ones merged; the
     pooled structure split into walls and rooms (a pool that gives no piece counts in ``dropped``)."""
@@ -253,7 +253,7 @@ def _pieces(acc: _Accumulator, s: MappingSettings, dropped: Counter) -> list[tup
     return pieces
 
 
-def _min_sizes(s: MappingSettings) -> dict[str, tuple]:
+def _min_sizes(s: MapBuildSettings) -> dict[str, tuple]:
     """The minimum box size per kind: walls as the thinnest ground-truth wall, floor and ceiling
     slabs as the ground truth's (``formats.boxes.STRUCT_SLAB``)."""
     slab = _struct_slab()
@@ -271,7 +271,7 @@ def _movable_classes(tour) -> dict[str, bool]:
     return {b["class"]: bool(b.get("movable", False)) for b in tour.objects().get("boxes", [])}
 
 
-def _boxes(pieces: list[tuple], s: MappingSettings, movable_of: dict[str, bool], dropped: Counter) -> tuple[list[dict], list[int], int]:
+def _boxes(pieces: list[tuple], s: MapBuildSettings, movable_of: dict[str, bool], dropped: Counter) -> tuple[list[dict], list[int], int]:
     """One box per piece of at least ``min_voxels`` voxels seen in at least ``min_frames`` frames
     (the others count in ``dropped``), sorted by id: ``(boxes, the ids assigned to pieces without
     a track id, the voxels of the boxed pieces)``."""
@@ -314,7 +314,7 @@ def _boxes(pieces: list[tuple], s: MappingSettings, movable_of: dict[str, bool],
 
 
 def _document(tour, detector, classes: dict, boxes: list[dict], assigned_ids: list[int],
-              s: MappingSettings) -> dict:
+              s: MapBuildSettings) -> dict:
     """The ``videoreloc-boxes/1`` document of the boxes, with the class ids of the classes they use
     (the tour's; 0 for a class it lacks) and a ``mapping`` note of how they were built."""
     sem = {v: k for k, v in classes.items()}
@@ -353,7 +353,7 @@ def _warnings(tour, indices: list[int], counts: Counter, boxes: list[dict]) -> l
 
 
 def _report(tour, indices: list[int], counts: Counter, pieces: list[tuple], dropped: Counter, boxes: list[dict],
-            n_voxels: int, voxels_disowned: int, s: MappingSettings, t_start: float) -> dict:
+            n_voxels: int, voxels_disowned: int, s: MapBuildSettings, t_start: float) -> dict:
     """The build report: frames and detections used and skipped, segments, boxes, settings, time."""
     kinds = Counter(b["kind"] for b in boxes)
     warnings = _warnings(tour, indices, counts, boxes)

@@ -15,7 +15,7 @@ from formats.cli import add_quiet
 from .build import build_map
 from .document import dumps_map, map_from_tour
 from .scoring import errors_against_ground_truth
-from .settings import DEFAULT_STRIDE, MappingSettings
+from .settings import DEFAULT_STRIDE, MapBuildSettings
 
 
 def summary_line(doc: dict, size_bytes: int, errors: dict | None, report: dict | None = None) -> str:
@@ -94,8 +94,8 @@ def register_cli(subparsers) -> None:
     a.add_argument("tour", metavar="TOUR_DIR", help="tour directory")
     a.add_argument("--out", required=True, help="map file (.json)")
     a.add_argument("--stride", type=int, default=DEFAULT_STRIDE, help=f"use every N-th frame (default {DEFAULT_STRIDE})")
-    a.add_argument("--voxel", type=float, default=MappingSettings.voxel,
-                   help=f"voxel size in metres (default {MappingSettings.voxel:g})")
+    a.add_argument("--voxel", type=float, default=MapBuildSettings.voxel,
+                   help=f"voxel size in metres (default {MapBuildSettings.voxel:g})")
     a.add_argument("--report", metavar="FILE.json", help="write the build report and per-box errors against the tour's ground truth")
     add_quiet(a)
     from ..detection.factory import add_detector_arguments

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .settings import MappingSettings
+from .settings import MapBuildSettings
 
 
 class _Backprojector:
@@ -85,7 +85,7 @@ def _consistent_rim(mask: np.ndarray, z: np.ndarray, valid: np.ndarray, r: int, 
 
 
 def _mask_pixels(mask, kind: str, zc: np.ndarray, zf: np.ndarray, valid: np.ndarray, good: np.ndarray,
-                 s: MappingSettings) -> np.ndarray | None:
+                 s: MapBuildSettings) -> np.ndarray | None:
     """Flat pixel indices of a detection mask's depth-consistent pixels, or None when fewer than
     ``min_mask_pixels`` are left. ``zc``: the frame's depth (0 where not ``valid``), ``zf`` its flat
     view, ``good`` (flat): valid and not on the far side of a depth discontinuity. The mask loses the

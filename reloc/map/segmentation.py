@@ -15,7 +15,7 @@ from collections import Counter
 
 import numpy as np
 
-from .settings import MappingSettings
+from .settings import MapBuildSettings
 
 _OFF = 1 << 20  # voxel indices within +-2^20 (52 km at 5 cm) pack into 21 bits each
 
@@ -142,7 +142,7 @@ def _vote_voxels(segs: list[_Segment], ratio: float, keep_small: int = 0) -> int
     return dropped
 
 
-def _associate(segs: list[_Segment], keys, pts, s: MappingSettings) -> _Segment:
+def _associate(segs: list[_Segment], keys, pts, s: MapBuildSettings) -> _Segment:
     """The untracked same-class segment a detection belongs to (or a new one).
 
     A candidate qualifies by voxel overlap (at least ``assoc_min_overlap`` of the detection's

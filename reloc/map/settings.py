@@ -1,4 +1,4 @@
-"""The knobs of map construction (:class:`MappingSettings`)."""
+"""The knobs of map construction (:class:`MapBuildSettings`)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ DEFAULT_STRIDE = 5  # every 5th frame: a 6000-frame 320x240 tour maps in well un
 
 
 @dataclass(frozen=True)
-class MappingSettings:
+class MapBuildSettings:
     """Knobs of :func:`~reloc.map.build.build_map` (all "ours": the paper's pipeline has none of these):
     how a box map is built from a mapping tour (``reloc map build --stride --voxel``).
 
