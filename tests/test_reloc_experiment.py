@@ -16,6 +16,7 @@ from reloc.cli import main as reloc_main
 from reloc.experiments.spec import load_experiment
 
 from formats.design import write_design
+from jobspecs import write_experiment_spec
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -204,19 +205,6 @@ def test_check_file_or_results_missing_exit_2(tmp_path, capsys):
 # experiment spec validation
 
 
-def _spec(tmp_path, **changes) -> Path:
-    doc = yaml.safe_load((REPO / "reloc" / "specs" / "demo_experiment.yaml").read_text())
-    doc["render"] = str(REPO / "synth" / "specs" / "demo.yaml")
-    doc["out"] = str(tmp_path / "exp")
-    doc["tours"] = str(tmp_path / "tours")
-    doc.update(changes)
-    for k in [k for k, v in changes.items() if v is None]:
-        del doc[k]
-    p = tmp_path / "exp.yaml"
-    p.write_text(yaml.safe_dump(doc))
-    return p
-
-
 def test_shipped_experiment_spec_validates():
     s = load_experiment(REPO / "reloc" / "specs" / "demo_experiment.yaml")
     assert s.methods == ("videoreloc", "videoreloc_oracle", "fpfh_icp", "appearance", "one_frame")
@@ -235,12 +223,12 @@ def test_a_bare_name_is_a_shipped_spec_and_a_file_wins(tmp_path, monkeypatch, ca
     monkeypatch.chdir(tmp_path)
     assert load_experiment("demo_experiment").source == REPO / "reloc" / "specs" / "demo_experiment.yaml"
     assert len(parse_checks("demo_checks")) == len(parse_checks(REPO / "reloc" / "specs" / "demo_checks.yaml")) > 5
-    (tmp_path / "demo_experiment").write_text(_spec(tmp_path, name="mine").read_text())
+    (tmp_path / "demo_experiment").write_text(write_experiment_spec(tmp_path, name="mine").read_text())
     assert load_experiment("demo_experiment").name == "mine"
-    assert load_experiment(_spec(tmp_path, render="demo")).render == (REPO / "synth" / "specs" / "demo.yaml").resolve()
+    assert load_experiment(write_experiment_spec(tmp_path, render="demo")).render == (REPO / "synth" / "specs" / "demo.yaml").resolve()
     with pytest.raises(SceneFormatError, match=r"exp.yaml: render: .*nowhere: no such file, and no shipped render job "
                                                r"spec of that name; shipped: demo, detector_eval, reference"):
-        load_experiment(_spec(tmp_path, render="nowhere"))
+        load_experiment(write_experiment_spec(tmp_path, render="nowhere"))
     for argv, shipped in ((["experiment", "nosuch"], "demo_experiment, demo_sensors_experiment, demo_tables, "
                                                      "reference_experiment"),
                           (["check", "nosuch", str(tmp_path)], "demo_checks, demo_sensor_checks")):
@@ -268,7 +256,7 @@ def test_a_bare_name_is_a_shipped_spec_and_a_file_wins(tmp_path, monkeypatch, ca
     ({"map": "magic"}, "map: expected build or ground-truth"),
 ])
 def test_bad_experiment_specs_are_one_line_exit_2(tmp_path, capsys, changes, message):
-    assert reloc_main(["experiment", str(_spec(tmp_path, **changes)), "--quiet"]) == 2
+    assert reloc_main(["experiment", str(write_experiment_spec(tmp_path, **changes)), "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("reloc: error:") and message in err and len(err.splitlines()) == 1, err
     assert not (tmp_path / "exp").exists()
@@ -293,18 +281,18 @@ def _render_spec(tmp_path, **design_changes) -> Path:
 def test_a_render_job_without_rgb_where_the_detector_looks(tmp_path, capsys, design, field, message):
     """The learned detector sees only RGB frames: the spec check names the render job's design field."""
     render = _render_spec(tmp_path, **design)
-    assert reloc_main(["experiment", str(_spec(tmp_path, render=str(render))), "--quiet"]) == 2
+    assert reloc_main(["experiment", str(write_experiment_spec(tmp_path, render=str(render))), "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
     assert f"{render}: {field}: " in err and message in err and len(err.splitlines()) == 1, err
     assert not (tmp_path / "exp").exists()
     # the oracle reads label images, which every frame has: the same render job is fine for it
-    assert reloc_main(["experiment", str(_spec(tmp_path, render=str(render), detector="oracle",
+    assert reloc_main(["experiment", str(write_experiment_spec(tmp_path, render=str(render), detector="oracle",
                                                methods=["videoreloc"])), "--quiet"]) == 2
     assert "no rendered design" in capsys.readouterr().err
 
 
 def test_one_frame_stride_must_fall_on_rgb_frames(tmp_path, capsys):
-    assert reloc_main(["experiment", str(_spec(tmp_path, one_frame_stride=12)), "--quiet"]) == 2
+    assert reloc_main(["experiment", str(write_experiment_spec(tmp_path, one_frame_stride=12)), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "designs[0].rgb_every: RGB on every 5th frame" in err and "every 12th query frame (one_frame_stride)" in err
 
@@ -315,7 +303,7 @@ def test_one_frame_stride_must_fall_on_rgb_frames(tmp_path, capsys):
 ])
 def test_corrupt_detector_model_is_one_line(tmp_path, capsys, content, message):
     (tmp_path / "bad.onnx").write_bytes(content)
-    spec = _spec(tmp_path, detector={"kind": "learned", "model": "bad.onnx"})
+    spec = write_experiment_spec(tmp_path, detector={"kind": "learned", "model": "bad.onnx"})
     assert reloc_main(["experiment", str(spec), "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
     assert f"{spec}: detector.model: {tmp_path / 'bad.onnx'}" in err and message in err, err
@@ -332,7 +320,7 @@ def test_a_foreign_onnx_model_is_named(tmp_path, capsys):
                           [helper.make_tensor_value_info("x", TensorProto.FLOAT, [1, 3, 8, 8])],
                           [helper.make_tensor_value_info("y", TensorProto.FLOAT, [1, 3, 8, 8])])
     onnx.save(helper.make_model(g, opset_imports=[helper.make_opsetid("", 17)]), tmp_path / "other.onnx")
-    spec = _spec(tmp_path, detector={"kind": "learned", "model": "other.onnx"})
+    spec = write_experiment_spec(tmp_path, detector={"kind": "learned", "model": "other.onnx"})
     assert reloc_main(["experiment", str(spec), "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
     assert f"{tmp_path / 'other.onnx'}: format: expected a videoreloc-segnet/1 model" in err, err
@@ -351,11 +339,11 @@ def _planned_design(tmp_path) -> Path:
 
 @pytest.mark.slow
 def test_unrendered_design_names_the_missing_tours_and_the_command(tmp_path, capsys):
-    assert reloc_main(["experiment", str(_spec(tmp_path)), "--quiet"]) == 2  # nothing on disk at all
+    assert reloc_main(["experiment", str(write_experiment_spec(tmp_path)), "--quiet"]) == 2  # nothing on disk at all
     err = capsys.readouterr().err.strip()
     assert "no rendered design" in err and "synth render" in err and len(err.splitlines()) == 1, err
     _planned_design(tmp_path)  # planned, nothing rendered yet
-    assert reloc_main(["experiment", str(_spec(tmp_path)), "--quiet"]) == 2
+    assert reloc_main(["experiment", str(write_experiment_spec(tmp_path)), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "10 tour(s) not rendered" in err and "synth render" in err and "--resume" in err
     assert not (tmp_path / "exp").exists()
@@ -363,11 +351,11 @@ def test_unrendered_design_names_the_missing_tours_and_the_command(tmp_path, cap
 
 def test_wrong_names_in_the_design(tmp_path, capsys):
     _planned_design(tmp_path)
-    assert reloc_main(["experiment", str(_spec(tmp_path, unchanged="apt_2")), "--quiet"]) == 2
+    assert reloc_main(["experiment", str(write_experiment_spec(tmp_path, unchanged="apt_2")), "--quiet"]) == 2
     assert "unchanged: layout 'apt_2' has no query tour" in capsys.readouterr().err
-    assert reloc_main(["experiment", str(_spec(tmp_path, query="walk")), "--quiet"]) == 2
+    assert reloc_main(["experiment", str(write_experiment_spec(tmp_path, query="walk")), "--quiet"]) == 2
     assert "has no tours of path 'walk'" in capsys.readouterr().err
-    assert reloc_main(["experiment", str(_spec(tmp_path, mapping={"layout": "apt_1", "lighting": "day",
+    assert reloc_main(["experiment", str(write_experiment_spec(tmp_path, mapping={"layout": "apt_1", "lighting": "day",
                                                                   "path": "mapping"})), "--quiet"]) == 2
     assert "has no tour apt_1__day__mapping" in capsys.readouterr().err
 
@@ -375,7 +363,7 @@ def test_wrong_names_in_the_design(tmp_path, capsys):
 def test_malformed_design_file_is_one_line(tmp_path, capsys):
     root = _planned_design(tmp_path)
     (root / "design.json").write_text('{"format": "videoreloc-design/1", "tours": [1]')
-    assert reloc_main(["experiment", str(_spec(tmp_path)), "--quiet"]) == 2
+    assert reloc_main(["experiment", str(write_experiment_spec(tmp_path)), "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
     assert "design.json: line 1: not valid JSON" in err and len(err.splitlines()) == 1, err
 

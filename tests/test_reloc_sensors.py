@@ -15,6 +15,7 @@ from formats.camera import pose_from_ypr
 from reloc.cli import main as reloc_main
 from reloc.experiments import tables
 from reloc.experiments.evaluation import END_REASONS, end_reason_kind, odometry_drift
+from jobspecs import write_experiment_spec
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -90,15 +91,6 @@ def test_sensor_factors_match_hand_computation():
 # bad specs: one line naming the file and the key, exit 2, nothing written
 
 
-def _spec(tmp_path, **changes) -> Path:
-    doc = yaml.safe_load((REPO / "reloc" / "specs" / "demo_experiment.yaml").read_text())
-    doc.update(render=str(REPO / "synth" / "specs" / "demo.yaml"), out=str(tmp_path / "exp"), tours=str(tmp_path / "tours"))
-    doc.update(changes)
-    p = tmp_path / "exp.yaml"
-    p.write_text(yaml.safe_dump(doc))
-    return p
-
-
 @pytest.mark.parametrize("changes, file, message", [
     ({"sensors": ["kinect9"]}, "exp.yaml", "sensors[0]: unknown sensor preset 'kinect9'; known: ideal, structured_light, tof"),
     ({"sensors": ["ideal", "tof", "tof"]}, "exp.yaml", "sensors[2]: sensor 'tof' is listed twice"),
@@ -117,7 +109,7 @@ def test_bad_sensor_specs_are_one_line_exit_2(tmp_path, capsys, changes, file, m
     (tmp_path / "neg.yaml").write_text("name: neg\ndepth: {lateral_px: -1}\n")
     (tmp_path / "fake_ideal.yaml").write_text("name: ideal\ndepth: {sigma_a: 0.01}\n")
     (tmp_path / "badname.yaml").write_text("name: my.sensor\ndepth: {sigma_a: 0.01}\n")
-    assert reloc_main(["experiment", str(_spec(tmp_path, **changes)), "--quiet"]) == 2
+    assert reloc_main(["experiment", str(write_experiment_spec(tmp_path, **changes)), "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("reloc: error:") and message in err and len(err.splitlines()) == 1, err
     assert f"{tmp_path / file}" in err, err
