@@ -98,7 +98,9 @@ def _number(d: dict, key: str, path: Path, positive: bool = False, integer: bool
     return int(v) if integer else v
 
 
-def _parse_camera(path: Path) -> tuple[Intrinsics, float, dict]:
+def read_camera(path: Path) -> tuple[Intrinsics, float, dict]:
+    """A tour's ``camera.json``: (intrinsics, fps, the whole document), every field checked (a
+    SceneFormatError naming the file and the field)."""
     d = _read_json(path, "camera file")
     w = _number(d, "width", path, positive=True, integer=True)
     h = _number(d, "height", path, positive=True, integer=True)
@@ -182,7 +184,7 @@ class Tour:
         if not self.root.is_dir():
             raise UserError(f"{self.root}: tour directory not found")
         self.camera_file = self.root / CAMERA_FILE
-        self.intrinsics, self.fps, self.camera = _parse_camera(self.camera_file)
+        self.intrinsics, self.fps, self.camera = read_camera(self.camera_file)
         poses_file = self.root / POSES_FILE
         self.frame_indices, self.poses = read_tum(poses_file, fps=self.fps)
         if len(self.frame_indices) == 0:

@@ -58,9 +58,10 @@ def load_depths(tour_dir, frames: int | None = None, start: int = 0):
         idx_all, poses_all, K = tour.frame_indices, tour.poses, tour.K
         W, H, fps = tour.intrinsics.width, tour.intrinsics.height, tour.fps
     except UserError:  # e.g. meta.json not written yet while rendering
-        cam = json.loads((root / "camera.json").read_text())
-        K = np.asarray(cam["K"], dtype=float)
-        W, H, fps = int(cam["width"]), int(cam["height"]), float(cam["fps"])
+        from formats.tour import CAMERA_FILE, read_camera
+
+        intr, fps, _ = read_camera(root / CAMERA_FILE)
+        K, W, H = intr.K, intr.width, intr.height
         idx_all, poses_all = read_tum(root / "poses.txt", fps=fps)
     idx, depths, poses = [], [], []
     has_rgb = False

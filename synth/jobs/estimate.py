@@ -43,12 +43,12 @@ Not modelled: Ray installing the runtime environment on a node's first task (min
 from __future__ import annotations
 
 import heapq
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from formats.errors import UserError
+from formats.errors import SceneFormatError, UserError
+from formats.yamlfile import read_json
 
 SETUP_S = {"geometry": 3.0, "rgb": 4.0, "fast": 1.0}  # start-up per chunk (a fresh process, the scene built)
 RENDER_KINDS = ("geometry", "rgb", "fast")  # kinds rendered on the nodes; copy runs on the driver
@@ -194,13 +194,9 @@ def load_calibration(path) -> dict:
     if not p.is_file():
         raise UserError(f"--calibration {p}: no such file")
     try:
-        doc = json.loads(p.read_text())
-    except UnicodeDecodeError:
-        raise UserError(f"{p}: not a JSON calibration file (not text)") from None
-    except json.JSONDecodeError as e:
-        raise UserError(f"{p}: not a JSON calibration file ({e.msg} at line {e.lineno})") from None
-    except OSError as e:
-        raise UserError(f"--calibration {p}: cannot read it ({e.strerror or e})") from None
+        doc = read_json(p, expect_object=False)  # validate_calibration says what a calibration holds
+    except SceneFormatError as e:
+        raise UserError(f"{p}: not a JSON calibration file ({': '.join(x for x in (e.field, e.message) if x)})") from None
     return validate_calibration(doc, str(p))
 
 
