@@ -8,7 +8,10 @@
   measures them (``formats.sensors``);
 - ``--out``: where the command writes, with the command's own description of what it writes.
 
-Each ``add_*`` returns the argparse action, so a caller can still adjust it.
+Each ``add_*`` returns the argparse action, so a caller can still adjust it. ``ArgumentParser`` is
+argparse's, with the toolkit's one-line errors: a bad option is one line on stderr and exit status 2,
+like every other user error (``synth render: error: argument --workers: expected a positive integer,
+got '0' (see synth render --help)``), not the usage block.
 """
 
 from __future__ import annotations
@@ -16,8 +19,15 @@ from __future__ import annotations
 import argparse
 
 
+class ArgumentParser(argparse.ArgumentParser):
+    """``argparse.ArgumentParser`` whose errors are one line (subcommand parsers inherit it)."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def positive_int(text: str) -> int:
-    """argparse ``type`` of a count: a positive integer, or argparse's one-line usage error."""
+    """argparse ``type`` of a count: a positive integer, else an argparse error naming the option."""
     try:
         v = int(text)
     except ValueError:

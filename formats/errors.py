@@ -88,6 +88,21 @@ def run_command(prog: str, fn, args) -> int:
         print(f"{prog}: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:
-        # stdout's reader is gone: point stdout at /dev/null so that the interpreter's final flush is quiet
+        if not _stdout_reader_gone():  # a broken pipe elsewhere is a real error
+            raise
+        # point stdout at /dev/null so that the interpreter's final flush is quiet too
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
+
+
+def _stdout_reader_gone() -> bool:
+    """stdout is a pipe whose reading end is closed (``| head`` has exited): poll reports an error on it."""
+    import select
+    import sys
+
+    try:
+        poll = select.poll()
+        poll.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(ev & select.POLLERR for _, ev in poll.poll(0))
+    except (AttributeError, OSError, ValueError):  # no poll here, or stdout is not a file
+        return False

@@ -269,9 +269,10 @@ def _section(doc, cls, file: str, key: str):
                 raise SceneFormatError(file, field, f"expected true or false, got {v!r}")
             out[k] = v
             continue
-        x = number(file, v, field, lo=0.0)
-        if math.isinf(x) and k not in _INF_OK:
-            raise SceneFormatError(file, field, "must be finite")
+        if k in _INF_OK and isinstance(v, float) and v == math.inf:
+            x = math.inf  # "no limit": the one non-finite value these keys take (formats.fields.number refuses it)
+        else:
+            x = number(file, v, field, lo=0.0)
         if k in _PROBABILITIES and x > 1:
             raise SceneFormatError(file, field, f"a probability must be in [0, 1], got {x}")
         if k == "max_incidence_deg" and not 0 < x <= 90:

@@ -65,9 +65,21 @@ def resolve_spec(arg, folder: Path, what: str, key: str | None = None) -> Path:
 
 
 def shipped_file(name: str, folder: Path, what: str, key: str | None = None) -> Path:
-    """The shipped spec ``folder/NAME.yaml``; ``UnknownNameError`` (listing the names) when there is none."""
+    """The shipped spec ``folder/NAME.yaml`` (of the kind ``key`` marks); ``UnknownNameError`` (listing
+    the names) when there is none. A shipped file that does not parse is returned all the same: its
+    loader reports what is wrong with it, rather than calling it missing."""
+    from .yamlfile import read_yaml
+
+    p = Path(folder) / f"{name}.yaml"
+    if p.is_file():
+        if key is None:
+            return p
+        try:
+            doc = read_yaml(p)
+        except Exception:
+            return p
+        if isinstance(doc, dict) and key in doc:
+            return p
     names = shipped_names(folder, key)
-    if name in names:
-        return Path(folder) / f"{name}.yaml"
     raise UnknownNameError(f"{name}: no such file, and no shipped {what} of that name; shipped: "
                            f"{', '.join(names) or 'none'} (in {folder})")

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from formats.cli import ArgumentParser
 from formats.errors import run_command
 
 from . import __version__
@@ -22,7 +23,7 @@ def build_parser() -> argparse.ArgumentParser:
     from .experiments import cli as eval_cli
     from .map import cli as map_cli
 
-    p = argparse.ArgumentParser(prog="reloc", description="VideoReloc: relocalization against a map of class-labelled boxes.")
+    p = ArgumentParser(prog="reloc", description="VideoReloc: relocalization against a map of class-labelled boxes.")
     p.add_argument("--version", action="version", version=f"reloc {__version__}")
     sub = p.add_subparsers(dest="group")
     map_cli.register_cli(sub)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from formats.cli import ArgumentParser
 from formats.errors import run_command
 
 
@@ -22,7 +23,7 @@ def build_parser() -> argparse.ArgumentParser:
     from .render import cli as tour_cli
     from .scene import cli as scene_cli
 
-    p = argparse.ArgumentParser(prog="synth", description="Build, check and render controlled-change indoor scenes.")
+    p = ArgumentParser(prog="synth", description="Build, check and render controlled-change indoor scenes.")
     sub = p.add_subparsers(dest="group", required=True)
     scene_cli.register_cli(sub)  # synth scene list|show|check|stats|preview|export-boxes|generate|build|rearrange|...
     tour_cli.register_cli(sub)  # synth tour render

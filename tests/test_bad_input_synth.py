@@ -368,3 +368,18 @@ def test_render_spec_refuses_a_clearance_breach_before_rendering(variant, short_
     assert not (tmp_path / "out").exists()
     assert synth_main(["render", str(spec), "--quiet", "--allow-clearance-breach"]) == 0
     assert len(Tour(tmp_path / "out" / "apt_x__geometry__query16")) == 16
+
+
+@pytest.mark.parametrize("state", ["{not json", "[1, 2]", b"\xff\xfe"])
+def test_an_unreadable_job_state_is_one_line_and_kept(tmp_path, capsys, state):
+    """A job_state.json that is not a JSON object: --resume says which file and what to do, exit 2,
+    and leaves the file as it was."""
+    spec = _spec(tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    f = out / "job_state.json"
+    f.write_bytes(state if isinstance(state, bytes) else state.encode())
+    before = f.read_bytes()
+    assert synth_main(["render", str(spec), "--out", str(out), "--resume", "--quiet"]) == 2
+    line = one_line_error(capsys, str(f), "unreadable job state", "delete it to start the job afresh")
+    assert "\n" not in line and f.read_bytes() == before

@@ -135,3 +135,46 @@ def test_scene_build_is_the_main_job(tmp_path, capsys):
         assert (out / "layouts" / f"apt_{n}.yaml").read_bytes() == (REPO / "synth" / "data" / "layouts" / f"apt_{n}.yaml").read_bytes()
         assert (out / "previews" / f"apt_{n}.png").stat().st_size > 10_000
         assert json.loads((out / "boxes" / f"apt_{n}.json").read_text())["layout"] == f"apt_{n}"
+
+
+def test_a_closed_stdout_pipe_ends_a_command_quietly():
+    """``synth scene list | head -0``: the reader is gone before anything is written; the command ends
+    with 141 (SIGPIPE's status) and no traceback. A broken pipe that is not stdout stays an error."""
+    import os
+    import subprocess
+    import sys
+
+    from formats.errors import run_command
+
+    r, w = os.pipe()
+    os.close(r)  # the reading end closed before the command writes
+    try:
+        p = subprocess.run([sys.executable, "-m", "synth.cli", "scene", "list"], stdout=w, stderr=subprocess.PIPE,
+                           text=True, timeout=120)
+    finally:
+        os.close(w)
+    assert p.returncode == 141 and p.stderr == "", p.stderr
+
+    def elsewhere(_args):
+        raise BrokenPipeError(32, "Broken pipe")  # e.g. a child's stdin
+
+    with pytest.raises(BrokenPipeError):
+        run_command("synth", elsewhere, None)
+
+
+@pytest.mark.parametrize("argv, part", [
+    (["synth", "render", "smoke", "--workers", "0"], "synth render: error: argument --workers: expected a positive integer, got '0'"),
+    (["synth", "tour", "render", "apt_0", "query", "--out", "x", "--device", "tpu"], "argument --device: invalid choice: 'tpu'"),
+    (["synth", "rendr"], "synth: error: argument group: invalid choice: 'rendr'"),
+    (["reloc", "experiment", "demo_experiment", "--workers", "-2"], "reloc experiment: error: argument --workers"),
+    (["reloc", "run", "--tour", "T"], "reloc run: error: the following arguments are required"),
+])
+def test_a_bad_option_is_one_line_exit_2(argv, part, capsys, tmp_path, monkeypatch):
+    from reloc.cli import main as reloc_main
+
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as e:
+        (synth_main if argv[0] == "synth" else reloc_main)(argv[1:])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and len(err.strip().splitlines()) == 1 and part in err and "--help)" in err, err
+    assert list(tmp_path.iterdir()) == []

@@ -732,3 +732,11 @@ def test_lateral_noise_is_in_the_sensors_pixels(width):
     s = 0.8 * intr.fx / 580.0
     expected = 2 * (1 - norm.cdf(0.5 / s))
     assert np.mean(du != 0) == pytest.approx(expected, rel=0.1)
+
+
+@pytest.mark.parametrize("key", ["max_range_m", "bright_relative"])
+def test_no_limit_is_inf_where_a_key_takes_it(tmp_path, key):
+    """``max_range_m`` and ``bright_relative`` take ``.inf`` (no limit); other keys refuse it (above)."""
+    p = tmp_path / "cam.yaml"
+    p.write_text(f"name: cam\ndepth:\n  {key}: .inf\n")
+    assert getattr(load_sensor(p).depth, key) == math.inf

@@ -14,7 +14,7 @@ from formats.cli import add_quiet, add_workers
 from .calibration import estimate, measure_calibration
 from .estimate import fmt_duration
 from .plan import describe, expand
-from .runner import _job_folder, run_job
+from .runner import job_folder, run_job
 from .spec import JobSpec, load_spec
 
 
@@ -74,7 +74,7 @@ def _dry_run(args, spec: JobSpec, clusters: list) -> int:
                             "exists for --gpus-per-node (measure one on a GPU node with --save-calibration)")
     if args.save_calibration:
         check_output_file(args.save_calibration)
-    out, store = _job_folder(spec, args.out, args.backend)
+    out, store = job_folder(spec, args.out, args.backend)
     with tempfile.TemporaryDirectory(prefix="synth_dry_run_") as tmp:  # a dry run leaves nothing behind
         if spec.replicacad is not None:
             from ..replicacad.job import prepare as prepare_replicacad

@@ -196,7 +196,9 @@ def load_calibration(path) -> dict:
     try:
         doc = read_json(p, expect_object=False)  # validate_calibration says what a calibration holds
     except SceneFormatError as e:
-        raise UserError(f"{p}: not a JSON calibration file ({': '.join(x for x in (e.field, e.message) if x)})") from None
+        if e.field is None:  # it could not be read at all
+            raise UserError(f"--calibration {p}: {e.message}") from None
+        raise UserError(f"{p}: not a JSON calibration file ({e.field}: {e.message})") from None
     return validate_calibration(doc, str(p))
 
 

@@ -29,7 +29,6 @@ from ..render.render_tour import TourSpec, prepare
 from .spec import JobSpec
 
 
-
 @dataclass
 class Chunk:
     id: str  # e.g. "geometry/apt_0__query/0003", "rgb/apt_0__day__query/0003"
@@ -71,7 +70,7 @@ class Plan:
         return sum(len(c.frames) for c in self.chunks)
 
 
-def _out_error(spec: JobSpec, from_cli: bool, e: UserError):
+def out_error(spec: JobSpec, from_cli: bool, e: UserError):
     """An unusable output folder, named as the spec's ``out`` or as the ``--out`` that overrides it."""
     if from_cli:
         raise UserError(f"--out: {e}") from None
@@ -136,7 +135,7 @@ def expand(spec: JobSpec, out: Path | None = None, check_clearance: bool = False
     try:
         check_output_folder(out)
     except UserError as e:
-        _out_error(spec, from_cli, e)
+        out_error(spec, from_cli, e)
     validate_names(spec, check_clearance)
     plan = Plan(spec, out, {})
     seen_geo: dict[str, list[Chunk]] = {}
@@ -183,7 +182,6 @@ def expand(spec: JobSpec, out: Path | None = None, check_clearance: bool = False
                         plan.chunks.append(Chunk(f"copy/{name}/{k:04d}", "copy", name, copy, chunk_job(p, "copy", copy),
                                                  str(p.out / "frames"), needs=need))
     return plan
-
 
 
 def describe(plan: Plan) -> str:

@@ -1,5 +1,5 @@
 """Running a render job: ``run_job`` renders everything a spec asks for that is not on disk yet,
-locally (``synth.jobs.queue``) or on a Ray cluster (``synth.jobs.ray_backend``), into a folder or
+locally (``synth.jobs.chunk_queue``) or on a Ray cluster (``synth.jobs.ray_backend``), into a folder or
 onto a storage URI (``synth.jobs.storage``), and writes each tour's ``meta.json`` and the job's
 ``job_summary.json``. Killed, it loses nothing: ``--resume`` finishes what is missing
 (``synth.jobs.state``)."""
@@ -16,7 +16,7 @@ from formats.errors import UserError, check_output_folder
 
 from ..render.render_tour import make_output_folder, tour_meta, write_static_files
 from ..render.settings import quality
-from .plan import Chunk, Plan, _out_error, expand
+from .plan import Chunk, Plan, expand, out_error
 from .chunk_queue import ProgressBar, run_local
 from .spec import JobSpec, spec_difference, spec_document
 from .state import DONE, FAILED, STATE_FILE, JobState, load_stored_state
@@ -30,7 +30,6 @@ def run_ray(plan: Plan, state: JobState, todo: list[Chunk], bar: ProgressBar, wo
     from . import ray_backend
 
     return ray_backend.run(plan, state, todo, bar, work)
-
 
 
 def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, backend: str = "local",
@@ -55,7 +54,7 @@ def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, back
     if backend not in ("local", "ray"):
         raise UserError(f"unknown backend '{backend}'; use local or ray")
     from_cli = out is not None
-    out, store = _job_folder(spec, out, backend)
+    out, store = job_folder(spec, out, backend)
     if spec.replicacad is not None:
         from ..replicacad.job import prepare as prepare_replicacad
 
@@ -63,7 +62,7 @@ def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, back
         try:
             check_output_folder(target)
         except UserError as e:
-            _out_error(spec, from_cli, e)
+            out_error(spec, from_cli, e)
         spec = prepare_replicacad(spec, target, replicacad_root,
                                   progress=(lambda m: print(m, file=sys.stderr)) if progress else (lambda m: None))
     staging = None
@@ -104,7 +103,7 @@ def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, back
             shutil.rmtree(staging, ignore_errors=True)
 
 
-def _job_folder(spec: JobSpec, out, backend: str):
+def job_folder(spec: JobSpec, out, backend: str):
     """(local folder or None, ``synth.jobs.storage.Storage`` or None) of ``--out`` (else the spec's ``out``).
     An unknown scheme, or a non-local one with the local backend, is a one-line UserError."""
     from . import storage
@@ -128,15 +127,13 @@ def _job_folder(spec: JobSpec, out, backend: str):
     return None, store
 
 
-
-
 def _run_plan(plan: Plan, old: dict | None, backend: str, workers: int, progress: bool, t0: float,
               from_cli: bool) -> dict:
     spec = plan.spec
     try:
         make_output_folder(plan.out)
     except UserError as e:
-        _out_error(spec, from_cli, e)
+        out_error(spec, from_cli, e)
     state_path = plan.out / STATE_FILE
     store = plan.store
     state = JobState(state_path, plan.chunks, spec_document(spec), store)

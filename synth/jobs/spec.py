@@ -151,14 +151,12 @@ def load_spec(path) -> JobSpec:
     return parse_spec(read_yaml(p), str(p))
 
 
-
 def spec_document(spec: JobSpec) -> dict:
     d = asdict(spec)
     d.pop("source", None)
     if d.get("replicacad") is None:  # a spec without it reads as before: jobs started earlier still resume
         d.pop("replicacad", None)
     return d
-
 
 
 def spec_difference(old, new, where: str = "") -> str:

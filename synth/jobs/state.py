@@ -12,8 +12,7 @@ import json
 from pathlib import Path
 
 from formats.atomic import write_text_atomic
-from formats.errors import SceneFormatError, UserError
-from formats.yamlfile import read_json
+from formats.errors import UserError, one_line
 
 from .plan import Chunk
 
@@ -34,12 +33,14 @@ class JobState:
 
     @staticmethod
     def load(path: Path) -> dict | None:
+        """The state document in the job folder ``path`` points into, or None before the first run."""
         if not path.exists():
             return None
         try:
-            return read_json(path)
-        except SceneFormatError as e:
-            raise UserError(f"{e} (an unreadable job state); delete it to start the job afresh") from None
+            text = path.read_text()
+        except (OSError, UnicodeDecodeError) as e:
+            raise UserError(f"{path}: unreadable job state ({one_line(e)}); delete it to start the job afresh") from None
+        return parse_state(text, str(path))
 
     def merge(self, old: dict) -> None:
         for cid, st in (old or {}).get("chunks", {}).items():
@@ -79,14 +80,27 @@ class JobState:
         return out
 
 
+def parse_state(text: str, where: str) -> dict:
+    """A job state document from its text (a folder's or a storage's ``job_state.json``): a JSON
+    object, else one line naming ``where`` and what to do."""
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as e:
+        problem = f"not valid JSON: {e.msg} at line {e.lineno}"
+    else:
+        if isinstance(doc, dict):
+            return doc
+        problem = f"expected a JSON object, got {type(doc).__name__}"
+    raise UserError(f"{where}: unreadable job state ({problem}); delete it to start the job afresh")
+
 
 def load_stored_state(store) -> dict | None:
+    """The state document of a job folder on a storage (``synth.jobs.storage``), or None before the first run."""
     try:
         text = store.read_text(STATE_FILE)
     except FileNotFoundError:
         return None
-    try:
-        doc = json.loads(text)
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise UserError(f"{store.url(STATE_FILE)}: unreadable job state ({e}); delete it to start the job afresh") from None
-    return doc if isinstance(doc, dict) else {}
+    except UnicodeDecodeError as e:
+        raise UserError(f"{store.url(STATE_FILE)}: unreadable job state ({one_line(e)}); delete it to start the job "
+                        "afresh") from None
+    return parse_state(text, store.url(STATE_FILE))
