@@ -130,13 +130,13 @@ def test_reloc_experiment_unwritable_out_fails_fast(tmp_path, blocker, capsys, m
     import yaml
 
     import reloc.experiments.runner
-    from test_reloc_experiment import _spec
+    from jobspecs import write_experiment_spec
 
     def no_work(*a, **k):
         raise AssertionError("the design was read before --out was checked")
 
     monkeypatch.setattr(reloc.experiments.runner, "design_tours", no_work)
-    spec = _spec(tmp_path)
+    spec = write_experiment_spec(tmp_path)
     out = blocker / "exp"
     assert reloc_main(["experiment", str(spec), "--out", str(out), "--quiet"]) == 2
     one_line_error(capsys.readouterr().err, out)
