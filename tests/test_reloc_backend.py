@@ -363,3 +363,39 @@ def test_cue_derived_hypothesis_overrules_a_consistently_wrong_run():
         assert st.source == "run-level", k
         dt, dr = G.pose_distance(st.S, truth[k])
         assert dt < 0.1 and math.degrees(dr) < 2.0, (k, dt, math.degrees(dr))
+
+
+def test_a_retained_wrong_clip_does_not_flip_the_rest_of_the_run():
+    """Clip 1 sees an ambiguous copy: its nodes fit its wrong (180 deg) placement better than the
+    truth, so it keeps that placement as an independently supported alternative. Clips 2-4 were
+    placed wrong by the front-end (each differently) but their nodes fit the run hypothesis G* of
+    clip 0: they must be revised from G*, not from the retained clip 1 next to them (issue 27:
+    apt_1__evening__query stayed 180 deg wrong through such a cascade)."""
+    m = room_map(n_objects=40, seed=21)
+    rng = np.random.default_rng(3)
+    G_true = yaw_T(0.6, [1.0, -0.5, 0.0])
+    be = Backend(m, Config())
+    truth, flip = [], yaw_T(math.pi, [0.4, 0.2, 0.0])
+    for c in range(5):
+        C = yaw_T(0.4 * c, [0.8 * c, 0.3 * c, 0.0])
+        S_true = G_true @ C
+        truth.append(S_true)
+        ids = list(m.object_nodes[(6 * c) % 30: (6 * c) % 30 + 10])
+        seen_at = S_true @ flip if c == 1 else S_true  # clip 1's nodes are where its wrong placement puts them
+        nodes = nodes_from_map(m, seen_at, rng, ids=ids, samples=24)
+        clip = Clip(id=c, start=100 * c, frames=[100 * c, 100 * c + 99])
+        clip.V = {100 * c: CAM, 100 * c + 99: yaw_T(0.4, [0.8, 0.3, 0.0]) @ CAM}
+        if c == 0:
+            S_front = S_true
+        elif c == 1:
+            S_front = S_true @ flip
+        else:  # wrong, and no two of them alike (separate sub-runs)
+            S_front = S_true @ yaw_T(math.pi / 2 + 0.5 * c, [1.5 + 0.7 * c, -0.5, 0.0])
+        res = ClipResult(clip=clip, nodes=nodes, placement=Placement(S=S_front, source="graph", kappa=0.5), chain=0,
+                         chain_poses={clip.start: C, clip.frames[-1]: C @ clip.V[clip.frames[-1]]})
+        be.add(res)
+    assert be.clips[1].source == "graph"  # retained: its own support beats propagation onto it
+    for k in (0, 2, 3, 4):
+        dt, dr = G.pose_distance(be.clips[k].abs_S, truth[k])
+        assert dt < 0.15 and math.degrees(dr) < 3.0, (k, be.clips[k].source, dt, math.degrees(dr))
+        assert be.clips[k].source == ("graph" if k == 0 else "run-level")

@@ -12,8 +12,9 @@ For each closed clip, in order:
    of the run by the per-instance test of Eq. 2; the best G* seeds the trusted set; other
    placement-consistent sub-runs keep their placements only when their own support exceeds the
    support of propagation from the nearest trusted sub-run, else they (and unplaced clips) get the
-   propagated placement, box-refined under a 0.5 m / 5 deg prior. Boundary edges inconsistent
-   with the selected placements are removed.
+   propagated placement, box-refined under a 0.5 m / 5 deg prior. A retained sub-run is not trusted
+   itself: only G*'s source and the sub-runs that agree with propagation from it are propagation
+   sources. Boundary edges inconsistent with the selected placements are removed.
 3. *Clip-rigid pose graph*: one rigid node S_c per clip, relative edges from boundary odometry,
    absolute edges from the placements (weight 20; 1 when inconsistent with both neighbours);
    Gauss-Seidel relaxation with chordal rotation averaging and Geman-McClure weights; then the
@@ -195,7 +196,10 @@ class Backend:
             own = sum(self._passes(placed[k], placed[k].front) for k in subs[s])
             prop = self._support(members, G_prop)
             if own > prop:
-                trusted.add(s)
+                # retained: an independently supported alternative keeps its placement, but it does
+                # not join the trusted set, so it is never the propagation source of its neighbours
+                # (Sec. III-F: only G*'s source sub-run, and sub-runs that agree with propagation
+                # from it, are trusted; one retained wrong clip no longer flips the rest of the run)
                 continue
             for k in subs[s]:
                 st = placed[k]
