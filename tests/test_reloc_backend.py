@@ -399,3 +399,31 @@ def test_a_retained_wrong_clip_does_not_flip_the_rest_of_the_run():
         dt, dr = G.pose_distance(be.clips[k].abs_S, truth[k])
         assert dt < 0.15 and math.degrees(dr) < 3.0, (k, be.clips[k].source, dt, math.degrees(dr))
         assert be.clips[k].source == ("graph" if k == 0 else "run-level")
+
+
+def test_later_clips_overturn_a_first_clip_placed_180_degrees_wrong():
+    """The run's first clip is placed 180 deg wrong by the front-end (its nodes fit the truth, as the
+    rendered room does); the clips after it are placed right. As evidence accumulates, the run-level
+    decision's G* comes from the later clips, and the first clip is revised onto it."""
+    m = room_map(n_objects=40, seed=21)
+    rng = np.random.default_rng(5)
+    G_true = yaw_T(0.6, [1.0, -0.5, 0.0])
+    be = Backend(m, Config())
+    truth = []
+    for c in range(5):
+        C = yaw_T(0.4 * c, [0.8 * c, 0.3 * c, 0.0])
+        S_true = G_true @ C
+        truth.append(S_true)
+        nodes = nodes_from_map(m, S_true, rng, ids=list(m.object_nodes[(6 * c) % 30: (6 * c) % 30 + 10]), samples=24)
+        clip = Clip(id=c, start=100 * c, frames=[100 * c, 100 * c + 99])
+        clip.V = {100 * c: CAM, 100 * c + 99: yaw_T(0.4, [0.8, 0.3, 0.0]) @ CAM}
+        S_front = S_true @ yaw_T(math.pi, [0.4, 0.2, 0.0]) if c == 0 else S_true
+        be.add(ClipResult(clip=clip, nodes=nodes, placement=Placement(S=S_front, source="graph", kappa=0.5), chain=0,
+                          chain_poses={clip.start: C, clip.frames[-1]: C @ clip.V[clip.frames[-1]]}))
+    first = be.clips[0]
+    assert first.front_source == "graph" and first.source == "run-level"
+    dt, dr = G.pose_distance(first.abs_S, truth[0])
+    assert dt < 0.15 and math.degrees(dr) < 3.0
+    for k in range(1, 5):
+        dt, dr = G.pose_distance(be.clips[k].abs_S, truth[k])
+        assert dt < 0.15 and math.degrees(dr) < 3.0
