@@ -289,6 +289,15 @@ def _factor(results: dict, row: dict, key: str) -> float | None:
     return float(v)
 
 
+def _factor_interval(results: dict, row: dict, key: str) -> list | None:
+    """The 95 % interval of a Table II figure (``reloc.experiments.intervals``), None without one."""
+    try:
+        iv = results["methods"][row["method"]]["modes"][row["mode"]]["intervals"]["factors"].get(key)
+    except (KeyError, TypeError, AttributeError):
+        return None
+    return iv if isinstance(iv, list) and len(iv) == 2 and all(isinstance(x, (int, float)) for x in iv) else None
+
+
 def row_label(row: dict) -> str:
     label = str(row.get("label") or row.get("key") or f"{row.get('method')}.{row.get('mode')}")
     return label + (" \u2020" if row.get("dagger") and "\u2020" not in label else "")
@@ -301,7 +310,8 @@ def _is_bound(row: dict) -> bool:
 
 def recall_bars(results: dict, out_png, dpi: float = DPI) -> Path:
     """Grouped bars of recall at 1 m/10 deg per row: lightings (left), unchanged vs rearranged (middle)
-    and, in an experiment with more than one sensor, per sensor (right)."""
+    and, in an experiment with more than one sensor, per sensor (right); each bar with its 95 %
+    interval as an error bar when the results carry one."""
     import matplotlib
 
     rows = list(results.get("rows") or [])
@@ -349,9 +359,17 @@ def recall_bars(results: dict, out_png, dpi: float = DPI) -> Path:
                 continue
             xs, ys = zip(*pts)
             ax.bar(xs, ys, width=bar_w * 0.92, linewidth=0.5, **styles[j])
-            for xb, yb in pts:
-                ax.text(xb, yb + 0.01, f"{100 * yb:.0f}%", ha="center", va="bottom", fontsize=6 if small else 7,
-                        rotation=90 if small else 0)
+            # the 95 % interval as an error bar; the value's label sits above the bar's top whisker
+            ivs = [_factor_interval(results, row, g) for g in groups if _factor(results, row, g) is not None]
+            tops = []
+            for xb, yb, iv in zip(xs, ys, ivs):
+                if iv is not None:
+                    ax.errorbar([xb], [yb], yerr=[[max(0.0, yb - iv[0])], [max(0.0, iv[1] - yb)]], fmt="none",
+                                ecolor="0.15", elinewidth=0.8, capsize=2)
+                tops.append(max(yb, iv[1]) if iv is not None else yb)
+            for xb, yb, top in zip(xs, ys, tops):
+                ax.text(xb, min(top, 1.0) + 0.01, f"{100 * yb:.0f}%", ha="center", va="bottom",
+                        fontsize=6 if small else 7, rotation=90 if small else 0)
         ax.set_xticks(x)
         ax.set_xticklabels(names, fontsize=9)
         ax.set_xlim(-0.5, len(groups) - 0.5)

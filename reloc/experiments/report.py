@@ -294,6 +294,23 @@ def build_markdown(results_dir, results: dict) -> str:
             rows.append([m, info.get("label", ""), info.get("primary", ""), ", ".join(info.get("modes") or {}), size])
         md += [_md_table(["method", "label", "primary mode", "modes", "map size"], rows), ""]
 
+    iv = results.get("intervals")
+    if isinstance(iv, dict) and iv.get("segments"):
+        ref = results.get("reference_sensor", "ideal")
+        n_ref = sum(1 for t in tours.values() if isinstance(t, dict) and t.get("sensor", "ideal") == ref)
+        st = iv.get("settings") or {}
+        md += ["## Uncertainty", "", str(iv.get("note", "")), ""]
+        md += [_md_table(["figure", "independent units it rests on"], [
+            ["pooled recall and coverage (Table I)", " + ".join(f"{n} segments of path {p}" for p, n in
+                                                                iv["segments"].items()) + f", each seen in {n_ref} tours"],
+            ["a lighting or layout column (Table II)", "the same segments, seen in that column's tours"],
+            ["ΔL, ΔR, kept, comparisons in checks", "the same segments, paired"],
+            ["one tour", f"its segments of {st.get('segment_frames', '?')} frames"]]), ""]
+        reps = results.get("replicates")
+        if isinstance(reps, dict) and reps.get("count", 1) > 1:
+            md += [f"Replicates: {reps['count']} runs of the experiment with reseeded random parts; Table I gives the "
+                   "range of each row's recall across them.", ""]
+
     md += ["## Tables", ""]
     tables = _table_files(results_dir)
     if not tables:

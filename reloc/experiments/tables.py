@@ -39,7 +39,9 @@ from formats.atomic import write_json_atomic, write_text_atomic
 from formats.camera import read_tum
 from formats.yamlfile import read_json
 
-from .evaluation import END_REASONS, end_reason_kind, odometry_drift, summarize
+from .evaluation import END_REASONS, THRESHOLDS, end_reason_kind, odometry_drift, pose_errors, summarize
+from .intervals import (Bootstrap, IntervalSettings, factor_figures, figure_values, n_segments, pooled_figures,
+                        segment_counts, tour_figures, units_note)
 
 FORMAT = "videoreloc-experiment/1"
 LIGHTINGS = ("day", "evening", "night")
@@ -179,6 +181,7 @@ def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: li
                   "appearance": "appearance"}
     sensors = list(getattr(spec, "sensor_names", ["ideal"]))
     reference = getattr(spec, "reference_sensor", "ideal")
+    settings = getattr(spec, "intervals", None) or IntervalSettings()
     res: dict = {
         "format": FORMAT, "name": spec.name, "description": spec.description, "spec": str(spec.source),
         "map": str(files["boxes"]), "detector": spec.detector_label, "unchanged": spec.unchanged,
@@ -202,7 +205,7 @@ def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: li
             entry = {"label": LABELS.get(m, m).format(feature=feature), "map_bytes": map_bytes.get(method_map.get(m, "boxes")),
                      "primary": PRIMARY.get(m, "closure"), "modes": {}}
         for mode in modes:
-            per, pooled_est, pooled_gt = {}, {}, {}
+            per, pooled_est, pooled_gt, units = {}, {}, {}, {}
             by_sensor: dict = {s: ({}, {}) for s in sensors}
             for k, (name, t) in enumerate(queries.items()):
                 tour, gt = gts[name]
@@ -211,19 +214,23 @@ def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: li
                 g = {i: gt[i] for i in idx}
                 rel = Path("runs") / m / name / f"{mode}.txt"
                 est = _estimates(out / rel, t["fps"]) if valid is None or (m, name) in valid else {}
-                s = summarize({i: T for i, T in est.items() if i in g}, g)
+                e = {i: T for i, T in est.items() if i in g}
+                s = summarize(e, g)
                 s["file"] = str(rel)
                 per[name] = _clean(s)
+                units[name] = _segment_counts(e, g, settings, t)
                 base = k * 10_000_000
                 s_est, s_gt = by_sensor.setdefault(t.get("sensor", "ideal"), ({}, {}))
                 s_est.update({base + i: T for i, T in est.items() if i in g})
                 s_gt.update({base + i: T for i, T in g.items()})
             pooled_est, pooled_gt = by_sensor[reference]
             entry["modes"][mode] = {"tours": per, "all": _clean(summarize(pooled_est, pooled_gt)),
-                                    "factors": factors(per, queries, spec.unchanged, sensors, reference)}
+                                    "factors": factors(per, queries, spec.unchanged, sensors, reference),
+                                    "units": units}
             if len(sensors) > 1:
                 entry["modes"][mode]["sensors"] = {s: _clean(summarize(*by_sensor[s])) for s in sensors}
         res["methods"][m] = entry
+    add_intervals(res, settings)
     res["maps"] = {k: q for k in ("boxes", "boxes_oracle") if k in files
                    and (q := map_quality(map_report_path(files[k]))) is not None}
     if len(sensors) > 1:
@@ -243,6 +250,84 @@ def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: li
     if variants:
         res["ablation"] = _ablation(res, variants)
     return res
+
+
+def _segment_counts(est: dict, gt: dict, settings: IntervalSettings, tour: dict) -> list[list[int]]:
+    """A run's per-frame outcomes on one tour, counted per segment of its path (``intervals``)."""
+    frames = sorted(gt)
+    done, pos, rot = pose_errors(est, gt)
+    err = {int(i): (p, r) for i, p, r in zip(done, pos, rot)}
+    ok = {k: [i in err and err[i][0] <= tp and err[i][1] <= tr for i in frames] for k, (tp, tr) in THRESHOLDS.items()}
+    n = n_segments(max(int(tour["frames"]), max(frames, default=0) + 1), settings.segment_frames)
+    return segment_counts(frames, ok["recall_1m_10deg"], ok["recall_25cm_5deg"], [i in err for i in frames],
+                          settings.segment_frames, n)
+
+
+def bootstrap_of(res: dict) -> Bootstrap:
+    """The resamples of an experiment's results (``results.json``): every run's segment counts, the
+    tours' paths and the interval settings it was computed with."""
+    units = {f"{m}.{mode}": d["units"] for m, e in res["methods"].items() for mode, d in e["modes"].items()
+             if d.get("units") is not None}
+    st = IntervalSettings(**(res.get("intervals") or {}).get("settings", {}))
+    return Bootstrap(units, {n: t.get("path", "query") for n, t in res["tours"].items()}, st)
+
+
+def add_intervals(res: dict, settings: IntervalSettings) -> None:
+    """Every figure's interval into ``res``: ``modes.MODE.intervals`` = {all, factors, tours, sensors}
+    of ``[lo, hi]`` (None where it has none), and ``res["intervals"]``: the settings and units."""
+    res["intervals"] = {"settings": settings.as_dict(), "method": "block bootstrap over segments of the query path, "
+                        "tours resampled together (paired)"}
+    boot = bootstrap_of(res)
+    tours = res["tours"]
+    sensors = res.get("sensors") or ["ideal"]
+    reference = res.get("reference_sensor", "ideal")
+    ref_tours = [n for n, t in tours.items() if t.get("sensor", "ideal") == reference]
+    res["intervals"]["segments"] = {p: n for p, n in sorted(boot.n_segments.items())}
+    res["intervals"]["note"] = units_note(boot.n_segments, settings, len(ref_tours))
+    fac = factor_figures(tours, res["unchanged"], reference, sensors, LIGHTINGS)
+    for m, entry in res["methods"].items():
+        for mode, d in entry["modes"].items():
+            key = f"{m}.{mode}"
+            if key not in boot.units:
+                continue
+
+            def ci(figs: dict) -> dict:
+                return {k: boot.interval(figure_values(boot, key, f)[1]) for k, f in figs.items()}
+
+            iv = {"all": ci(pooled_figures(ref_tours)), "factors": ci(fac),
+                  "tours": {n: ci(tour_figures(n)) for n in d["units"]}}
+            if len(sensors) > 1:
+                iv["sensors"] = {s: ci(pooled_figures([n for n, t in tours.items() if t.get("sensor", "ideal") == s]))
+                                 for s in sensors}
+            d["intervals"] = iv
+
+
+def replicate_summary(reps: list[dict], specs: list) -> dict:
+    """What ``replicates: N`` adds to ``results.json``: per replicate its seed and detector
+    perturbation, and per row key (``METHOD.MODE``) every pooled figure, factor and per-tour recall
+    across the replicates (``values``, replicate 0 first) with their ``spread`` (max - min) and
+    standard deviation (``sd``, N - 1 in the denominator)."""
+    def stats(values: list) -> dict:
+        v = [x for x in values if x is not None]
+        return {"values": values, "spread": (max(v) - min(v)) if len(v) == len(values) and v else None,
+                "sd": float(np.std(v, ddof=1)) if len(v) == len(values) and len(v) > 1 else None}
+
+    figs: dict = {}
+    base = reps[0]
+    for m, entry in base["methods"].items():
+        for mode, d in entry["modes"].items():
+            key = f"{m}.{mode}"
+            per = [r["methods"].get(m, {}).get("modes", {}).get(mode) for r in reps]
+            if any(x is None for x in per):
+                continue
+            f = {k: stats([x["all"].get(k) for x in per]) for k in ("recall_1m_10deg", "recall_25cm_5deg", "coverage")}
+            f.update({k: stats([x["factors"].get(k) for x in per]) for k in FACTOR_KEYS})
+            f["tours"] = {t: stats([x["tours"].get(t, {}).get("recall_1m_10deg") for x in per]) for t in d["tours"]}
+            figs[key] = f
+    return {"count": len(reps),
+            "replicates": [{"seed": sp.seed, "detector": sp.detector.get("perturbation") or sp.detector.get("corruption") or {}}
+                           for sp in specs],
+            "figures": figs}
 
 
 def sensor_figures(out: Path, queries: dict, sensors: list, gts: dict, map_files: dict, spec, valid) -> dict:
@@ -376,6 +461,38 @@ def pct(v, signed: bool = False) -> str:
     return f"{100 * v:+.1f}" if signed else f"{100 * v:.1f}"
 
 
+def pct_ci(v, iv, signed: bool = False) -> str:
+    """``77.8 [70.1, 84.9]``: a fraction in percent with its interval (``intervals``), when it has one."""
+    if iv is None or v is None or (isinstance(v, float) and math.isnan(v)):
+        return pct(v, signed)
+    return f"{pct(v, signed)} [{pct(iv[0], signed)}, {pct(iv[1], signed)}]"
+
+
+def ratio_ci(v, iv) -> str:
+    """kept: ``100 % [84, 118]``."""
+    if v is None:
+        return "-"
+    text = f"{100 * v:.0f} %"
+    return text if iv is None else f"{text} [{100 * iv[0]:.0f}, {100 * iv[1]:.0f}]"
+
+
+def _replicate_cell(reps: dict, key: str) -> str:
+    f = (reps.get("figures") or {}).get(key, {}).get("recall_1m_10deg")
+    if not f or f["spread"] is None:
+        return "-"
+    v = f["values"]
+    return f"{pct(min(v))}-{pct(max(v))} ({100 * f['spread']:.1f})"
+
+
+def _intervals(res: dict, row: dict) -> dict:
+    return res["methods"][row["method"]]["modes"][row["mode"]].get("intervals") or {}
+
+
+def _interval_note(res: dict) -> list[str]:
+    note = (res.get("intervals") or {}).get("note")
+    return ["", note] if note else []
+
+
 def size_text(n) -> str:
     if n is None:
         return "-"
@@ -403,18 +520,26 @@ def main_table(res: dict) -> tuple[str, list[dict]]:
     n_tours = len(tours)
     frames = sum(t["frames"] for t in tours.values())
     det = res.get("detector")
+    reps = res.get("replicates") or {}
+    n_rep = reps.get("count", 1)
+    rep_head = f" 1 m/10°, {n_rep} replicates |" if n_rep > 1 else ""
     lines = [f"**{table_title('main')}** ({n_tours} query tours, {frames} frames"
              f"{f'; detections: {det}' if det else ''}{_sensor_note(res)})", "",
-             "| Method | Map size | Pos. / rot. | 1 m/10° | 0.25 m/5° | Coverage | Frames evaluated |",
-             "|---|---|---|---|---|---|---|"]
+             f"| Method | Map size | Pos. / rot. | 1 m/10° | 0.25 m/5° | Coverage | Frames evaluated |{rep_head}",
+             "|---|---|---|---|---|---|---|" + ("---|" if n_rep > 1 else "")]
     rows = []
     for r in res["rows"]:
         m = res["methods"][r["method"]]
         a = m["modes"][r["mode"]]["all"]
         med = ("-" if a["median_pos_m"] is None else f"{100 * a['median_pos_m']:.0f} cm / {a['median_rot_deg']:.1f}°")
-        lines.append(f"| {_label(r)} | {size_text(m['map_bytes'])} | {med} | {pct(a['recall_1m_10deg'])} | "
-                     f"{pct(a['recall_25cm_5deg'])} | {pct(a['coverage'])} | {a['frames']} |")
-        rows.append({"key": r["key"], "label": _label(r), "map_bytes": m["map_bytes"], **a})
+        iv = _intervals(res, r).get("all") or {}
+        lines.append(f"| {_label(r)} | {size_text(m['map_bytes'])} | {med} | "
+                     f"{pct_ci(a['recall_1m_10deg'], iv.get('recall_1m_10deg'))} | "
+                     f"{pct_ci(a['recall_25cm_5deg'], iv.get('recall_25cm_5deg'))} | "
+                     f"{pct_ci(a['coverage'], iv.get('coverage'))} | {a['frames']} |"
+                     + (f" {_replicate_cell(reps, r['key'])} |" if n_rep > 1 else ""))
+        rows.append({"key": r["key"], "label": _label(r), "map_bytes": m["map_bytes"], **a,
+                     **{f"{k}_interval": v for k, v in iv.items()}})
     lines += ["", "Recall (%) over all evaluated frames, a frame without a pose counts as a failure; median errors "
               "over returned poses. † clip-rigid control: VideoReloc's clip partition and within-clip odometry, "
               "one clip-to-map transform per clip at clip closure, no cross-clip back-end. Per-frame appearance "
@@ -424,6 +549,11 @@ def main_table(res: dict) -> tuple[str, list[dict]]:
     if ext:
         lines[-1] += (" External methods: a command on exported tours is evaluated on the frames its export holds "
                       "(those with RGB), trajectories on every frame; their map size is what map_command wrote.")
+    lines += _interval_note(res)
+    if n_rep > 1:
+        lines += ["", f"Replicates: the experiment run {n_rep} times with its stochastic parts reseeded (random draws, "
+                  "sensor noise; the learned detector's input jittered by one 8-bit level, which is what another "
+                  "processor amounts to); the column gives the lowest and highest recall and their spread (points)."]
     maps = res.get("maps") or {}
     for k, label in (("boxes", f"Box map built with the {res.get('detector') or 'oracle'} detector"),
                      ("boxes_oracle", "Box map built from oracle detections")):
@@ -449,19 +579,24 @@ def factors_table(res: dict) -> tuple[str, list[dict]]:
     rows = []
     for r in res["rows"]:
         f = res["methods"][r["method"]]["modes"][r["mode"]]["factors"]
-        kept = "-" if f["kept"] is None else f"{100 * f['kept']:.0f} %"
-        cells = [_label(r), *(pct(f[x]) for x in lights), pct(f["delta_L"], True), pct(f["unchanged"]),
-                 pct(f["rearranged"]), pct(f["delta_R"], True), kept]
+        iv = _intervals(res, r).get("factors") or {}
+
+        def c(k, signed=False):
+            return pct_ci(f.get(k), iv.get(k), signed)
+
+        cells = [_label(r), *(c(x) for x in lights), c("delta_L", True), c("unchanged"),
+                 c("rearranged"), c("delta_R", True), ratio_ci(f["kept"], iv.get("kept"))]
         if others:
-            cells += [pct(f.get(f"sensor.{ref}"))]
-            cells += [c for s in others for c in (pct(f.get(f"sensor.{s}")), pct(f.get(f"sensor.{s}.delta"), True))]
+            cells += [c(f"sensor.{ref}")]
+            cells += [x for s in others for x in (c(f"sensor.{s}"), c(f"sensor.{s}.delta", True))]
         lines.append(line(cells))
-        rows.append({"key": r["key"], "label": _label(r), **f})
+        rows.append({"key": r["key"], "label": _label(r), **f, **{f"{k}_interval": v for k, v in iv.items()}})
     lines += ["", "Recall (%); lighting columns average the layouts, unchanged/rearranged average the tours. "
               "ΔL = night - day and ΔR = rearranged - unchanged (points); kept = rearranged / unchanged."]
     if others:
         lines[-1] += (f" Sensor columns: recall over every query tour read through that sensor (a mean over tours); "
                       f"Δ = that sensor - {ref} (points). The other columns use the {ref} sensor's tours.")
+    lines += _interval_note(res)
     return "\n".join(lines), rows
 
 
