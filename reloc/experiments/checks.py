@@ -24,11 +24,22 @@ Metric names (values are fractions, as in ``results.json``):
   above; ``sensor.S.KEY`` for VideoReloc's odometry under S: drift_pct, drift_deg_per_m,
   median_drift_pct, clips_per_100m, odometry_failures (clips that ended on a failed odometry gate),
   odometry_failure_fraction (of all clip ends), no_usable_depth;
+* ``METHOD[.MODE].KEY.spread`` (an experiment with ``replicates: N``): the highest minus the lowest
+  value of a pooled figure or factor across the replicates;
 * ``METHOD.map_bytes``;
 * ``map.KEY`` (the box map built with the experiment's detector) and ``map_oracle.KEY`` (built
   from oracle detections), against the mapping layout's ground truth: built, gt, matched, missing,
   extra, class_errors, and ``map.KIND.KEY`` with KIND object, wall, floor, ceiling and KEY matched,
   median_center_err_m, median_size_err_max_m, median_yaw_err_deg.
+
+Intervals (:mod:`reloc.experiments.intervals`): recall, coverage and Table II's figures carry a 95 %
+interval; ``NAME.lo`` and ``NAME.hi`` are its bounds, so that a check can ask for the whole interval
+(``videoreloc.closure.recall_1m_10deg.lo >= 0.60``: the lower bound). A comparison of two such
+figures (``videoreloc.closure.recall_1m_10deg > appearance.causal.recall_1m_10deg``) is decided on
+the interval of their paired difference (the same resampled path segments): ``A > B`` passes when
+the difference's lower bound is above 0, ``A >= B`` when it is not below 0, ``A < B`` and ``A <= B``
+likewise on the upper bound; ``==`` and ``!=`` compare the point values. A plain ``NAME`` against a
+number is its point value.
 
 Prints a table; exit status 0 when every check passes, 1 when any fails (a metric without a value,
 such as evening recall in a design without evening tours, fails), 2 when the check file or the
@@ -48,7 +59,7 @@ from pathlib import Path
 from formats.errors import SceneFormatError, UserError
 from formats.cli import add_json
 
-from .tables import FACTOR_KEYS, METRICS, read_results
+from .tables import FACTOR_KEYS, LIGHTINGS, METRICS, read_results
 
 OPS = {">=": operator.ge, "<=": operator.le, ">": operator.gt, "<": operator.lt, "==": operator.eq, "!=": operator.ne}
 _EXPR = re.compile(r"^\s*([A-Za-z0-9_.@\-]+)\s*(>=|<=|==|!=|>|<)\s*([A-Za-z0-9_.@\-+eE]+)\s*$")
@@ -110,6 +121,14 @@ def metric_table(results: dict) -> dict[str, float | None]:
             for tour, s in d.get("tours", {}).items():
                 for k in METRICS:
                     vals[f"{m}.{mode}.{tour}.{k}"] = s.get(k)
+    for key, figs in ((results.get("replicates") or {}).get("figures") or {}).items():  # replicates: N
+        m, mode = key.split(".", 1)
+        primary = results["methods"].get(m, {}).get("primary") == mode
+        for k, st in figs.items():
+            if k != "tours":
+                vals[f"{key}.{k}.spread"] = st["spread"]
+                if primary:
+                    vals[f"{m}.{k}.spread"] = st["spread"]
     for s, f in (results.get("sensor_figures") or {}).items():
         odo = f.get("odometry") or {}
         for k in ("drift_pct", "drift_deg_per_m", "median_drift_pct"):
@@ -132,30 +151,112 @@ def metric_table(results: dict) -> dict[str, float | None]:
     return vals
 
 
-def _value(token: str, vals: dict, path: Path, field: str) -> float | None:
-    try:
-        return float(token)
-    except ValueError:
-        pass
-    if token not in vals:
-        close = difflib.get_close_matches(token, list(vals), n=2)
-        hint = f"; did you mean {' or '.join(close)}?" if close else ""
-        raise SceneFormatError(path, field, f"unknown metric {token!r}{hint}")
-    v = vals[token]
-    return None if v is None or (isinstance(v, float) and math.isnan(v)) else float(v)
+def figure_table(results: dict) -> dict[str, tuple[str, tuple]]:
+    """Every metric name that carries an interval -> (run key ``METHOD.MODE``, figure), the figure
+    as :mod:`reloc.experiments.intervals` computes it from the run's segment counts."""
+    from .intervals import factor_figures, pooled_figures, tour_figures
+
+    tours = results.get("tours") or {}
+    sensors = results.get("sensors") or ["ideal"]
+    reference = results.get("reference_sensor", "ideal")
+    ref_tours = [n for n, t in tours.items() if t.get("sensor", "ideal") == reference]
+    fac = factor_figures(tours, results.get("unchanged"), reference, sensors, LIGHTINGS)
+    out: dict = {}
+    for m, entry in results.get("methods", {}).items():
+        for mode, d in entry.get("modes", {}).items():
+            if d.get("units") is None:
+                continue
+            key = f"{m}.{mode}"
+            figs = {**pooled_figures(ref_tours), **fac}
+            if len(sensors) > 1:
+                figs.update({f"sensor.{s}.{k}": f for s in sensors for k, f in
+                             pooled_figures([n for n, t in tours.items() if t.get("sensor", "ideal") == s]).items()})
+            for k, f in figs.items():
+                out[f"{key}.{k}"] = (key, f)
+                if mode == entry.get("primary"):
+                    out[f"{m}.{k}"] = (key, f)
+            for tour in d["units"]:
+                for k, f in tour_figures(tour).items():
+                    out[f"{key}.{tour}.{k}"] = (key, f)
+    return out
+
+
+class _Resolver:
+    """Values of a check's tokens: numbers, metrics, ``METRIC.lo``/``.hi`` bounds and, for two figures
+    with intervals, their paired difference."""
+
+    def __init__(self, results: dict, path: Path):
+        self.results, self.path = results, path
+        self.vals = metric_table(results)
+        self.figs = figure_table(results)
+        self._boot = None
+
+    @property
+    def boot(self):
+        if self._boot is None:
+            from .tables import bootstrap_of
+
+            self._boot = bootstrap_of(self.results)
+        return self._boot
+
+    def _name(self, token: str, field: str) -> str:
+        if token not in self.vals:
+            close = difflib.get_close_matches(token, list(self.vals), n=2)
+            hint = f"; did you mean {' or '.join(close)}?" if close else ""
+            raise SceneFormatError(self.path, field, f"unknown metric {token!r}{hint}")
+        return token
+
+    def resamples(self, name: str):
+        key, fig = self.figs[name]
+        from .intervals import figure_values
+
+        return figure_values(self.boot, key, fig)[1]
+
+    def value(self, token: str, field: str) -> tuple[float | None, list | None, str | None]:
+        """(value, interval of the value or None, figure name when it has an interval)."""
+        try:
+            return float(token), None, None
+        except ValueError:
+            pass
+        base, _, bound = token.rpartition(".")
+        if bound in ("lo", "hi") and base and token not in self.vals:
+            name = self._name(base, field)
+            if name not in self.figs:
+                raise SceneFormatError(self.path, field, f"{token!r}: {name} has no interval (recall, coverage and "
+                                       "Table II's figures have one; rerun reloc experiment if these results predate them)")
+            iv = self.boot.interval(self.resamples(name))
+            return (None if iv is None else iv[0 if bound == "lo" else 1]), iv, None
+        name = self._name(token, field)
+        v = self.vals[name]
+        v = None if v is None or (isinstance(v, float) and math.isnan(v)) else float(v)
+        return v, None, (name if name in self.figs else None)
 
 
 def run_checks(check_file, results_dir) -> list[dict]:
     checks = parse_checks(check_file)
     results = read_results(results_dir)
-    vals = metric_table(results)
+    r = _Resolver(results, Path(check_file))
     rows = []
     for i, c in enumerate(checks):
-        a = _value(c.left, vals, Path(check_file), f"checks[{i}]")
-        b = _value(c.right, vals, Path(check_file), f"checks[{i}]")
-        ok = a is not None and b is not None and OPS[c.op](a, b)
-        rows.append({"check": c.name, "expression": c.text, "value": a, "against": b, "passed": bool(ok),
-                     "why": None if ok else ("no value" if a is None or b is None else "false")})
+        field = f"checks[{i}]"
+        a, a_iv, a_fig = r.value(c.left, field)
+        b, b_iv, b_fig = r.value(c.right, field)
+        interval, on = a_iv or b_iv, None
+        if a_fig and b_fig and c.op not in ("==", "!="):  # two figures: their paired difference decides
+            interval = r.boot.interval(r.resamples(a_fig) - r.resamples(b_fig))
+            on = "difference"
+            if interval is None or a is None or b is None:
+                ok = False
+            else:
+                bound = interval[0] if c.op in (">", ">=") else interval[1]
+                ok = OPS[c.op](bound, 0.0)
+        else:
+            ok = a is not None and b is not None and OPS[c.op](a, b)
+        rows.append({"check": c.name, "expression": c.text, "value": a, "against": b, "interval": interval,
+                     "interval_of": on or ("value" if interval else None), "passed": bool(ok),
+                     "why": None if ok else ("no value" if a is None or b is None or (on and interval is None)
+                                             else ("the interval of the difference does not exclude it" if on
+                                                   else "false"))})
     return rows
 
 
@@ -163,12 +264,21 @@ def _fmt(v) -> str:
     return "-" if v is None else f"{v:.4g}"
 
 
+def _fmt_iv(r: dict) -> str:
+    iv = r.get("interval")
+    if iv is None:
+        return "-"
+    text = f"[{iv[0]:.3g}, {iv[1]:.3g}]"
+    return f"diff {text}" if r.get("interval_of") == "difference" else text
+
+
 def format_checks(rows: list[dict]) -> str:
     w = max(len(r["check"]) for r in rows)
-    lines = [f"{'check':<{w}}  {'value':>9}  {'against':>9}  result"]
+    wi = max(8, *(len(_fmt_iv(r)) for r in rows))
+    lines = [f"{'check':<{w}}  {'value':>9}  {'against':>9}  {'interval':<{wi}}  result"]
     for r in rows:
         res = "pass" if r["passed"] else f"FAIL ({r['why']})"
-        lines.append(f"{r['check']:<{w}}  {_fmt(r['value']):>9}  {_fmt(r['against']):>9}  {res}")
+        lines.append(f"{r['check']:<{w}}  {_fmt(r['value']):>9}  {_fmt(r['against']):>9}  {_fmt_iv(r):<{wi}}  {res}")
     n_fail = sum(not r["passed"] for r in rows)
     lines.append(f"{len(rows) - n_fail} passed, {n_fail} failed")
     return "\n".join(lines)
