@@ -128,19 +128,58 @@ def _feasible(name: str) -> tuple[float, float]:
     return 0.0, 1.0
 
 
+def _has_interval(name: str) -> bool:
+    """Whether reloc check gives a metric an interval (recall, coverage and Table II's figures)."""
+    from reloc.experiments.intervals import COUNT_OF
+
+    return not name.startswith("map") and name.rsplit(".", 1)[-1] in (*COUNT_OF, *tables.FACTOR_KEYS)
+
+
+class _StubResolver:
+    """reloc check's resolver on constructed values (``VALUES``): ``NAME.lo``/``.hi`` are values of their
+    own, and a figure's resamples are constant at its value, so a comparison of two figures is decided
+    on the difference of their values."""
+
+    VALUES: dict = {}
+
+    def __init__(self, results, path):
+        from reloc.experiments.intervals import Bootstrap, IntervalSettings
+
+        self.boot = Bootstrap({}, {}, IntervalSettings(resamples=100))
+
+    def value(self, token, field):
+        try:
+            return float(token), None, None
+        except ValueError:
+            pass
+        v = self.VALUES[token]
+        if token.rsplit(".", 1)[-1] in ("lo", "hi"):
+            return v, [v, v], None
+        return v, None, (token if _has_interval(token) else None)
+
+    def resamples(self, name):
+        return np.full(100, self.VALUES[name])
+
+
 def test_every_demo_check_can_fail(monkeypatch, tmp_path):
     """Each check of reloc/specs/demo_checks.yaml passes on constructed values and fails when its
-    metric moves (within what the metric can take) to the wrong side of its threshold: a check that
-    no possible result can fail would be a defect."""
+    metric (a point value, an interval's bound, or one side of a paired comparison) moves, within what
+    the metric can take, to the wrong side: a check that no possible result can fail would be a defect."""
     from reloc.experiments import checks as ck
 
     path = REPO / "reloc" / "specs" / "demo_checks.yaml"
     items = ck.parse_checks(path)
-    known = set(ck.metric_table({"methods": {m: {"primary": "closure", "modes": {
+    metrics = set(ck.metric_table({"methods": {m: {"primary": "closure", "modes": {
         mode: {"all": {}, "factors": {}} for mode in ("causal", "closure")}} for m in
         ("videoreloc", "videoreloc_oracle", "appearance", "fpfh_icp", "one_frame")},
         "maps": {"boxes": {"by_kind": {k: {} for k in ("object", "wall", "floor", "ceiling")}},
                  "boxes_oracle": {"by_kind": {}}}}))
+    known = metrics | {f"{m}.{b}" for m in metrics if _has_interval(m) for b in ("lo", "hi")}
+    assert any(c.left.endswith(".lo") for c in items), "the demo's checks compare bounds"
+
+    def feasible(name):
+        return _feasible(name.removesuffix(".lo").removesuffix(".hi"))
+
     good: dict[str, float] = {}
     for c in items:  # a passing value for each metric: the threshold with a margin on the right side
         for side in (c.left, c.right):
@@ -157,21 +196,22 @@ def test_every_demo_check_can_fail(monkeypatch, tmp_path):
                 continue
             good.setdefault(c.right, 0.5)
         r = good[c.right] if c.right in known else float(c.right)
-        lo, hi = _feasible(c.left)
+        lo, hi = feasible(c.left)
         room = (hi - r) if c.op in (">", ">=") else (r - lo)  # how far the passing side reaches
         assert room > 0, f"{c.text}: cannot pass"
         step = 0.5 * room if math.isfinite(room) else max(abs(r) * 0.2, 0.05)
         good[c.left] = r + step if c.op in (">", ">=") else r - step
-    monkeypatch.setattr(ck, "metric_table", lambda results: dict(good))
-    res_dir = tmp_path  # run_checks reads a results.json; the values come from the patched metric_table
+    monkeypatch.setattr(ck, "_Resolver", _StubResolver)
+    monkeypatch.setattr(_StubResolver, "VALUES", dict(good))
+    res_dir = tmp_path  # run_checks reads a results.json; the values come from the stub
     (res_dir / "results.json").write_text("{}")
     assert all(r["passed"] for r in ck.run_checks(path, res_dir)), "the demo-like values must pass"
     for i, c in enumerate(items):
         bad = dict(good)
         r = good[c.right] if c.right in known else float(c.right)
-        lo, hi = _feasible(c.left)
+        lo, hi = feasible(c.left)
         bad[c.left] = max(lo, r - 0.01) if c.op in (">", ">=") else min(hi, r + 0.01)
-        monkeypatch.setattr(ck, "metric_table", lambda results, b=bad: dict(b))
+        monkeypatch.setattr(_StubResolver, "VALUES", bad)
         rows = ck.run_checks(path, res_dir)
         assert not rows[i]["passed"], f"{c.text} does not fail at {c.left} = {bad[c.left]}"
 
@@ -254,12 +294,38 @@ def test_a_bare_name_is_a_shipped_spec_and_a_file_wins(tmp_path, monkeypatch, ca
     ({"one_frame_stride": 0}, "one_frame_stride: expected a positive integer"),
     ({"unchanged": None}, "unchanged: missing"),
     ({"map": "magic"}, "map: expected build or ground-truth"),
+    ({"replicates": 0}, "replicates: expected a positive integer, got 0"),
+    ({"replicates": True}, "replicates: expected a positive integer"),
+    ({"seed": -1}, "seed: expected a non-negative integer, got -1"),
+    ({"intervals": {"level": 95}}, "intervals.level: must be in [0.5, 1)"),
+    ({"intervals": {"resamples": 5}}, "intervals.resamples: expected an integer >= 100"),
+    ({"intervals": {"blocks": 5}}, "intervals.blocks: unknown key"),
+    ({"detector": {"kind": "learned", "perturbation": {"input_jitter": -1}}},
+     "detector.perturbation: perturbation.input_jitter: expected a non-negative integer"),
+    ({"detector": {"kind": "learned", "perturbation": {"graph_optimization": "no"}}},
+     "detector.perturbation: perturbation.graph_optimization: expected true or false"),
+    ({"detector": {"kind": "learned", "perturbation": {"jitter": 1}}}, "detector.perturbation.jitter: unknown setting"),
+    ({"detector": {"kind": "oracle", "perturbation": {"input_jitter": 1}}},
+     "detector.perturbation: only the learned detector takes a perturbation"),
 ])
 def test_bad_experiment_specs_are_one_line_exit_2(tmp_path, capsys, changes, message):
     assert reloc_main(["experiment", str(write_experiment_spec(tmp_path, **changes)), "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("reloc: error:") and message in err and len(err.splitlines()) == 1, err
     assert not (tmp_path / "exp").exists()
+
+
+def test_replicate_specs_reseed_every_stochastic_part(tmp_path):
+    from reloc.experiments.spec import replicate_spec
+
+    s = load_experiment(write_experiment_spec(tmp_path, seed=4, replicates=3))
+    assert s.replicates == 3 and replicate_spec(s, 0) is s
+    r2 = replicate_spec(s, 2)
+    assert r2.seed == 6 and r2.replicates == 1 and r2.detector["perturbation"] == {"input_jitter": 1, "seed": 2}
+    assert s.detector.get("perturbation") is None  # the experiment's own spec is untouched
+    o = load_experiment(write_experiment_spec(tmp_path, detector={"kind": "oracle", "miss_rate": 0.1, "seed": 5},
+                                              methods=["videoreloc"]))
+    assert replicate_spec(o, 1).detector["corruption"] == {"miss_rate": 0.1, "seed": 6}
 
 
 def _render_spec(tmp_path, **design_changes) -> Path:
@@ -394,6 +460,52 @@ def tiny_design(tmp_path_factory):
     return root
 
 
+@pytest.mark.slow
+def test_replicates_and_the_stability_benchmark_with_the_learned_detector(tiny_design, capsys):
+    """replicates: 2 reruns the experiment reseeded, the second with the learned detector's input
+    jittered; results.json, Table I and reloc check report the spread. reloc bench stability reruns
+    VideoReloc under a perturbation and reports each figure's values and spread."""
+    spec = yaml.safe_load((tiny_design / "exp.yaml").read_text())
+    spec.update({"out": str(tiny_design / "exp_rep"), "map": "build", "detector": "learned", "methods": ["videoreloc"],
+                 "config": {"observation": {"stride": 150}}, "replicates": 2})
+    (tiny_design / "exp_rep.yaml").write_text(yaml.safe_dump(spec))
+    argv = ["experiment", str(tiny_design / "exp_rep.yaml"), "--quiet", "--no-plots"]
+    assert reloc_main(argv) == 0
+    out = capsys.readouterr().out
+    exp = tiny_design / "exp_rep"
+    res = json.loads((exp / "results.json").read_text())
+    r1 = json.loads((exp / "replicates" / "r1" / "results.json").read_text())
+    reps = res["replicates"]
+    assert reps["count"] == 2 and [r["seed"] for r in reps["replicates"]] == [0, 1]
+    assert reps["replicates"][1]["detector"] == {"input_jitter": 1, "seed": 1}
+    vals = reps["figures"]["videoreloc.closure"]["recall_1m_10deg"]
+    assert vals["values"] == [res["methods"]["videoreloc"]["modes"]["closure"]["all"]["recall_1m_10deg"],
+                              r1["methods"]["videoreloc"]["modes"]["closure"]["all"]["recall_1m_10deg"]]
+    assert vals["spread"] == pytest.approx(max(vals["values"]) - min(vals["values"]))
+    run = json.loads((exp / "replicates" / "r1" / "runs" / "videoreloc" / "apt_1__night__query" / "run.json").read_text())
+    assert run["seed"] == 1 and run["detector"]["perturbation"]["input_jitter"] == 1
+    assert "1 m/10°, 2 replicates" in out and "8 runs and 2 maps computed now" in out
+    assert reloc_main(argv) == 0 and "0 runs and 0 maps computed now" in capsys.readouterr().out  # resumes
+    checks = tiny_design / "rep_checks.yaml"
+    checks.write_text(yaml.safe_dump({"checks": [f"videoreloc.closure.recall_1m_10deg.spread <= {vals['spread'] + 1e-6:.6f}",
+                                                 f"videoreloc.recall_1m_10deg.spread >= {vals['spread'] - 1e-6:.6f}"]}))
+    assert reloc_main(["check", str(checks), str(exp)]) == 0
+    assert "2 passed, 0 failed" in capsys.readouterr().out
+
+    st = tiny_design / "stab"
+    assert reloc_main(["bench", "stability", str(tiny_design / "exp_rep.yaml"), "--perturbation", "jitter:5",
+                       "--out", str(st), "--quiet", "--json"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["perturbations"] == {"none": {}, "jitter-5": {"input_jitter": 1, "seed": 5}}
+    fig = next(f for f in rep["figures"] if f["figure"] == "closure 1 m/10°")
+    assert fig["values"]["none"] == vals["values"][0]  # the unperturbed rerun gives the experiment's figure
+    assert fig["spread"] == pytest.approx(abs(fig["values"]["none"] - fig["values"]["jitter-5"]))
+    assert len(rep["tours"]) == 8 and (st / "stability.md").is_file() and (st / "jitter-5" / "results.json").is_file()
+    assert reloc_main(["bench", "stability", str(tiny_design / "exp_rep.yaml"), "--perturbation", "jitter:5",
+                       "--out", str(st), "--quiet", "--max-tour-loss", "-1"]) == 1
+    assert "unstable: a tour lost" in capsys.readouterr().err
+
+
 def _tum_recall(path: Path, gt_path: Path, frames: list[int]) -> float:
     """Recall at 1 m/10 deg from TUM files, parsed and compared independently of reloc.experiments.evaluation."""
     from scipy.spatial.transform import Rotation
@@ -503,6 +615,42 @@ def test_experiment_end_to_end_rerun_and_resume(tiny_design, capsys):
     p.write_text(yaml.safe_dump({"checks": ["videoreloc.closure.apt_0__day__query.recall_1m_10deg >= 0.8",
                                             "videoreloc.delta_L >= -0.03", "fpfh_icp.map_bytes > videoreloc.map_bytes"]}))
     assert reloc_main(["check", str(p), str(exp)]) == 0
+    # intervals: every run's segment counts give back its figures, every interval holds its point value
+    res = json.loads((exp / "results.json").read_text())
+    assert res["intervals"]["segments"] == {"query": 5}  # 450 frames in segments of 100
+    for m, e in res["methods"].items():
+        for mode, d in e["modes"].items():
+            for name, u in d["units"].items():
+                tot = np.sum(u, axis=0)
+                got = d["tours"][name]
+                assert tot[0] == got["frames"] and tot[1] == round(got["recall_1m_10deg"] * got["frames"])
+                assert tot[3] == round(got["coverage"] * got["frames"])
+            for part in ("all", "factors"):
+                for k, iv in d["intervals"][part].items():
+                    v = d[part][k]
+                    assert (iv is None) == (v is None) or v is None, (m, mode, k)
+                    if iv is not None:
+                        assert iv[0] - 1e-9 <= v <= iv[1] + 1e-9, (m, mode, k, v, iv)
+    main_md = (exp / "tables" / "main.md").read_text()
+    vr = res["methods"]["videoreloc"]["modes"]["closure"]
+    lo, hi = vr["intervals"]["all"]["recall_1m_10deg"]
+    assert f"[{100 * lo:.1f}, {100 * hi:.1f}]" in main_md and "block bootstrap over 5 segments" in main_md
+    # checks on bounds and on a paired difference, on the real results
+    p.write_text(yaml.safe_dump({"checks": [f"videoreloc.closure.recall_1m_10deg.lo >= {lo - 0.01:.4f}",
+                                            f"videoreloc.closure.recall_1m_10deg.hi <= {hi + 0.01:.4f}",
+                                            "videoreloc.closure.recall_1m_10deg >= videoreloc.closure.recall_1m_10deg"]}))
+    assert reloc_main(["check", str(p), str(exp)]) == 0
+    assert "diff [0, 0]" in capsys.readouterr().out
+    p.write_text(yaml.safe_dump({"checks": [f"videoreloc.closure.recall_1m_10deg.lo >= {lo + 0.001:.4f}"]}))
+    assert reloc_main(["check", str(p), str(exp)]) == 1
+    p.write_text(yaml.safe_dump({"checks": ["videoreloc.closure.recall_1m_10deg > videoreloc.closure.recall_1m_10deg"]}))
+    assert reloc_main(["check", str(p), str(exp)]) == 1
+    for bad, says in (("videoreloc.map_bytes.lo >= 1", "has no interval"),
+                      ("videoreloc.closure.recal_1m_10deg.lo >= 0.5", "unknown metric")):
+        p.write_text(yaml.safe_dump({"checks": [bad]}))
+        assert reloc_main(["check", str(p), str(exp)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert says in err and "checks[0]" in err and len(err.splitlines()) == 1
 
 
 def test_units_and_ablation_tables_from_run_outputs(tmp_path):

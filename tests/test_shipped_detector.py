@@ -61,3 +61,45 @@ def test_shipped_model_finds_apt_0_in_day_and_night(views, lighting):
     assert len(ious) >= 30
     assert np.mean(acc) >= floor_acc, acc
     assert np.mean(ious) >= floor_iou, np.mean(ious)
+
+
+def test_a_perturbation_jitters_the_8_bit_input_by_one_level_seeded_per_frame():
+    from reloc.detection.learned import Perturbation
+
+    img = np.full((12, 16, 3), 128.0)
+    img[0, 0] = 0.0
+    img[0, 1] = 255.0
+    p = Perturbation(input_jitter=1, seed=3)
+    a, b = p.jitter(img, 7), p.jitter(img, 7)
+    assert np.array_equal(a, b)  # the same frame gets the same jitter in every run
+    assert not np.array_equal(a, p.jitter(img, 8)) and not np.array_equal(a, Perturbation(1, seed=4).jitter(img, 7))
+    assert set(np.unique(a[1:] - img[1:])) == {-1.0, 0.0, 1.0}
+    assert 0.0 <= a.min() and a.max() <= 255.0  # clipped to the 8-bit range
+    assert Perturbation().jitter(img, 7) is img and not Perturbation().active and p.active
+    assert p.label() == "jitter 1 (seed 3)" and Perturbation(threads=2, graph_optimization=False).label() == \
+        "2 threads, no graph optimisation"
+    for bad in ({"input_jitter": -1}, {"threads": 0}, {"graph_optimization": "no"}, {"seed": True}):
+        with pytest.raises(ValueError, match="perturbation"):
+            Perturbation(**bad)
+
+
+def test_perturbed_sessions_run_the_model_with_other_kernels_and_agree_closely():
+    """threads and graph_optimization reach onnxruntime's session; the model's output moves in its last
+    bits at most (what another processor does), while a jittered input moves it more."""
+    import onnxruntime as ort
+
+    from reloc.detection.learned import Perturbation
+
+    rng = np.random.default_rng(0)
+    rgb = rng.random((120, 160, 3)).astype(np.float32) ** 2
+    base = LearnedDetector(MODEL)
+    other = LearnedDetector(MODEL, perturbation=Perturbation(threads=2, graph_optimization=False))
+    opts = other.session.get_session_options()
+    assert opts.intra_op_num_threads == 2
+    assert opts.graph_optimization_level == ort.GraphOptimizationLevel.ORT_DISABLE_ALL
+    assert base.session.get_session_options().graph_optimization_level != ort.GraphOptimizationLevel.ORT_DISABLE_ALL
+    c0, p0, b0 = base.predict(rgb, 5)
+    c1, p1, b1 = other.predict(rgb, 5)
+    assert np.abs(p0 - p1).max() < 1e-3 and np.abs(b0 - b1).max() < 1e-3 and (c0 != c1).mean() < 0.01
+    c2, p2, _ = LearnedDetector(MODEL, perturbation=Perturbation(input_jitter=1, seed=1)).predict(rgb, 5)
+    assert np.abs(p0 - p2).max() > np.abs(p0 - p1).max()

@@ -15,7 +15,7 @@ from formats.errors import UserError
 
 from ..config import DetectionConfig
 from .base import Detector
-from .learned import SHIPPED_MODEL, LearnedDetector
+from .learned import SHIPPED_MODEL, LearnedDetector, Perturbation
 from .onnx_yolo import OnnxDetector
 from .oracle import Corruption, OracleDetector
 
@@ -28,6 +28,7 @@ class DetectorSpec:
     corruption: Corruption = field(default_factory=Corruption)
     model: str | None = None
     class_map: str | None = None
+    perturbation: Perturbation = field(default_factory=Perturbation)  # the learned detector's (replicates, stability)
 
 
 def build_detector(spec: DetectorSpec, classes: dict[int, str], vocabulary=None,
@@ -43,7 +44,8 @@ def build_detector(spec: DetectorSpec, classes: dict[int, str], vocabulary=None,
         return OnnxDetector(spec.model, class_map=spec.class_map, vocabulary=vocabulary)
     if spec.kind == "learned":
         cfg = config or DetectionConfig()
-        return LearnedDetector(spec.model or SHIPPED_MODEL, vocabulary=vocabulary, min_pixels=cfg.min_mask_pixels)
+        return LearnedDetector(spec.model or SHIPPED_MODEL, vocabulary=vocabulary, min_pixels=cfg.min_mask_pixels,
+                               perturbation=spec.perturbation)
     raise UserError(f"unknown detector {spec.kind!r} (expected oracle, onnx or learned)")
 
 
@@ -54,6 +56,8 @@ def detector_record(detector: Detector) -> dict:
     if isinstance(detector, OracleDetector):
         rec["corruption"] = {**asdict(detector.corruption), "active": detector.corruption.active}
         rec["min_pixels"] = detector.min_pixels
+    if isinstance(detector, LearnedDetector) and detector.perturbation.active:
+        rec["perturbation"] = asdict(detector.perturbation)
     for k in ("model_path", "score_threshold", "iou_threshold", "max_detections", "mask_threshold",
               "boundary_threshold", "min_pixels"):
         v = getattr(detector, k, None)

@@ -22,6 +22,7 @@ the map's) are one-line ``UserError`` naming the file.
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +39,56 @@ MODEL_FORMAT = "videoreloc-segnet/1"
 # experiments' default detector
 SHIPPED_MODEL = resources.SHIPPED_MODEL
 REGROW_PX = 3.0  # cut pixels this close to an instance rejoin it (predicted boundaries are 2-4 px wide)
+
+
+@dataclass(frozen=True)
+class Perturbation:
+    """Last-bit changes of what the learned detector computes, of the size another processor makes:
+    a replicate's or a stability benchmark's way to see which results stand on a knife edge.
+
+    ``input_jitter``: each 8-bit level of the image the model sees moves by a uniform integer in
+    [-input_jitter, input_jitter] (clipped to 0..255), drawn per pixel and channel from
+    ``(seed, frame index)``, so a frame gets the same jitter in every run; ``threads``:
+    onnxruntime's intra-op threads (another summation order); ``graph_optimization``: false runs the
+    model without onnxruntime's graph rewrites (other fused kernels). All defaults: no change."""
+
+    input_jitter: int = 0
+    seed: int = 0
+    threads: int = 1
+    graph_optimization: bool = True
+
+    def __post_init__(self):
+        for k in ("input_jitter", "seed"):
+            v = getattr(self, k)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise ValueError(f"perturbation.{k}: expected a non-negative integer, got {v!r}")
+        if isinstance(self.threads, bool) or not isinstance(self.threads, int) or self.threads < 1:
+            raise ValueError(f"perturbation.threads: expected a positive integer, got {self.threads!r}")
+        if not isinstance(self.graph_optimization, bool):
+            raise ValueError(f"perturbation.graph_optimization: expected true or false, got {self.graph_optimization!r}")
+
+    @property
+    def active(self) -> bool:
+        return self != Perturbation()
+
+    def label(self) -> str:
+        """``jitter 1 (seed 2), 2 threads, no graph optimisation``; ``none``."""
+        parts = []
+        if self.input_jitter:
+            parts.append(f"jitter {self.input_jitter} (seed {self.seed})")
+        if self.threads != 1:
+            parts.append(f"{self.threads} threads")
+        if not self.graph_optimization:
+            parts.append("no graph optimisation")
+        return ", ".join(parts) or "none"
+
+    def jitter(self, img8: np.ndarray, frame_index: int | None) -> np.ndarray:
+        """``img8`` (8-bit levels as floats) with this perturbation's jitter for one frame."""
+        if not self.input_jitter:
+            return img8
+        rng = np.random.default_rng([self.seed, 0 if frame_index is None else int(frame_index)])
+        j = rng.integers(-self.input_jitter, self.input_jitter + 1, size=img8.shape)
+        return np.clip(img8 + j, 0.0, 255.0)
 
 
 def depth_edges(depth: np.ndarray, rel: float, abs_m: float) -> np.ndarray:
@@ -62,9 +113,11 @@ class LearnedDetector:
 
     def __init__(self, model, vocabulary=None, *, min_pixels: int = 20, boundary_threshold: float = 0.5,
                  score_threshold: float = 0.3, depth_edge_rel: float = 0.04, depth_edge_abs_m: float = 0.03,
-                 intra_op_num_threads: int = 1):
+                 perturbation: Perturbation | None = None):
         self.model_path = where = Path(model)
-        self.session = open_session(where, "detector model", intra_op_num_threads)
+        self.perturbation = perturbation or Perturbation()
+        self.session = open_session(where, "detector model", self.perturbation.threads,
+                                    graph_optimization=self.perturbation.graph_optimization)
         meta = self.session.get_modelmeta().custom_metadata_map or {}
         if meta.get("format") != MODEL_FORMAT:
             raise UserError(f"{where}: format: expected a {MODEL_FORMAT} model (reloc detector export), "
@@ -87,10 +140,11 @@ class LearnedDetector:
 
     # -- the network -------------------------------------------------------------------------------
 
-    def predict(self, rgb_linear: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(class index, its probability, boundary probability), each (H, W), for a linear RGB frame."""
+    def predict(self, rgb_linear: np.ndarray, index: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(class index, its probability, boundary probability), each (H, W), for a linear RGB frame
+        (``index``: the frame's, which seeds a perturbation's jitter)."""
         srgb, _ = tonemap(rgb_linear)
-        x = np.round(srgb * 255.0) / 255.0  # the 8-bit frame the model was trained on
+        x = self.perturbation.jitter(np.round(srgb * 255.0), index) / 255.0  # the 8-bit frame the model was trained on
         h, w = x.shape[:2]
         ph, pw = (-h) % 8, (-w) % 8
         x = np.pad(x, ((0, ph), (0, pw), (0, 0)), mode="edge").transpose(2, 0, 1)[None].astype(np.float32)
@@ -108,7 +162,7 @@ class LearnedDetector:
     def detect(self, frame: FrameData) -> list[Detection]:
         if frame.rgb is None:
             return []
-        return self.instances(*self.predict(frame.rgb), frame.depth)
+        return self.instances(*self.predict(frame.rgb, frame.index), frame.depth)
 
     def instances(self, cls: np.ndarray, conf: np.ndarray, bnd: np.ndarray, depth: np.ndarray | None) -> list[Detection]:
         """Instances from a prediction (``predict``'s three maps) and the frame's depth (steps 2-4)."""

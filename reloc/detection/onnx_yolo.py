@@ -171,9 +171,11 @@ def _bilinear(m: np.ndarray, ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
 # ---------------------------------------------------------------- the detector
 
 
-def open_session(path, what: str, intra_op_num_threads: int = 1, providers: list | None = None):
-    """A quiet onnxruntime session (CPU unless ``providers`` say otherwise); a missing file or one
-    onnxruntime cannot read is a one-line UserError naming it (``what``: how to call the file)."""
+def open_session(path, what: str, intra_op_num_threads: int = 1, providers: list | None = None,
+                 graph_optimization: bool = True):
+    """A quiet onnxruntime session (CPU unless ``providers`` say otherwise; ``graph_optimization``
+    false: no graph rewrites); a missing file or one onnxruntime cannot read is a one-line UserError
+    naming it (``what``: how to call the file)."""
     import onnxruntime as ort
 
     path = Path(path)
@@ -183,6 +185,8 @@ def open_session(path, what: str, intra_op_num_threads: int = 1, providers: list
     opts.intra_op_num_threads = int(intra_op_num_threads)
     opts.inter_op_num_threads = 1
     opts.log_severity_level = 3
+    if not graph_optimization:
+        opts.graph_optimization_level = ort.GraphOptimizationLevel.ORT_DISABLE_ALL
     try:
         return ort.InferenceSession(str(path), sess_options=opts, providers=providers or ["CPUExecutionProvider"])
     except Exception as e:

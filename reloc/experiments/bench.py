@@ -1,4 +1,5 @@
-"""``reloc bench``: front-end throughput by stage, and the odometry speed/accuracy trade-off.
+"""``reloc bench``: front-end throughput by stage, the odometry speed/accuracy trade-off, and the
+stability of an experiment's figures under last-bit perturbations (:mod:`reloc.experiments.stability`).
 
 ``reloc bench frontend`` streams a tour through the front-end (adaptive clips, registration and
 refinement at every clip closure) and reports milliseconds per frame for each stage: reading the
@@ -94,7 +95,7 @@ def cmd_odometry(args) -> int:
 
 
 def register_cli(subparsers) -> None:
-    p = subparsers.add_parser("bench", help="benchmarks that print figures (front-end stages, odometry trade-off)")
+    p = subparsers.add_parser("bench", help="benchmarks that print figures (front-end stages, odometry trade-off, stability)")
     sub = p.add_subparsers(dest="cmd", required=True)
     a = sub.add_parser("frontend", help="front-end frames per second by stage")
     a.add_argument("--tour", required=True)
@@ -105,6 +106,11 @@ def register_cli(subparsers) -> None:
     a.add_argument("--config")
     add_json(a, "the report")
     a.set_defaults(fn=cmd_frontend)
+    a = sub.add_parser("stability", help="an experiment's figures under last-bit perturbations of the learned detector")
+    from . import stability
+
+    stability.add_arguments(a)
+    a.set_defaults(fn=stability.cmd_stability)
     a = sub.add_parser("odometry", help="odometry speed against drift per metre for resolutions and strides")
     from . import bench_odometry
 

@@ -33,7 +33,7 @@ from formats.cli import add_quiet, add_workers
 from . import tables
 from .fingerprint import code_fingerprint, file_key, ground_truth_key, key_of
 from .localization_units import DEFAULT_LENGTHS
-from .spec import ORACLE, ExperimentSpec, load_experiment, open_detector
+from .spec import ORACLE, ExperimentSpec, load_experiment, open_detector, replicate_spec
 from .tables import ABLATIONS, ablation_name, reading_name
 from .tasks import DONE, is_done, run_map_task, run_tour_task
 
@@ -295,6 +295,18 @@ def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int |
     results["seconds"]["this_run_wall"] = round(time.time() - t_start, 1)
     results["failed"] = runner.failed
     results["code"] = code
+    ran = {"maps": map_seconds, "runs": run_seconds}
+    if spec.replicates > 1:  # the same experiment reseeded, each in its own folder; their spread beside the intervals
+        reps = [results]
+        for k in range(1, spec.replicates):
+            r = run_experiment(replicate_spec(spec, k), out=out / "replicates" / f"r{k}", workers=workers,
+                               progress=progress, plots=False)
+            for part in ("maps", "runs"):
+                ran[part].update({f"r{k}/{name}": v for name, v in r["_ran"][part].items()})
+            results["failed"].update({f"r{k}/{name}": v for name, v in r["failed"].items()})
+            reps.append(r)
+        results["replicates"] = tables.replicate_summary(reps, [replicate_spec(spec, k) for k in range(spec.replicates)])
+        results["seconds"]["this_run_wall"] = round(time.time() - t_start, 1)
     write_json_atomic(out / "results.json", results)
     tables.write_tables(results, out)
     if plots:
@@ -303,7 +315,7 @@ def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int |
 
         plot_experiment(out)
         write_report(out)
-    results["_ran"] = {"maps": map_seconds, "runs": run_seconds}
+    results["_ran"] = ran
     return results
 
 

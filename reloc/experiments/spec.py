@@ -27,6 +27,10 @@ the optional tables::
                                        # (relative to this file); a design factor like lighting and layout
     map_sensor: same                   # the mapping tour through the query's sensor (same) or one sensor
     seed: 0                            # VideoReloc's RANSAC seed and the sensors' noise seed
+    replicates: 1                      # N > 1: the experiment N times, reseeded (replicate_spec); the spread
+                                       # of every figure across them beside its interval
+    intervals: {level: 0.95, resamples: 2000, segment_frames: 100, seed: 0}
+                                       # the figures' intervals (reloc.experiments.intervals): the defaults
     workers: 2
 
 Methods and the rows they give (``key`` = method.mode, used by ``reloc check``):
@@ -71,9 +75,11 @@ from formats.errors import SceneFormatError, UserError
 from formats.sensors import load_sensor
 from formats.yamlfile import read_yaml
 
+from .intervals import IntervalSettings
+
 SPEC_KEYS = {"name", "description", "render", "tours", "out", "mapping", "query", "unchanged", "map", "methods",
              "tables", "one_frame_stride", "detector", "config", "appearance", "fpfh_icp", "workers", "seed",
-             "sensors", "map_sensor"}
+             "sensors", "map_sensor", "intervals", "replicates"}
 METHODS = ("videoreloc", "videoreloc_oracle", "fpfh_icp", "appearance", "one_frame")
 DETECTORS = ("learned", "oracle", "onnx")
 ORACLE = {"kind": "oracle", "model": None, "corruption": {}}  # a spec's detector: the rendered labels
@@ -105,6 +111,8 @@ class ExperimentSpec:
     # the sensors queries are read through: {"name", "spec" (preset name or absolute file), "params"}
     sensors: tuple = ()
     map_sensor: dict | None = None  # None: the query's own sensor (map_sensor: same)
+    intervals: IntervalSettings = IntervalSettings()  # how the figures' intervals are computed
+    replicates: int = 1  # the experiment run this many times, its stochastic parts reseeded (replicate_spec)
 
     def __post_init__(self):
         if not self.sensors:
@@ -260,7 +268,7 @@ def load_experiment(path) -> ExperimentSpec:
         _fail(src, "tables", "the ablation table needs the videoreloc method")
     if doc.get("map", "build") not in ("build", "ground-truth"):
         _fail(src, "map", f"expected build or ground-truth, got {doc.get('map')!r}")
-    for k in ("one_frame_stride", "workers"):
+    for k in ("one_frame_stride", "workers", "replicates"):
         v = doc.get(k, 1)
         if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
             _fail(src, k, f"expected a positive integer, got {v!r}")
@@ -299,8 +307,25 @@ def load_experiment(path) -> ExperimentSpec:
         methods=tuple(methods), tables=tuple(tables), one_frame_stride=int(doc.get("one_frame_stride", 15)),
         detector=det, config=cfg, appearance=app, fpfh_icp=fp, workers=int(doc.get("workers", 2)),
         seed=seed, description=str(doc.get("description", "")), externals=tuple(externals),
-        sensors=sensors, map_sensor=map_sensor,
+        sensors=sensors, map_sensor=map_sensor, intervals=IntervalSettings.from_spec(src, doc.get("intervals")),
+        replicates=int(doc.get("replicates", 1)),
     )
+
+
+def replicate_spec(spec: ExperimentSpec, k: int) -> ExperimentSpec:
+    """Replicate ``k`` of an experiment (0: the experiment itself): every stochastic part reseeded.
+    ``seed`` + k (VideoReloc's and the baselines' random draws, the sensors' noise), the oracle's
+    corruption seed + k, and for the learned detector an input jitter of one 8-bit level seeded k
+    (``reloc.detection.learned.Perturbation``: what another processor amounts to)."""
+    if k == 0:
+        return spec
+    det = dict(spec.detector)
+    if det["kind"] == "learned":
+        det["perturbation"] = {**det.get("perturbation", {}), "input_jitter": max(1, det.get("perturbation", {})
+                                                                                   .get("input_jitter", 0)), "seed": k}
+    elif det["kind"] == "oracle" and det.get("corruption"):
+        det["corruption"] = {**det["corruption"], "seed": det["corruption"].get("seed", 0) + k}
+    return dataclasses.replace(spec, name=f"{spec.name} r{k}", seed=spec.seed + k, detector=det, replicates=1)
 
 
 def _detector_spec(v, src) -> dict:
@@ -318,6 +343,12 @@ def _detector_spec(v, src) -> dict:
               f"expected one of {', '.join(DETECTORS)}, got {kind!r}")
     model = d.pop("model", None)
     class_map = d.pop("class_map", None)
+    perturbation = d.pop("perturbation", None)
+    if perturbation is not None:
+        if kind != "learned":
+            _fail(src, "detector.perturbation", "only the learned detector takes a perturbation "
+                  "(the oracle has corruption settings instead)")
+        perturbation = _perturbation(perturbation, src)
     if kind == "oracle":
         if model is not None:
             _fail(src, "detector.model", "the oracle detector reads the rendered labels; it takes no model")
@@ -330,7 +361,7 @@ def _detector_spec(v, src) -> dict:
     fields = {f.name for f in dataclasses.fields(Corruption)}
     for k in d:
         _fail(src, f"detector.{k}", "corrupts the oracle's detections (add kind: oracle)" if k in fields
-              else "unknown setting; allowed: kind, model" + (", class_map" if kind == "onnx" else ""))
+              else "unknown setting; allowed: kind, model" + (", class_map" if kind == "onnx" else ", perturbation"))
     if model is None:
         if kind == "onnx":
             _fail(src, "detector.model", "the onnx detector needs a model file")
@@ -340,6 +371,8 @@ def _detector_spec(v, src) -> dict:
     if not path.is_file():
         _fail(src, "detector.model", f"model file {path} not found")
     out = {"kind": kind, "model": str(path), "corruption": {}}
+    if perturbation:
+        out["perturbation"] = perturbation
     if class_map is not None:
         if kind != "onnx":
             _fail(src, "detector.class_map", "only the onnx detector takes a class map")
@@ -351,13 +384,28 @@ def _detector_spec(v, src) -> dict:
     return out
 
 
+def _perturbation(v, src) -> dict:
+    """``detector.perturbation`` (``reloc.detection.learned.Perturbation``) as a dict of its
+    non-default settings; one line naming the key on error."""
+    from ..detection.learned import Perturbation
+
+    d = _mapping_of(v, src, "detector.perturbation")
+    _check_overrides(Perturbation, d, src, "detector.perturbation")
+    try:
+        p = Perturbation(**d)
+    except ValueError as e:
+        _fail(src, "detector.perturbation", str(e))
+    return {k: v for k, v in dataclasses.asdict(p).items() if v != getattr(Perturbation(), k)}
+
+
 def open_detector(det: dict, vocabulary, classes=None, cfg=None):
     """The detector a spec's ``detector`` names (``_detector_spec``'s dict)."""
     from ..detection.factory import DetectorSpec, build_detector
+    from ..detection.learned import Perturbation
     from ..detection.oracle import Corruption
 
     spec = DetectorSpec(kind=det["kind"], corruption=Corruption(**det.get("corruption", {})), model=det.get("model"),
-                        class_map=det.get("class_map"))
+                        class_map=det.get("class_map"), perturbation=Perturbation(**det.get("perturbation", {})))
     return build_detector(spec, classes or {}, vocabulary=vocabulary, config=cfg)
 
 
