@@ -38,7 +38,7 @@ from ..detection.base import Detector, check_rgb_schedule, needs_rgb
 from ..detection.factory import detector_record
 from ..frontend.stream import FrontEnd, PoseEvent, default_detector, make_pose_stream, read_frame
 from ..geometry import inv_T
-from ..frontend.localize import localize_clip
+from ..frontend.localize import clip_rng, localize_clip
 from ..map.boxmap import BoxMap
 
 
@@ -54,7 +54,6 @@ class Relocalizer:
         self.backend = Backend(bmap, self.cfg)
         self.fe = FrontEnd(bmap, K, detector, poses, config=self.cfg, seed=seed, predict=self.backend.predict,
                            on_frame=self._on_frame)
-        self.rng = np.random.default_rng(seed + 1)
         self.budgets = sorted({int(b) for b in budgets if int(b) > 0})
         self.causal: dict[int, tuple[np.ndarray, str]] = {}
         self.closure: dict[int, tuple[np.ndarray, str]] = {}
@@ -105,7 +104,7 @@ class Relocalizer:
             return
         nodes = fuse(obs, self.cfg.observation)
         self.frame_localizations += 1
-        p = localize_clip(nodes, {i: obs}, {i: np.eye(4)}, self.map, self.cfg, self.rng, anchors=False)
+        p = localize_clip(nodes, {i: obs}, {i: np.eye(4)}, self.map, self.cfg, clip_rng(self.seed + 1, i), anchors=False)
         if p.S is not None and p.kappa >= self.cfg.backend.track_min_kappa:
             self._frame_fix[chain] = p.S @ inv_T(chain_pose)
 

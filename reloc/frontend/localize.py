@@ -40,6 +40,15 @@ class Placement:
         return self.S is not None
 
 
+def clip_rng(seed: int, first_frame: int) -> np.random.Generator:
+    """The random draws of one clip's localization, keyed by the run's seed and the clip's first
+    frame. A run-wide generator would hand every later clip other draws as soon as one clip consumed
+    a different number of them (one detection more or less changes how many the random route
+    draws), so a last-bit change in one clip would reach every clip after it; keyed, it stays in the
+    clip where it happened."""
+    return np.random.default_rng([int(seed), int(first_frame)])
+
+
 def localize_clip(nodes: list[Node], frame_obs: dict[int, list[Observation]], V: dict[int, np.ndarray],
                   bmap: BoxMap, cfg: Config, rng: np.random.Generator, yaw_prior: float | None = None,
                   anchors: bool = True, prediction: np.ndarray | None = None) -> Placement:
@@ -79,6 +88,7 @@ def localize_clip(nodes: list[Node], frame_obs: dict[int, list[Observation]], V:
         if yaw_prior is None:
             yaw_prior = yaw_of(prediction[:3, :3])
 
+    anchor_rng = rng.spawn(1)[0]  # the anchors' draws do not depend on how many the graph route made
     S_g = graph_candidate(nodes, bmap, reg, rng)
     tm["graph"] = time.perf_counter() - t0
     cands: list[Candidate] = []
@@ -89,7 +99,7 @@ def localize_clip(nodes: list[Node], frame_obs: dict[int, list[Observation]], V:
     weak = S_g is None or S_g.matches < reg.min_graph_matches or S_g.kappa < reg.min_graph_surface_fraction
     if anchors and weak:
         t1 = time.perf_counter()
-        anc = anchors_for_clip(frame_obs, V, bmap, reg, rng)
+        anc = anchors_for_clip(frame_obs, V, bmap, reg, anchor_rng)
         S_a = anchor_candidate(anc, V, reg)
         info["anchors"] = {"anchors": len(anc), "consensus": S_a.matches if S_a else 0}
         if S_g is not None and anchors_veto(S_g.S, anc, V, reg):

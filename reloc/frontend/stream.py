@@ -27,7 +27,7 @@ from ..config import Config
 from ..detection.base import Detector, FrameData, needs_labels
 from ..detection.oracle import OracleDetector
 from ..geometry import inv_T
-from .localize import Placement, localize_clip
+from .localize import Placement, clip_rng, localize_clip
 from ..map.boxmap import BoxMap
 from .observations import observe
 
@@ -138,7 +138,7 @@ class FrontEnd:
         self.poses = poses
         self.cfg = config or Config()
         self.policy = ClipPolicy(self.cfg.clips)
-        self.rng = np.random.default_rng(seed)
+        self.seed = int(seed)  # a clip's random draws come from clip_rng(seed, its first frame)
         self.localize = localize
         self.yaw_prior = yaw_prior
         self.predict = predict  # (chain, camera-to-chain pose of the clip's first frame) -> S_pred
@@ -260,8 +260,8 @@ class FrontEnd:
             pred = None
             if self.predict is not None and self.cfg.backend.tracking:
                 pred = self.predict(self._chain, self._chain_pose[clip.start])
-            placement = localize_clip(nodes, clip.frame_observations(), clip.V, self.map, self.cfg, self.rng,
-                                      yaw_prior=prior, prediction=pred)
+            placement = localize_clip(nodes, clip.frame_observations(), clip.V, self.map, self.cfg,
+                                      clip_rng(self.seed, clip.start), yaw_prior=prior, prediction=pred)
         else:
             placement = Placement(None, reason="localization off", nodes=len(nodes))
         tm = placement.timings
