@@ -117,7 +117,7 @@ class _Fixed(LearnedDetector):
         self.depth_edge_rel, self.depth_edge_abs_m = 0.04, 0.03
         self._pred = (cls, conf, bnd)
 
-    def predict(self, rgb_linear):
+    def predict(self, rgb_linear, index=None):
         return self._pred
 
 
