@@ -59,7 +59,7 @@ from pathlib import Path
 from formats.errors import SceneFormatError, UserError
 from formats.cli import add_json
 
-from .tables import FACTOR_KEYS, LIGHTINGS, METRICS, read_results
+from .tables import FACTOR_KEYS, METRICS, interval_figures, read_results
 
 OPS = {">=": operator.ge, "<=": operator.le, ">": operator.gt, "<": operator.lt, "==": operator.eq, "!=": operator.ne}
 _EXPR = re.compile(r"^\s*([A-Za-z0-9_.@\-]+)\s*(>=|<=|==|!=|>|<)\s*([A-Za-z0-9_.@\-+eE]+)\s*$")
@@ -152,32 +152,21 @@ def metric_table(results: dict) -> dict[str, float | None]:
 
 
 def figure_table(results: dict) -> dict[str, tuple[str, tuple]]:
-    """Every metric name that carries an interval -> (run key ``METHOD.MODE``, figure), the figure
-    as :mod:`reloc.experiments.intervals` computes it from the run's segment counts."""
-    from .intervals import factor_figures, pooled_figures, tour_figures
-
-    tours = results.get("tours") or {}
-    sensors = results.get("sensors") or ["ideal"]
-    reference = results.get("reference_sensor", "ideal")
-    ref_tours = [n for n, t in tours.items() if t.get("sensor", "ideal") == reference]
-    fac = factor_figures(tours, results.get("unchanged"), reference, sensors, LIGHTINGS)
+    """Every metric name that carries an interval -> (run key ``METHOD.MODE``, figure), named as
+    ``metric_table`` names them, from ``tables.interval_figures``."""
     out: dict = {}
-    for m, entry in results.get("methods", {}).items():
-        for mode, d in entry.get("modes", {}).items():
-            if d.get("units") is None:
-                continue
-            key = f"{m}.{mode}"
-            figs = {**pooled_figures(ref_tours), **fac}
-            if len(sensors) > 1:
-                figs.update({f"sensor.{s}.{k}": f for s in sensors for k, f in
-                             pooled_figures([n for n, t in tours.items() if t.get("sensor", "ideal") == s]).items()})
+    for key, parts in interval_figures(results).items():
+        m, mode = key.split(".", 1)
+        named = {**parts["all"], **parts["factors"],
+                 **{f"sensor.{s}.{k}": f for s, figs in parts.get("sensors", {}).items() for k, f in figs.items()}}
+        primary = results["methods"][m].get("primary") == mode
+        for k, f in named.items():
+            out[f"{key}.{k}"] = (key, f)
+            if primary:
+                out[f"{m}.{k}"] = (key, f)
+        for tour, figs in parts["tours"].items():
             for k, f in figs.items():
-                out[f"{key}.{k}"] = (key, f)
-                if mode == entry.get("primary"):
-                    out[f"{m}.{k}"] = (key, f)
-            for tour in d["units"]:
-                for k, f in tour_figures(tour).items():
-                    out[f"{key}.{tour}.{k}"] = (key, f)
+                out[f"{key}.{tour}.{k}"] = (key, f)
     return out
 
 

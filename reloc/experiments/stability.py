@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import sys
 from pathlib import Path
 
 from formats.atomic import write_json_atomic, write_text_atomic
@@ -144,7 +145,7 @@ def cmd_stability(args) -> int:
     if args.max_tour_loss is not None and (rep["max_tour_loss"] is None or rep["max_tour_loss"] > args.max_tour_loss):
         bad.append(f"a tour lost {rep['max_tour_loss']} > {args.max_tour_loss}")
     if bad:
-        print("unstable: " + "; ".join(bad), file=__import__("sys").stderr)
+        print("unstable: " + "; ".join(bad), file=sys.stderr)
         return 1
     return 0
 

@@ -272,34 +272,46 @@ def bootstrap_of(res: dict) -> Bootstrap:
     return Bootstrap(units, {n: t.get("path", "query") for n, t in res["tours"].items()}, st)
 
 
+def interval_figures(res: dict) -> dict[str, dict]:
+    """Per run ``METHOD.MODE`` that has segment counts, its figures as :mod:`.intervals` computes
+    them, by part: ``all`` (Table I, pooled over the reference sensor's tours), ``factors`` (Table
+    II), ``tours`` ({tour: figures}) and, with more than one sensor, ``sensors`` ({sensor: pooled
+    figures}). The one definition that the tables' intervals and ``reloc check`` both read."""
+    tours = res.get("tours") or {}
+    sensors = res.get("sensors") or ["ideal"]
+    reference = res.get("reference_sensor", "ideal")
+    ref_tours = [n for n, t in tours.items() if t.get("sensor", "ideal") == reference]
+    common = {"all": pooled_figures(ref_tours),
+              "factors": factor_figures(tours, res.get("unchanged"), reference, sensors, LIGHTINGS)}
+    if len(sensors) > 1:
+        common["sensors"] = {s: pooled_figures([n for n, t in tours.items() if t.get("sensor", "ideal") == s])
+                             for s in sensors}
+    return {f"{m}.{mode}": {**common, "tours": {n: tour_figures(n) for n in d["units"]}}
+            for m, entry in (res.get("methods") or {}).items() for mode, d in entry.get("modes", {}).items()
+            if d.get("units") is not None}
+
+
 def add_intervals(res: dict, settings: IntervalSettings) -> None:
     """Every figure's interval into ``res``: ``modes.MODE.intervals`` = {all, factors, tours, sensors}
     of ``[lo, hi]`` (None where it has none), and ``res["intervals"]``: the settings and units."""
     res["intervals"] = {"settings": settings.as_dict(), "method": "block bootstrap over segments of the query path, "
                         "tours resampled together (paired)"}
     boot = bootstrap_of(res)
-    tours = res["tours"]
-    sensors = res.get("sensors") or ["ideal"]
     reference = res.get("reference_sensor", "ideal")
-    ref_tours = [n for n, t in tours.items() if t.get("sensor", "ideal") == reference]
+    n_ref = sum(1 for t in res["tours"].values() if t.get("sensor", "ideal") == reference)
     res["intervals"]["segments"] = {p: n for p, n in sorted(boot.n_segments.items())}
-    res["intervals"]["note"] = units_note(boot.n_segments, settings, len(ref_tours))
-    fac = factor_figures(tours, res["unchanged"], reference, sensors, LIGHTINGS)
-    for m, entry in res["methods"].items():
-        for mode, d in entry["modes"].items():
-            key = f"{m}.{mode}"
-            if key not in boot.units:
-                continue
+    res["intervals"]["note"] = units_note(boot.n_segments, settings, n_ref)
+    for key, parts in interval_figures(res).items():
+        m, mode = key.split(".", 1)
 
-            def ci(figs: dict) -> dict:
-                return {k: boot.interval(figure_values(boot, key, f)[1]) for k, f in figs.items()}
+        def ci(figs: dict) -> dict:
+            return {k: boot.interval(figure_values(boot, key, f)[1]) for k, f in figs.items()}
 
-            iv = {"all": ci(pooled_figures(ref_tours)), "factors": ci(fac),
-                  "tours": {n: ci(tour_figures(n)) for n in d["units"]}}
-            if len(sensors) > 1:
-                iv["sensors"] = {s: ci(pooled_figures([n for n, t in tours.items() if t.get("sensor", "ideal") == s]))
-                                 for s in sensors}
-            d["intervals"] = iv
+        iv = {"all": ci(parts["all"]), "factors": ci(parts["factors"]),
+              "tours": {n: ci(f) for n, f in parts["tours"].items()}}
+        if "sensors" in parts:
+            iv["sensors"] = {sn: ci(f) for sn, f in parts["sensors"].items()}
+        res["methods"][m]["modes"][mode]["intervals"] = iv
 
 
 def replicate_summary(reps: list[dict], specs: list) -> dict:
