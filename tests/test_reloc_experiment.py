@@ -120,9 +120,9 @@ def _feasible(name: str) -> tuple[float, float]:
     """The values a metric can take: fractions in [0, 1], differences of fractions in [-1, 1],
     kept (a ratio) and sizes, counts and errors from 0 up."""
     key = name.rsplit(".", 1)[-1]
-    if key in ("delta_L", "delta_R"):
+    if key in ("delta_L", "delta_R", "delta"):
         return -1.0, 1.0
-    if key in ("kept", "map_bytes", "built", "gt", "matched", "missing", "extra", "class_errors") or key.endswith(
+    if key in ("kept", "map_bytes", "drift_pct", "built", "gt", "matched", "missing", "extra", "class_errors") or key.endswith(
             ("_m", "_deg")):
         return 0.0, math.inf
     return 0.0, 1.0
@@ -132,6 +132,8 @@ def _has_interval(name: str) -> bool:
     """Whether reloc check gives a metric an interval (recall, coverage and Table II's figures)."""
     from reloc.experiments.intervals import COUNT_OF
 
+    if ".sensor." in f".{name}" and not name.startswith("sensor."):  # a method's recall through a sensor, or its delta
+        return True
     return not name.startswith("map") and name.rsplit(".", 1)[-1] in (*COUNT_OF, *tables.FACTOR_KEYS)
 
 
@@ -161,17 +163,24 @@ class _StubResolver:
         return np.full(100, self.VALUES[name])
 
 
-def test_every_demo_check_can_fail(monkeypatch, tmp_path):
-    """Each check of reloc/specs/demo_checks.yaml passes on constructed values and fails when its
-    metric (a point value, an interval's bound, or one side of a paired comparison) moves, within what
-    the metric can take, to the wrong side: a check that no possible result can fail would be a defect."""
+_SENSORS = ("ideal", "structured_light", "tof")
+
+
+@pytest.mark.parametrize("spec", ["demo_checks.yaml", "demo_sensor_checks.yaml"])
+def test_every_demo_check_can_fail(monkeypatch, tmp_path, spec):
+    """Each check of the shipped check files (reloc/specs/demo_checks.yaml, demo_sensor_checks.yaml)
+    passes on constructed values and fails when its metric (a point value, an interval's bound, or one
+    side of a paired comparison) moves, within what the metric can take, to the wrong side: a check
+    that no possible result can fail would be a defect."""
     from reloc.experiments import checks as ck
 
-    path = REPO / "reloc" / "specs" / "demo_checks.yaml"
+    path = REPO / "reloc" / "specs" / spec
     items = ck.parse_checks(path)
+    sensor_factors = {f"sensor.{s}{d}": None for s in _SENSORS for d in ("", ".delta")}
     metrics = set(ck.metric_table({"methods": {m: {"primary": "closure", "modes": {
-        mode: {"all": {}, "factors": {}} for mode in ("causal", "closure")}} for m in
+        mode: {"all": {}, "factors": dict(sensor_factors)} for mode in ("causal", "closure")}} for m in
         ("videoreloc", "videoreloc_oracle", "appearance", "fpfh_icp", "one_frame")},
+        "sensor_figures": {s: {"odometry": {}, "clip_ends": {}} for s in _SENSORS},
         "maps": {"boxes": {"by_kind": {k: {} for k in ("object", "wall", "floor", "ceiling")}},
                  "boxes_oracle": {"by_kind": {}}}}))
     known = metrics | {f"{m}.{b}" for m in metrics if _has_interval(m) for b in ("lo", "hi")}
