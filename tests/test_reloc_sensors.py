@@ -169,6 +169,10 @@ def test_experiment_through_two_sensors(sensor_design, capsys):
     assert sum(res["sensor_figures"]["ideal"]["clip_ends"].values()) == res["sensor_figures"]["ideal"]["odometry"]["clips"]
     md = (exp / "tables" / "sensors.md").read_text()
     assert "| noisy |" in md and "drift (% of path)" in md
+    iv = mode["intervals"]["sensors"]["noisy"]["recall_1m_10deg"]  # the table prints each recall's interval
+    row = next(ln for ln in md.splitlines() if ln.startswith("| noisy |"))
+    assert f"{100 * mode['sensors']['noisy']['recall_1m_10deg']:.1f} [{100 * iv[0]:.1f}, {100 * iv[1]:.1f}]" in row
+    assert "95 % interval" in md
     fac = (exp / "tables" / "factors.md").read_text()
     assert "Δ noisy" in fac and "(lighting and layout: sensor ideal)" in fac
     assert (exp / "plots" / "tour_apt_0__geometry__query_noisy.png").is_file()

@@ -628,12 +628,14 @@ def sensor_table(res: dict) -> tuple[str, list[dict]]:
         ends = f.get("clip_ends") or {}
         rec = {r["key"]: res["methods"][r["method"]]["modes"][r["mode"]].get("sensors", {}).get(s, {}).get("recall_1m_10deg")
                for r in rows_r}
+        rec_iv = {r["key"]: ((_intervals(res, r).get("sensors") or {}).get(s) or {}).get("recall_1m_10deg")
+                  for r in rows_r}
         drift = "-" if odo.get("drift_pct") is None else f"{odo['drift_pct']:.2f}"
         deg = "-" if odo.get("drift_deg_per_m") is None else f"{odo['drift_deg_per_m']:.2f}"
         c100 = "-" if f.get("clips_per_100m") is None else f"{f['clips_per_100m']:.1f}"
-        lines.append("| " + " | ".join([s, *(pct(rec[r["key"]]) for r in rows_r), drift, deg, c100,
+        lines.append("| " + " | ".join([s, *(pct_ci(rec[r["key"]], rec_iv[r["key"]]) for r in rows_r), drift, deg, c100,
                                          *(str(ends.get(k, 0)) for k in END_REASONS)]) + " |")
-        rows.append({"sensor": s, "recall_1m_10deg": rec, **{k: odo.get(k) for k in ("drift_pct", "drift_deg_per_m",
+        rows.append({"sensor": s, "recall_1m_10deg": rec, "recall_1m_10deg_interval": rec_iv, **{k: odo.get(k) for k in ("drift_pct", "drift_deg_per_m",
                                                                                      "median_drift_pct", "path_m")},
                      "clips_per_100m": f.get("clips_per_100m"), "clip_ends": ends})
     method = next((f.get("method") for f in figs.values() if f.get("method")), "videoreloc")
@@ -642,6 +644,7 @@ def sensor_table(res: dict) -> tuple[str, list[dict]]:
               "first frame: endpoint error / ground-truth path length, summed over clips. Clip ends: closed (enough "
               "evidence), max length, end of tour, odometry failure (a gate failed: the run breaks there), no usable "
               "depth (too few valid depth pixels)."]
+    lines += _interval_note(res)
     return "\n".join(lines), rows
 
 
