@@ -470,6 +470,42 @@ def tiny_design(tmp_path_factory):
 
 
 @pytest.mark.slow
+def test_tables_iii_and_iv_with_intervals_end_to_end(tiny_design, capsys):
+    """tables: [units, ablation] on the tiny design: every unit length writes its trajectory, whose
+    recall matches units.json; Tables III and IV print intervals, and the ablation rows' paired
+    differences to the full method are in results.json."""
+    spec = yaml.safe_load((tiny_design / "exp.yaml").read_text())
+    spec.update({"out": str(tiny_design / "exp_tables"), "methods": ["videoreloc", "one_frame"],
+                 "tables": ["units", "ablation"]})
+    (tiny_design / "exp_tables.yaml").write_text(yaml.safe_dump(spec))
+    assert reloc_main(["experiment", str(tiny_design / "exp_tables.yaml"), "--quiet", "--no-plots"]) == 0
+    capsys.readouterr()
+    exp = tiny_design / "exp_tables"
+    res = json.loads((exp / "results.json").read_text())
+    for u in res["units"]:
+        assert sorted(u["segments"]) == sorted(res["tours"])
+        iv = u["intervals"]["all_recall_1m_10deg"]
+        assert iv[0] <= u["all_recall_1m_10deg"] + 1e-12 and u["all_recall_1m_10deg"] <= iv[1] + 1e-12
+        for name in res["tours"]:  # the unit's trajectory gives units.json's recall
+            rep = json.loads((exp / "runs" / "one_frame" / name / "units.json").read_text())
+            row = next(r for r in rep["units"] if r["unit"] == u["unit"])
+            frames = list(range(450))[:: 50 if u["unit"] == 1 else 1]
+            got = _tum_recall(exp / "runs" / "one_frame" / name / tables.unit_file(u["unit"]),
+                              Path(res["tours"][name]["dir"]) / "poses.txt", frames)
+            assert got == pytest.approx(row["recall_1m_10deg"]), (u["unit"], name)
+    assert len(res["ablation"]) == 5
+    for a in res["ablation"]:
+        assert a["intervals"]["closure_coarse"] is not None
+        if a["method"] != "videoreloc":
+            lo, hi = a["intervals"]["closure_coarse_delta"]
+            assert lo <= a["closure_coarse_delta"] + 1e-12 and a["closure_coarse_delta"] <= hi + 1e-12
+    units_md = (exp / "tables" / "units.md").read_text()
+    abl_md = (exp / "tables" / "ablation.md").read_text()
+    assert "-frame clip | " in units_md and " [" in units_md and "95 % interval" in units_md
+    assert "against all on" in abl_md and "95 % interval" in abl_md
+
+
+@pytest.mark.slow
 def test_replicates_and_the_stability_benchmark_with_the_learned_detector(tiny_design, capsys):
     """replicates: 2 reruns the experiment reseeded, the second with the learned detector's input
     jittered; results.json, Table I and reloc check report the spread. reloc bench stability reruns
@@ -692,8 +728,71 @@ def test_units_and_ablation_tables_from_run_outputs(tmp_path):
     rows = tables._ablation(res, [v for v in ABLATIONS if v != (True, True, True)])
     assert [(r["orientation_aware"], r["run_level"], r["adaptive"]) for r in rows] == list(ABLATIONS)
     md, _ = tables.ablation_table({"ablation": rows})
-    assert md.splitlines()[4] == "|  |  |  | 50.0 | 30.0 | 40.0 | 20.0 |"
-    assert md.splitlines()[-3] == "| ✓ | ✓ | ✓ | 90.0 | 30.0 | 40.0 | 40.0 |"
+    assert md.splitlines()[4] == "|  |  |  | 50.0 | 30.0 | 40.0 | 20.0 | - |"  # no interval without segment counts
+    assert "| ✓ | ✓ | ✓ | 90.0 | 30.0 | 40.0 | 40.0 | - |" in md.splitlines()
+
+
+def test_units_and_ablation_tables_carry_intervals(tmp_path):
+    """Tables III and IV get intervals from the same draws as Tables I and II: each unit's recall from
+    its trajectory (``unit_L.txt``, the one-frame unit's ``causal.txt``) counted per path segment, each
+    ablation row's from its runs, and an ablation row's difference to the full method is paired (a row
+    that equals it has the interval [0, 0], one that fails where it succeeds a negative one)."""
+    from formats.camera import write_tum
+    from reloc.experiments.intervals import IntervalSettings
+
+    n = 400
+    queries = {f"apt_{k}__day__query": {"layout": f"apt_{k}", "lighting": "day", "frames": n, "fps": 30.0,
+                                        "path": "query"} for k in (0, 1)}
+    gt = {i: np.eye(4) for i in range(n)}
+    for i in gt:
+        gt[i] = gt[i].copy()
+        gt[i][0, 3] = 0.01 * i
+
+    class _Tour:
+        frame_indices = list(range(n))
+
+    gts = {q: (_Tour(), gt) for q in queries}
+    for k, name in enumerate(queries):
+        d = tmp_path / "runs" / "one_frame" / name
+        d.mkdir(parents=True)
+        (d / "units.json").write_text(json.dumps({"units": [
+            {"unit": 1, "recall_1m_10deg": 0.5, "recall_25cm_5deg": 0.5, "frames": n // 10, "sampled_every": 10},
+            {"unit": 100, "recall_1m_10deg": 0.5, "recall_25cm_5deg": 0.5, "frames": n, "sampled_every": 1}]}))
+        right = [i for i in range(n) if (i // 100) % 2 == 0]  # the unit succeeds on segments 0 and 2
+        write_tum(d / tables.unit_file(100), [gt[i] for i in right], fps=30.0, frames=right)
+        write_tum(d / tables.unit_file(1), [gt[i] for i in range(0, n, 10)], fps=30.0, frames=list(range(0, n, 10)))
+    rows = tables._units(tmp_path, queries, "apt_0", gts, IntervalSettings(resamples=200), stride=10)
+    assert [sorted(r["segments"]) for r in rows] == [sorted(queries)] * 2
+    assert rows[1]["segments"]["apt_1__day__query"] == [[100, 100, 100, 100], [100, 0, 0, 0]] * 2
+
+    def counts(ok):  # per segment of 100 frames: frames, ok at both cutoffs, posed
+        return [[100, 100 * o, 100 * o, 100 * o] for o in ok]
+
+    full, weaker = counts([1, 1, 1, 1]), counts([1, 0, 1, 1])
+    res = {"tours": queries, "unchanged": "apt_0", "units": rows, "intervals": {"settings": {"resamples": 200}},
+           "methods": {m: {"modes": {mode: {"units": {q: c for q in queries}, "all": {}} for mode in ("closure", "causal")}}
+                       for m, c in (("videoreloc", full), ("ablation_110", full), ("ablation_100", weaker))}}
+    res["ablation"] = [{"method": m, "orientation_aware": True, "run_level": m != "ablation_100", "adaptive": m == "videoreloc",
+                        "closure_coarse": v, "closure_fine": v, "causal_coarse": v, "causal_fine": v}
+                       for m, v in (("ablation_100", 0.75), ("ablation_110", 1.0), ("videoreloc", 1.0))]
+    tables.add_intervals(res, IntervalSettings(resamples=200))
+    tables.add_table_intervals(res)
+    u100 = rows[1]["intervals"]
+    lo, hi = u100["all_recall_1m_10deg"]
+    assert 0.0 <= lo < 0.5 < hi <= 1.0  # 2 of 4 segments succeed: the interval spans the point value
+    assert u100["unchanged_recall_1m_10deg"] is not None and "rearranged_recall_1m_10deg" in u100
+    assert rows[0]["intervals"]["all_recall_1m_10deg"] == [1.0, 1.0]  # every sampled frame right
+    by = {a["method"]: a for a in res["ablation"]}
+    assert by["ablation_110"]["intervals"]["closure_coarse_delta"] == [0.0, 0.0]
+    assert by["ablation_100"]["closure_coarse_delta"] == pytest.approx(-0.25)
+    dlo, dhi = by["ablation_100"]["intervals"]["closure_coarse_delta"]
+    assert -1.0 <= dlo < -0.25 < dhi <= 0.0
+    assert "closure_coarse_delta" not in by["videoreloc"]["intervals"]
+    md, out_rows = tables.units_table(res)
+    assert "| 100-frame clip | 50.0 [" in md and "95 % interval" in md
+    assert all("segments" not in r for r in out_rows)  # the table's rows stay small
+    md, _ = tables.ablation_table(res)
+    assert "| -25.0 [" in md and "| +0.0 [+0.0, +0.0] |" in md
 
 
 # ---------------------------------------------------------------------------------------------

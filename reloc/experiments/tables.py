@@ -40,8 +40,8 @@ from formats.camera import read_tum
 from formats.yamlfile import read_json
 
 from .evaluation import END_REASONS, THRESHOLDS, end_reason_kind, odometry_drift, pose_errors, summarize
-from .intervals import (Bootstrap, IntervalSettings, factor_figures, figure_values, n_segments, pooled_figures,
-                        segment_counts, tour_figures, units_note)
+from .intervals import (OK_COARSE, OK_FINE, Bootstrap, IntervalSettings, factor_figures, figure_values, n_segments,
+                        pooled_figures, segment_counts, tour_figures, units_note)
 
 FORMAT = "videoreloc-experiment/1"
 LIGHTINGS = ("day", "evening", "night")
@@ -246,9 +246,10 @@ def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: li
                                 "external": True})
     if "units" in spec.tables:
         res["units"] = _units(out, {n: t for n, t in queries.items() if t.get("sensor", "ideal") == reference},
-                              spec.unchanged)
+                              spec.unchanged, gts, settings, spec.one_frame_stride)
     if variants:
         res["ablation"] = _ablation(res, variants)
+    add_table_intervals(res)
     return res
 
 
@@ -268,6 +269,7 @@ def bootstrap_of(res: dict) -> Bootstrap:
     tours' paths and the interval settings it was computed with."""
     units = {f"{m}.{mode}": d["units"] for m, e in res["methods"].items() for mode, d in e["modes"].items()
              if d.get("units") is not None}
+    units.update({unit_key(u["unit"]): u["segments"] for u in res.get("units") or () if u.get("segments")})
     st = IntervalSettings(**(res.get("intervals") or {}).get("settings", {}))
     return Bootstrap(units, {n: t.get("path", "query") for n, t in res["tours"].items()}, st)
 
@@ -312,6 +314,43 @@ def add_intervals(res: dict, settings: IntervalSettings) -> None:
         if "sensors" in parts:
             iv["sensors"] = {sn: ci(f) for sn, f in parts["sensors"].items()}
         res["methods"][m]["modes"][mode]["intervals"] = iv
+
+
+def add_table_intervals(res: dict) -> None:
+    """Intervals of Tables III and IV, from the same draws as every other figure: per localization
+    unit its pooled recall over all, the unchanged and the rearranged tours (``units[k].intervals``);
+    per ablation row its closure and causal recall and, for closure at 1 m/10 deg, the paired
+    difference to the row with every component on (``ablation[k].intervals``)."""
+    if not res.get("units") and not res.get("ablation"):
+        return
+    boot = bootstrap_of(res)
+    unchanged = res.get("unchanged")
+    for u in res.get("units") or ():
+        seg = u.get("segments")
+        if not seg:
+            continue
+        groups = {"all": list(seg), "unchanged": [n for n in seg if res["tours"][n]["layout"] == unchanged],
+                  "rearranged": [n for n in seg if res["tours"][n]["layout"] != unchanged]}
+        u["intervals"] = {f"{g}_{k}": boot.interval(figure_values(boot, unit_key(u["unit"]), ("pooled", c, (tuple(ns),)))[1])
+                          for g, ns in groups.items() if ns for k, c in (("recall_1m_10deg", OK_COARSE),
+                                                                         ("recall_25cm_5deg", OK_FINE))}
+    reference = res.get("reference_sensor", "ideal")
+    coarse = pooled_figures([n for n, t in res["tours"].items() if t.get("sensor", "ideal") == reference])
+    full = next((r for r in res.get("ablation") or () if r["method"] == "videoreloc"), None)
+    for a in res.get("ablation") or ():
+        m = a["method"]
+        iv = {}
+        for mode in ("closure", "causal"):
+            got = (res["methods"][m]["modes"][mode].get("intervals") or {}).get("all") or {}
+            iv[f"{mode}_coarse"] = got.get("recall_1m_10deg")
+            iv[f"{mode}_fine"] = got.get("recall_25cm_5deg")
+        if full is not None and a is not full and coarse and f"{m}.closure" in boot.units \
+                and a["closure_coarse"] is not None and full["closure_coarse"] is not None:
+            fig = coarse["recall_1m_10deg"]
+            d = figure_values(boot, f"{m}.closure", fig)[1] - figure_values(boot, "videoreloc.closure", fig)[1]
+            a["closure_coarse_delta"] = a["closure_coarse"] - full["closure_coarse"]
+            iv["closure_coarse_delta"] = boot.interval(d)
+        a["intervals"] = iv
 
 
 def replicate_summary(reps: list[dict], specs: list) -> dict:
@@ -424,7 +463,19 @@ def map_line(label: str, q: dict) -> str:
             f"median center error).")
 
 
-def _units(out: Path, queries: dict, unchanged: str) -> list[dict]:
+def unit_file(length: int) -> str:
+    """The trajectory of a localization unit's poses in a ``one_frame`` run folder (Table III):
+    ``causal.txt`` for the one-frame unit, ``unit_L.txt`` for L-frame clips."""
+    return "causal.txt" if int(length) == 1 else f"unit_{int(length)}.txt"
+
+
+def unit_key(length: int) -> str:
+    """The run key of a localization unit's segment counts in the bootstrap (``bootstrap_of``)."""
+    return f"unit_{int(length)}"
+
+
+def _units(out: Path, queries: dict, unchanged: str, gts: dict | None = None,
+           settings: IntervalSettings | None = None, stride: int = 1) -> list[dict]:
     reps = {}
     for name in queries:
         p = out / "runs" / "one_frame" / name / "units.json"
@@ -434,6 +485,20 @@ def _units(out: Path, queries: dict, unchanged: str) -> list[dict]:
     lengths = sorted({u["unit"] for r in reps.values() for u in r["units"]})
     for L in lengths:
         row = {"unit": L}
+        if gts is not None and reps:  # per-segment outcomes for the intervals, when every tour has the unit's poses
+            seg = {}
+            for name in reps:
+                f = out / "runs" / "one_frame" / name / unit_file(L)
+                if not f.is_file():
+                    break
+                tour, gt = gts[name]
+                frames = [int(i) for i in tour.frame_indices]
+                g = {i: gt[i] for i in (frames[::max(1, stride)] if L == 1 else frames)}
+                est = _estimates(f, queries[name]["fps"])
+                seg[name] = _segment_counts({i: T for i, T in est.items() if i in g}, g,
+                                            settings or IntervalSettings(), queries[name])
+            else:
+                row["segments"] = seg
         for group, names in (("all", list(reps)), ("unchanged", [n for n in reps if queries[n]["layout"] == unchanged]),
                              ("rearranged", [n for n in reps if queries[n]["layout"] != unchanged])):
             us = [u for n in names for u in reps[n]["units"] if u["unit"] == L]
@@ -454,7 +519,7 @@ def _ablation(res: dict, variants: list) -> list[dict]:
         if m not in res["methods"]:
             continue
         modes = res["methods"][m]["modes"]
-        row = {"orientation_aware": v[0], "run_level": v[1], "adaptive": v[2]}
+        row = {"orientation_aware": v[0], "run_level": v[1], "adaptive": v[2], "method": m}
         for mode in ("closure", "causal"):
             a = modes[mode]["all"]
             row[f"{mode}_coarse"] = a["recall_1m_10deg"]
@@ -655,24 +720,34 @@ def units_table(res: dict) -> tuple[str, list[dict]]:
         name = "one frame" if u["unit"] == 1 else f"{u['unit']}-frame clip"
         if u["unit"] == 1 and (u.get("sampled_every") or 1) > 1:
             name += f" (every {u['sampled_every']}th frame)"
-        lines.append(f"| {name} | {pct(u['all_recall_1m_10deg'])} | {pct(u['all_recall_25cm_5deg'])} | "
-                     f"{pct(u['unchanged_recall_1m_10deg'])} | {pct(u['rearranged_recall_1m_10deg'])} |")
+        iv = u.get("intervals") or {}
+        cells = [pct_ci(u[k], iv.get(k)) for k in ("all_recall_1m_10deg", "all_recall_25cm_5deg",
+                                                   "unchanged_recall_1m_10deg", "rearranged_recall_1m_10deg")]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
     lines += ["", "Each unit is registered independently, without tracking or a pose graph; recall (%) over all "
               "frames, measured when the unit closes."]
-    return "\n".join(lines), res["units"]
+    if any(u.get("intervals") for u in res["units"]):
+        lines += _interval_note(res)
+    return "\n".join(lines), [{k: v for k, v in u.items() if k != "segments"} for u in res["units"]]
 
 
 def ablation_table(res: dict) -> tuple[str, list[dict]]:
     ck = lambda b: "✓" if b else ""  # noqa: E731
     lines = [f"**{table_title('ablation')}**", "",
              "| orientation-aware | run-level | adaptive | closure 1 m/10° | closure 0.25 m/5° | causal 1 m/10° | "
-             "causal 0.25 m/5° |", "|---|---|---|---|---|---|---|"]
+             "causal 0.25 m/5° | closure 1 m/10° against all on |", "|---|---|---|---|---|---|---|---|"]
     for a in res["ablation"]:
+        iv = a.get("intervals") or {}
+        cells = [pct_ci(a[k], iv.get(k)) for k in ("closure_coarse", "closure_fine", "causal_coarse", "causal_fine")]
+        delta = pct_ci(a.get("closure_coarse_delta"), iv.get("closure_coarse_delta"), signed=True) \
+            if "closure_coarse_delta" in a else "-"
         lines.append(f"| {ck(a['orientation_aware'])} | {ck(a['run_level'])} | {ck(a['adaptive'])} | "
-                     f"{pct(a['closure_coarse'])} | {pct(a['closure_fine'])} | {pct(a['causal_coarse'])} | "
-                     f"{pct(a['causal_fine'])} |")
+                     + " | ".join(cells) + f" | {delta} |")
     lines += ["", "Recall (%) over all frames. Empty cells: point-to-point refinement, no run-level decision, "
-              "fixed 100-frame clips. Tracking and the pose graph stay on."]
+              "fixed 100-frame clips. Tracking and the pose graph stay on. The last column: the row's closure recall "
+              "minus that of the row with every component on, with the interval of the paired difference."]
+    if any(a.get("intervals") for a in res["ablation"]):
+        lines += _interval_note(res)
     return "\n".join(lines), res["ablation"]
 
 

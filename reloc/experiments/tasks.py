@@ -160,6 +160,12 @@ def run_tour_task(task: dict) -> dict:
         fr = sorted(one)
         write_tum(d / "causal.txt", [one[i] for i in fr], fps=tour.fps, frames=fr,
                   header=f"one-frame object units on every {task['stride']}th frame of {tour.root}")
+        for L in lengths:  # each longer unit's poses, for Table III's intervals (tables.unit_file)
+            if L > 1:
+                e = est.get(L, {})
+                fr = sorted(e)
+                write_tum(d / tables.unit_file(L), [e[i] for i in fr], fps=tour.fps, frames=fr,
+                          header=f"{L}-frame clip units, each registered independently, of {tour.root}")
         write_json_atomic(d / "units.json", rep)
     else:
         raise ValueError(f"unknown method {method!r}")
