@@ -65,3 +65,59 @@ def add_sensor(p: argparse.ArgumentParser, verb: str = "read the frames", defaul
                         f"structured_light, tof) or a sensor YAML file (default: {default})")
     return p.add_argument("--sensor-seed", type=int, default=0, metavar="S",
                           help="seed of the sensor noise (per frame: formats.sensors.frame_seed; default 0)")
+
+
+def run_command(prog: str, fn, args) -> int:
+    """Run a CLI command function: a UserError prints one line and exits 2; Ctrl-C, SIGTERM and SIGHUP
+    stop it in order (``formats.lifetime``: its workers are stopped, one line, exit 130 / 143 / 129);
+    a reader that closed the pipe (``synth scene show apt_0 | head``) ends it quietly."""
+    import os
+    import sys
+
+    from .errors import UserError
+    from .lifetime import exit_status, signal_name, signals_interrupt
+
+    try:
+        with signals_interrupt():
+            return int(fn(args) or 0)
+    except UserError as e:
+        _end_progress_line()
+        print(f"{prog}: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt as e:
+        _end_progress_line()
+        print(f"{prog}: interrupted ({signal_name(e)})", file=sys.stderr)
+        return exit_status(e)
+    except BrokenPipeError:
+        if not _stdout_reader_gone():  # a broken pipe elsewhere is a real error
+            raise
+        # point stdout at /dev/null so that the interpreter's final flush is quiet too
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
+
+
+def _end_progress_line() -> None:
+    """Close any progress bar still drawn on stderr, so that a one-line message starts its own line."""
+    import sys
+
+    tqdm = sys.modules.get("tqdm")
+    if tqdm is None:
+        return
+    for bar in list(getattr(tqdm.tqdm, "_instances", ())):
+        try:
+            bar.close()
+        except Exception:  # noqa: BLE001 - a bar that cannot close must not hide the error
+            pass
+
+
+def _stdout_reader_gone() -> bool:
+    """stdout is a pipe whose reading end is closed (``| head`` has exited): poll reports an error on it."""
+    import select
+    import sys
+
+    try:
+        poll = select.poll()
+        poll.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(ev & select.POLLERR for _, ev in poll.poll(0))
+    except (AttributeError, OSError, ValueError):  # no poll here, or stdout is not a file
+        return False

@@ -1,4 +1,5 @@
-"""Errors a user can act on. The CLIs print them as one line and exit with status 2."""
+"""Errors a user can act on. The CLIs print them as one line and exit with status 2
+(``formats.cli.run_command``)."""
 
 from __future__ import annotations
 
@@ -71,38 +72,3 @@ def one_line(e: BaseException, limit: int = 240, with_type: bool = False) -> str
     if with_type:
         s = f"{type(e).__name__}: {s}".rstrip(": ")
     return s if len(s) <= limit else s[: limit - 3] + "..."
-
-
-def run_command(prog: str, fn, args) -> int:
-    """Run a CLI command function: a UserError prints one line and exits 2, Ctrl-C exits 130, and a
-    reader that closed the pipe (``synth scene show apt_0 | head``) ends it quietly."""
-    import os
-    import sys
-
-    try:
-        return int(fn(args) or 0)
-    except UserError as e:
-        print(f"{prog}: error: {e}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print(f"{prog}: interrupted", file=sys.stderr)
-        return 130
-    except BrokenPipeError:
-        if not _stdout_reader_gone():  # a broken pipe elsewhere is a real error
-            raise
-        # point stdout at /dev/null so that the interpreter's final flush is quiet too
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 141
-
-
-def _stdout_reader_gone() -> bool:
-    """stdout is a pipe whose reading end is closed (``| head`` has exited): poll reports an error on it."""
-    import select
-    import sys
-
-    try:
-        poll = select.poll()
-        poll.register(sys.stdout.fileno(), select.POLLOUT)
-        return any(ev & select.POLLERR for _, ev in poll.poll(0))
-    except (AttributeError, OSError, ValueError):  # no poll here, or stdout is not a file
-        return False

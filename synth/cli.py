@@ -9,8 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from formats.cli import ArgumentParser
-from formats.errors import run_command
+from formats.cli import ArgumentParser, run_command
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -144,7 +144,7 @@ def test_a_closed_stdout_pipe_ends_a_command_quietly():
     import subprocess
     import sys
 
-    from formats.errors import run_command
+    from formats.cli import run_command
 
     r, w = os.pipe()
     os.close(r)  # the reading end closed before the command writes

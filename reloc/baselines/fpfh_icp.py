@@ -668,7 +668,7 @@ def main(argv=None) -> int:
     import argparse
 
     from formats.tour import Tour
-    from formats.errors import run_command
+    from formats.cli import run_command
 
     from ..backend.run import load_clip_poses
 

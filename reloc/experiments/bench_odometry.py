@@ -31,8 +31,8 @@ from pathlib import Path
 import numpy as np
 
 from formats.atomic import write_json_atomic
-from formats.cli import add_json, add_out
-from formats.errors import check_output_file, run_command
+from formats.cli import add_json, add_out, run_command
+from formats.errors import check_output_file
 
 from ..config import OdometryConfig
 from ..frontend.odometry import OdometryChain, rotation_deg

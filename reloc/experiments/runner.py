@@ -19,6 +19,7 @@ import concurrent.futures as cf
 import json
 import math
 import multiprocessing as mp
+import os
 import sys
 import time
 from pathlib import Path
@@ -26,6 +27,7 @@ from pathlib import Path
 from formats.atomic import write_json_atomic
 from formats.design import DESIGN_FILE, list_tours, read_design, tour_name
 from formats.errors import SceneFormatError, UserError, check_output_folder
+from formats.lifetime import folder_lock, stop_processes, worker_init
 from formats.sensors import load_sensor
 from formats.tour import Tour
 from formats.cli import add_quiet, add_workers
@@ -123,8 +125,10 @@ def _check_detector_inputs(spec: ExperimentSpec, queries: dict, mapping: dict) -
 def _pool(workers: int):
     if workers <= 1:
         return None
-    # spawn: Open3D and OpenCV keep thread pools that a fork would copy mid-state
-    return cf.ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"))
+    # spawn: Open3D and OpenCV keep thread pools that a fork would copy mid-state; the workers die with
+    # the driver and leave Ctrl-C to it (formats.lifetime)
+    return cf.ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=worker_init,
+                                  initargs=(os.getpid(),))
 
 
 class _Runner:
@@ -157,17 +161,31 @@ class _Runner:
                     keep.append(t)
             waiting = keep
 
-        while waiting or running:
-            for tid, fn, arg, _ in list(ready()):
-                if self.pool is None:
-                    self._finish(tid, lambda: fn(arg), done)
-                else:
-                    running[self.pool.submit(fn, arg)] = tid
-            if not running:
-                continue
-            finished, _ = cf.wait(running, return_when=cf.FIRST_COMPLETED)
-            for f in finished:
-                self._finish(running.pop(f), f.result, done)
+        try:
+            while waiting or running:
+                for tid, fn, arg, _ in list(ready()):
+                    if self.pool is None:
+                        self._finish(tid, lambda: fn(arg), done)
+                    else:
+                        running[self.pool.submit(fn, arg)] = tid
+                if not running:
+                    continue
+                finished, _ = cf.wait(running, return_when=cf.FIRST_COMPLETED)
+                for f in finished:
+                    self._finish(running.pop(f), f.result, done)
+        except BaseException:  # Ctrl-C, SIGTERM, SIGHUP (formats.lifetime) or a bug: stop the workers now
+            self.abort()
+            raise
+
+    def abort(self) -> None:
+        """Cancel what has not started and stop the workers (SIGTERM, then SIGKILL after 3 s): a task cut
+        short leaves nothing half-written (every output is renamed into place) and reruns next time."""
+        if self.pool is None:
+            return
+        procs = list((getattr(self.pool, "_processes", None) or {}).values())
+        self.pool.shutdown(wait=False, cancel_futures=True)
+        stop_processes(procs)
+        self.pool = None
 
     def _finish(self, tid, get, done) -> None:
         try:
@@ -191,9 +209,19 @@ def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int |
     t_start = time.time()
     out = Path(out or spec.out)
     check_output_folder(out)
+    lock = folder_lock(out, "reloc experiment")
+    try:
+        return _run_experiment(spec, out, workers, progress, plots, t_start, lock)
+    finally:
+        lock.release()
+
+
+def _run_experiment(spec: ExperimentSpec, out: Path, workers: int | None, progress: bool, plots: bool,
+                    t_start: float, lock) -> dict:
     workers = workers or spec.workers
     queries, mapping = design_tours(spec)
     _check_detector_inputs(spec, queries, mapping)
+    lock.acquire()  # one experiment per folder; made and locked only once the inputs are known to be good
     out.mkdir(parents=True, exist_ok=True)
     maps_dir = out / "maps"
     maps_dir.mkdir(exist_ok=True)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..render.chunks import run_chunk_process
+from ..render.chunks import run_chunk_process, stopping_workers
 from .plan import Chunk, Plan
 from .state import DONE, FAILED, PENDING, RUNNING, JobState
 
@@ -96,7 +96,7 @@ def run_local(plan: Plan, state: JobState, todo: list[Chunk], workers: int, bar:
         with lock:
             bar.update()
 
-    with ThreadPoolExecutor(max_workers=workers) as pool:
+    with ThreadPoolExecutor(max_workers=workers) as pool, stopping_workers(pool):
         running = {}
         while True:
             for c in q.take_ready(workers - len(running)):

@@ -13,6 +13,7 @@ from pathlib import Path
 from formats.atomic import write_json_atomic
 from formats.design import write_design
 from formats.errors import UserError, check_output_folder
+from formats.lifetime import folder_lock
 
 from ..render.render_tour import make_output_folder, tour_meta, write_static_files
 from ..render.settings import quality
@@ -67,9 +68,16 @@ def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, back
                                   progress=(lambda m: print(m, file=sys.stderr)) if progress else (lambda m: None))
     staging = None
     session = None
+    lock = None
     try:
         if store is None:
             plan = expand(spec, out, check_clearance=not allow_clearance_breach)
+            try:
+                check_output_folder(plan.out)
+            except UserError as e:
+                out_error(spec, from_cli, e)
+            # one run per job folder (with or without --resume); the kernel drops the lock with the process
+            lock = folder_lock(plan.out, "synth render").acquire()
             state_path = plan.out / STATE_FILE
             old = JobState.load(state_path)
             shown = str(state_path)
@@ -97,6 +105,8 @@ def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, back
     finally:
         if session is not None:
             session.close()
+        if lock is not None:
+            lock.release()
         if staging is not None:
             import shutil
 

@@ -14,9 +14,12 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import threading
+from contextlib import contextmanager
 from pathlib import Path
 
 from formats import frames as fr
+from formats.lifetime import die_with_parent, stop_processes, worker_env
 
 
 
@@ -62,8 +65,56 @@ def run_chunk_process(chunk_kind: str, job: dict, job_file: str, log_file: str, 
     info: dict = {}
     err = None
     with open(log_file, "w") as log:
-        proc = subprocess.Popen([sys.executable, "-m", worker, job_file], stdout=subprocess.PIPE, stderr=log, text=True, bufsize=1,
-                                env=env)
+        with _LIVE_LOCK:  # no new worker once the driver is stopping (stopping_workers)
+            if _STOPPING.is_set():
+                return 130, "stopped: the run was interrupted", info
+            proc = subprocess.Popen([sys.executable, "-m", worker, job_file], stdout=subprocess.PIPE, stderr=log, text=True,
+                                    bufsize=1, env=worker_env(env))
+            _LIVE.add(proc)
+        try:
+            rc, err = _follow(proc, log, on_frame, info)
+        finally:
+            with _LIVE_LOCK:
+                _LIVE.discard(proc)
+    if rc != 0 and err is None:
+        err = f"exit status {rc}" + (" (killed)" if rc < 0 else "")
+    return rc, err, info
+
+
+# the chunk workers this process has running, so that a stopping driver can end them (stopping_workers)
+_LIVE: set = set()
+_LIVE_LOCK = threading.Lock()
+_STOPPING = threading.Event()
+
+
+@contextmanager
+def stopping_workers(pool=None):
+    """``with ThreadPoolExecutor(...) as pool, stopping_workers(pool):`` around a driver's chunk loop:
+    if it ends by an exception (Ctrl-C, SIGTERM, SIGHUP: ``formats.lifetime``), the chunks not yet
+    started are cancelled, no new worker starts, and every running chunk worker is stopped (SIGTERM,
+    SIGKILL after 3 s) before the exception goes on. Frames are written atomically, so a chunk cut
+    short leaves only whole frames, and ``--resume`` renders the rest."""
+    try:
+        yield
+    except BaseException:
+        with _LIVE_LOCK:
+            _STOPPING.set()
+            procs = list(_LIVE)
+        try:
+            if pool is not None:
+                pool.shutdown(wait=False, cancel_futures=True)
+            stop_processes(procs)
+            if pool is not None:
+                pool.shutdown(wait=True)  # the threads return once their workers are gone
+        finally:
+            _STOPPING.clear()
+        raise
+
+
+def _follow(proc, log, on_frame, info: dict) -> tuple[int, str | None]:
+    """Read a chunk worker's events until it exits: (exit status, its error event or None)."""
+    err = None
+    try:
         for line in proc.stdout:
             if not line.startswith("{"):
                 log.write(line)
@@ -81,10 +132,9 @@ def run_chunk_process(chunk_kind: str, job: dict, job_file: str, log_file: str, 
                 info["device"] = ev.get("device")
             elif e == "error":
                 err = ev.get("error")
+    finally:
         rc = proc.wait()
-    if rc != 0 and err is None:
-        err = f"exit status {rc}" + (" (killed)" if rc < 0 else "")
-    return rc, err, info
+    return rc, err
 
 
 # -- the worker's side ----------------------------------------------------------------------------
@@ -98,6 +148,7 @@ def emit(**event) -> None:
 def worker_main(module: str, run, argv=None) -> int:
     """``python -m MODULE JOB.json``: run the chunk; an exception is reported as an ``error`` event, then raised."""
     argv = sys.argv[1:] if argv is None else argv
+    die_with_parent()  # a chunk worker never outlives the driver that reads its events
     if len(argv) != 1:
         print(f"usage: python -m {module} JOB.json", file=sys.stderr)
         return 2

@@ -31,9 +31,10 @@ from formats.atomic import replacing, write_json_atomic
 from formats.camera import Intrinsics, camera_document, write_tum
 from formats.tour import CAMERA_FILE
 from formats.errors import UserError, check_output_folder
+from formats.lifetime import folder_lock
 
 from .. import __version__
-from .chunks import chunk_job, missing_frames, run_chunk_process, split
+from .chunks import chunk_job, missing_frames, run_chunk_process, split, stopping_workers
 from .settings import DEFAULTS, DEVICES, quality
 from ..scene.model import boxes_document, load_layout, resolve_layout_path
 
@@ -239,7 +240,7 @@ def _render_pass(p: Prepared, kind: str, out_dir: Path, work: Path, desc: str, p
         return run_chunk_process(kind, job, str(jf), str(log), on_frame) + (log,)
 
     try:
-        with ThreadPoolExecutor(max_workers=p.spec.workers) as pool:
+        with ThreadPoolExecutor(max_workers=p.spec.workers) as pool, stopping_workers(pool):
             results = list(pool.map(one, enumerate(split(todo, p.spec.chunk_size))))
     finally:
         bar.close()
@@ -256,9 +257,15 @@ def _render_pass(p: Prepared, kind: str, out_dir: Path, work: Path, desc: str, p
 
 
 def render_tour(spec: TourSpec, progress: bool = True) -> dict:
-    """Render (or finish rendering) one tour; returns its meta.json content."""
+    """Render (or finish rendering) one tour; returns its meta.json content. One run per tour folder
+    (``formats.lifetime.folder_lock``)."""
     t0 = time.time()
     p = prepare(spec)
+    with folder_lock(p.out, "synth tour render"):
+        return _render_prepared(spec, p, progress, t0)
+
+
+def _render_prepared(spec: TourSpec, p, progress: bool, t0: float) -> dict:
     write_static_files(p)
     frames_dir = p.out / "frames"
     frames_dir.mkdir(parents=True, exist_ok=True)

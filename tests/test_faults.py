@@ -1,0 +1,235 @@
+"""The fault suite: signals, locks and corrupt input, each asserting the exit status, the one-line
+message and what is left behind, so that they stay fixed (issue: hardening 2).
+
+How the checks are made, so that others can extend them:
+
+* **Signals** (``formats.lifetime``): the command runs as a child process (``python -m reloc.cli``
+  or ``python -m synth.cli``) on a small geometry-only design; once it has its workers (pool
+  workers, or chunk worker processes), the test sends one signal to the **driver only** (not its
+  process group: that is what ``kill PID`` and a closed terminal do) and records every descendant
+  from ``/proc``. SIGINT, SIGTERM and SIGHUP must end the driver with ``128 + signal`` and one line
+  ``PROG: interrupted (SIGNAL)``; SIGKILL cannot be caught, so there only the workers' own watch
+  (parent-death signal, parent-pid poll) is tested. In every case no descendant may be alive 5 s
+  later, and a rerun (``--resume`` for a render) must finish with nothing failed.
+* **Locks**: a second run into a folder that a run owns is refused (exit 2, one line naming the
+  owner's pid), whether or not it passes ``--resume``; a lock file left by a dead run never blocks.
+* **Corrupt input and full disks** live beside the code they guard (``test_bad_input_*.py``,
+  ``test_faults`` adds the cases of this issue).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from formats.lifetime import FolderLock
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _children(pid: int) -> set[int]:
+    """Every live descendant of ``pid`` (from /proc)."""
+    parent_of = {}
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                fields = (d / "stat").read_text().rsplit(")", 1)[1].split()
+                parent_of[int(d.name)] = int(fields[1])
+            except (OSError, IndexError, ValueError):
+                continue
+    out, frontier = set(), {pid}
+    while frontier:
+        kids = {p for p, pp in parent_of.items() if pp in frontier} - out
+        out |= kids
+        frontier = kids
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def _cmdline(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+    except OSError:
+        return ""
+
+
+def _start(argv: list[str], want_workers: int, marker: str, timeout: float = 120.0):
+    """Start ``python -m ...`` and wait until it has ``want_workers`` children whose command line holds
+    ``marker``; returns (process, descendants)."""
+    proc = subprocess.Popen([sys.executable, "-m", *argv], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        kids = _children(proc.pid)
+        if sum(marker in _cmdline(k) for k in kids) >= want_workers:
+            return proc, kids
+        if proc.poll() is not None:
+            break
+        time.sleep(0.1)
+    out, err = proc.communicate(timeout=30) if proc.poll() is None else proc.communicate()
+    proc.kill()
+    pytest.fail(f"{argv}: no {want_workers} workers ({marker}) appeared; rc {proc.returncode}; {err[-2000:]}")
+
+
+def _signal_and_check(proc, kids: set[int], sig: int, prog: str) -> str:
+    os.kill(proc.pid, sig)
+    try:
+        _, err = proc.communicate(timeout=20)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        pytest.fail(f"the driver did not end within 20 s of {signal.Signals(sig).name}")
+    deadline = time.monotonic() + 5.0
+    while time.monotonic() < deadline and any(_alive(k) for k in kids):
+        time.sleep(0.1)
+    left = [f"{k}: {_cmdline(k)}" for k in kids if _alive(k)]
+    for k in kids:  # never leave them to the next test, whatever the verdict
+        try:
+            os.kill(k, signal.SIGKILL)
+        except OSError:
+            pass
+    assert not left, f"still running 5 s after {signal.Signals(sig).name} to the driver: {left}"
+    if sig == signal.SIGKILL:
+        assert proc.returncode == -signal.SIGKILL
+    else:
+        assert proc.returncode == 128 + sig, (proc.returncode, err[-2000:])
+        last = err.strip().splitlines()[-1]
+        assert last == f"{prog}: interrupted ({signal.Signals(sig).name})", err[-2000:]
+    return err
+
+
+@pytest.fixture(scope="module")
+def fault_design(tmp_path_factory):
+    """Two 600-frame geometry-only query tours and a 30-frame mapping tour at 64x48 (fast renderer),
+    and an experiment on them with two workers and three methods (a few seconds a task)."""
+    from synth.jobs import load_spec, run_job
+
+    root = tmp_path_factory.mktemp("faults")
+    render = {"name": "faults", "out": str(root / "tours"), "renderer": "fast", "size": [64, 48], "chunk_size": 50,
+              "designs": [{"layouts": ["apt_0", "apt_1"], "path": {"name": "query", "frames": 600}},
+                          {"layouts": ["apt_0"], "path": {"name": "mapping", "frames": 30}}]}
+    (root / "render.yaml").write_text(yaml.safe_dump(render))
+    assert run_job(load_spec(root / "render.yaml"), workers=2, progress=False)["failed"] == {}
+    exp = {"name": "faults", "render": "render.yaml", "out": str(root / "exp"), "query": "query", "unchanged": "apt_0",
+           "mapping": {"layout": "apt_0", "lighting": "geometry", "path": "mapping"}, "map": "ground-truth",
+           "methods": ["videoreloc", "fpfh_icp", "one_frame"], "one_frame_stride": 50, "workers": 2, "detector": "oracle"}
+    (root / "exp.yaml").write_text(yaml.safe_dump(exp))
+    return root
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT, signal.SIGHUP, signal.SIGKILL],
+                         ids=lambda s: signal.Signals(s).name)
+def test_a_signal_to_the_experiment_driver_stops_its_workers(fault_design, tmp_path, sig):
+    spec = yaml.safe_load((fault_design / "exp.yaml").read_text())
+    spec.update(render=str(fault_design / "render.yaml"), out=str(tmp_path / "exp"))
+    (tmp_path / "exp.yaml").write_text(yaml.safe_dump(spec))
+    argv = ["reloc.cli", "experiment", str(tmp_path / "exp.yaml"), "--quiet", "--no-plots"]
+    proc, kids = _start(argv, 2, "multiprocessing.spawn")
+    _signal_and_check(proc, kids, sig, "reloc")
+    assert not list((tmp_path / "exp").rglob("*.tmp")) or sig == signal.SIGKILL  # nothing half-written
+    finished = len(list((tmp_path / "exp" / "runs").rglob("done.json")))
+    done = subprocess.run([sys.executable, "-m", *argv], cwd=REPO, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    runs = int(re.search(r"(\d+) runs and \d+ maps computed now", done.stdout).group(1))
+    assert runs == 6 - finished  # the rerun does only what the interrupted run left undone
+    assert json.loads((tmp_path / "exp" / "results.json").read_text())["failed"] == {}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=lambda s: signal.Signals(s).name)
+def test_a_signal_to_the_render_driver_stops_its_chunk_workers(fault_design, tmp_path, sig):
+    spec = yaml.safe_load((fault_design / "render.yaml").read_text())
+    spec.update(out=str(tmp_path / "tours"), chunk_size=25)
+    (tmp_path / "render.yaml").write_text(yaml.safe_dump(spec))
+    argv = ["synth.cli", "render", str(tmp_path / "render.yaml"), "--workers", "2", "--quiet"]
+    proc, kids = _start(argv, 2, "synth.render.chunk_worker")
+    _signal_and_check(proc, kids, sig, "synth")
+    done = subprocess.run([sys.executable, "-m", *argv, "--resume"], cwd=REPO, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    for tour in ("apt_0__geometry__query", "apt_1__geometry__query"):
+        assert len(list((tmp_path / "tours" / tour / "frames").glob("*.npz"))) + \
+            len(list((tmp_path / "tours" / tour / "frames").glob("*.exr"))) >= 600
+
+
+def test_a_worker_dies_with_its_parent(tmp_path):
+    """kill -9 of a parent: its child that called die_with_parent ends within 2 s."""
+    code = ("import subprocess, sys, time\n"
+            "c = subprocess.Popen([sys.executable, '-c', 'from formats.lifetime import die_with_parent; "
+            "die_with_parent(); import time; time.sleep(60)'])\n"
+            "print(c.pid, flush=True)\n"
+            "time.sleep(60)\n")
+    parent = subprocess.Popen([sys.executable, "-c", code], cwd=REPO, stdout=subprocess.PIPE, text=True)
+    child = int(parent.stdout.readline())
+    time.sleep(0.5)  # the child has set its watch
+    assert _alive(child)
+    parent.kill()
+    parent.wait()
+    deadline = time.monotonic() + 2.0
+    while time.monotonic() < deadline and _alive(child):
+        time.sleep(0.05)
+    alive = _alive(child)
+    if alive:
+        os.kill(child, signal.SIGKILL)
+    assert not alive, "the child outlived its parent"
+
+
+# ---------------------------------------------------------------------------------------------
+# one run per folder
+
+
+@pytest.mark.slow
+def test_a_locked_experiment_folder_is_refused(fault_design, tmp_path, capsys):
+    from reloc.cli import main as reloc_main
+
+    out = tmp_path / "exp"
+    spec = yaml.safe_load((fault_design / "exp.yaml").read_text())
+    spec.update(render=str(fault_design / "render.yaml"), out=str(out))
+    (tmp_path / "exp.yaml").write_text(yaml.safe_dump(spec))
+    with FolderLock(out, "reloc experiment"):
+        assert reloc_main(["experiment", str(tmp_path / "exp.yaml"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f"reloc: error: {out}: another reloc experiment is running in this folder (pid {os.getpid()}); "
+                   "wait for it to finish or stop it, or use another output folder")
+    assert sorted(p.name for p in out.iterdir()) == [".lock"]  # nothing else written
+
+
+def test_a_locked_job_folder_is_refused_with_or_without_resume(tmp_path, capsys):
+    from synth.cli import main as synth_main
+
+    spec = {"name": "lk", "out": str(tmp_path / "job"), "renderer": "fast", "size": [32, 24],
+            "designs": [{"layouts": ["apt_0"], "path": {"name": "query", "frames": 5}}]}
+    (tmp_path / "job.yaml").write_text(yaml.safe_dump(spec))
+    lock = FolderLock(tmp_path / "job", "synth render").acquire()
+    try:
+        for extra in ([], ["--resume"]):
+            assert synth_main(["render", str(tmp_path / "job.yaml"), "--quiet", *extra]) == 2
+            err = capsys.readouterr().err.strip()
+            assert len(err.splitlines()) == 1 and f"(pid {os.getpid()})" in err and "another synth render" in err
+        assert sorted(p.name for p in (tmp_path / "job").iterdir()) == [".lock"]  # nothing else written
+    finally:
+        lock.release()
+    # the lock file stays, holding a pid that no longer owns it: it never blocks
+    assert synth_main(["render", str(tmp_path / "job.yaml"), "--quiet"]) == 0
+    assert synth_main(["render", str(tmp_path / "job.yaml"), "--quiet", "--resume"]) == 0
+
+
+def test_a_stale_lock_file_never_blocks(tmp_path):
+    (tmp_path / ".lock").write_text("999999999\n")  # left by a run killed long ago
+    with FolderLock(tmp_path, "x") as lk:
+        assert (tmp_path / ".lock").read_text().strip() == str(os.getpid()) and lk.folder == tmp_path
