@@ -161,3 +161,35 @@ def test_depth_edges_mark_jumps_and_holes():
     d2 = d.copy()
     d2[:, 5:] = 2.05  # within 4 % + 3 cm: a sloped surface, not an edge
     assert not depth_edges(d2, 0.04, 0.03)[3, 4]
+
+
+@pytest.mark.blender
+def test_checkpoints_are_read_as_weights_only(tiny, tmp_path, capsys):
+    """export and train --resume read a checkpoint with weights_only=True: the real one loads (and a
+    resumed training goes on from it), a pickle that would run code when unpickled is refused with
+    one line naming the file (and the code never runs), a checkpoint without a model is refused."""
+    from reloc.detector.train import load_checkpoint
+
+    assert set(load_checkpoint(tiny / "run" / "checkpoint.pt")) >= {"model", "opt", "sched", "log"}
+    train = ["detector", "train", str(tiny / "set.npz"), "--out", str(tmp_path / "run"), "--batch", "2", "--width", "8",
+             "--quiet"]
+    assert reloc_main([*train, "--epochs", "2"]) == 0
+    assert reloc_main([*train, "--epochs", "2", "--resume"]) == 0  # loads model, optimiser and schedule
+    assert len(json.loads((tmp_path / "run" / "train_log.json").read_text())["epochs"]) == 2
+    assert reloc_main([*train, "--epochs", "3", "--resume"]) == 2
+    assert "started for 2 epochs; resume it with --epochs 2" in capsys.readouterr().err
+    marker = tmp_path / "ran"
+
+    class Evil:
+        def __reduce__(self):
+            return (open, (str(marker), "w"))
+
+    evil = tmp_path / "evil.pt"
+    torch.save({"model": Evil(), "log": {}}, evil)
+    assert reloc_main(["detector", "export", str(evil), "--out", str(tmp_path / "m.onnx")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"reloc: error: {evil}: not a checkpoint of reloc detector train") and len(err.splitlines()) == 1
+    assert not marker.exists() and not (tmp_path / "m.onnx").exists()
+    torch.save({"weights": torch.zeros(2)}, tmp_path / "other.pt")
+    with pytest.raises(UserError, match="no model and log in it"):
+        load_checkpoint(tmp_path / "other.pt")

@@ -28,6 +28,7 @@ import torch
 import torch.nn.functional as F
 
 from formats.atomic import replacing, write_json_atomic
+from formats.errors import UserError, one_line
 
 from .data import boundaries, load
 from .settings import TrainConfig
@@ -87,7 +88,11 @@ def train(data_path, out, cfg: TrainConfig, device: str = "cpu", resume: bool = 
     start = 0
     ck = out / "checkpoint.pt"
     if resume and ck.is_file():
-        state = torch.load(ck, map_location=device)
+        state = load_checkpoint(ck, device)
+        was = (state["log"].get("config") or {}).get("epochs")
+        if was != cfg.epochs:  # the learning-rate schedule spans the epochs it was started with
+            raise UserError(f"{ck}: this run was started for {was} epochs; resume it with --epochs {was}, "
+                            "or train into another --out")
         model.load_state_dict(state["model"])
         opt.load_state_dict(state["opt"])
         sched.load_state_dict(state["sched"])
@@ -146,12 +151,28 @@ def evaluate_pixels(model, X: torch.Tensor, S: torch.Tensor, n_cls: int, device:
             "miou": round(float(iou[present].mean()), 4) if present.any() else 0.0}
 
 
+def load_checkpoint(path, device: str = "cpu") -> dict:
+    """A checkpoint of ``reloc detector train``, read with ``weights_only=True``: tensors, numbers,
+    strings, lists and dicts only, so a crafted file cannot run code (``torch.load``'s pickle would);
+    anything else is one line naming the file."""
+    path = Path(path)
+    if not path.is_file():
+        raise UserError(f"{path}: checkpoint not found")
+    try:
+        state = torch.load(path, map_location=device, weights_only=True)
+    except Exception as e:  # noqa: BLE001 - an unpickling refusal, a truncated or foreign file
+        raise UserError(f"{path}: not a checkpoint of reloc detector train ({one_line(e, limit=160)})") from None
+    if not isinstance(state, dict) or not {"model", "log"} <= set(state):
+        raise UserError(f"{path}: not a checkpoint of reloc detector train (no model and log in it)")
+    return state
+
+
 def export_onnx(checkpoint, out_onnx, height: int = 120, width: int = 160) -> Path:
     """The checkpoint's model as ONNX (input ``image``: N x 3 x H x W sRGB in [0, 1]; outputs
     ``semantic`` and ``boundary`` logits), with its classes and format in the metadata."""
     import onnx
 
-    state = torch.load(checkpoint, map_location="cpu")
+    state = load_checkpoint(checkpoint, "cpu")
     log = state["log"]
     model = SegNet(len(log["classes"]), log["config"]["width"])
     model.load_state_dict(state["model"])
