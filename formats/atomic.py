@@ -30,6 +30,10 @@ def replacing(path):
     try:
         yield tmp
         os.replace(tmp, path)
+    except OSError as e:
+        if e.filename is None:  # a write that failed (full disk, size limit) names no file: name the target
+            raise OSError(e.errno, e.strerror, str(path)) from e
+        raise
     finally:
         if tmp.exists():
             tmp.unlink()
@@ -46,11 +50,19 @@ def write_json_atomic(path, data, indent: int | None = 2) -> Path:
 
 
 def save_npz_atomic(path, compressed: bool = True, **arrays) -> Path:
-    """numpy .npz, atomically (written through a file object, so numpy adds no suffix)."""
-    import numpy as np
+    """numpy .npz, atomically: the archive ``np.savez`` writes (one ``NAME.npy`` per array, read by
+    ``np.load``), but closed in order when a write fails (a full disk), so that the error is the
+    only message (numpy's own writer leaves its zip file to a destructor that fails again)."""
+    import zipfile
 
-    with replacing(path) as tmp, open(tmp, "wb") as f:
-        (np.savez_compressed if compressed else np.savez)(f, **arrays)
+    import numpy as np
+    from numpy.lib import format as npy
+
+    comp = zipfile.ZIP_DEFLATED if compressed else zipfile.ZIP_STORED
+    with replacing(path) as tmp, open(tmp, "wb") as f, zipfile.ZipFile(f, "w", compression=comp, allowZip64=True) as z:
+        for name, value in arrays.items():
+            with z.open(f"{name}.npy", "w", force_zip64=True) as fid:
+                npy.write_array(fid, np.asanyarray(value), allow_pickle=False)
     return Path(path)
 
 

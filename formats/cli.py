@@ -17,6 +17,7 @@ got '0' (see synth render --help)``), not the usage block.
 from __future__ import annotations
 
 import argparse
+import errno
 
 
 class ArgumentParser(argparse.ArgumentParser):
@@ -67,6 +68,9 @@ def add_sensor(p: argparse.ArgumentParser, verb: str = "read the frames", defaul
                           help="seed of the sensor noise (per frame: formats.sensors.frame_seed; default 0)")
 
 
+_WRITE_ERRNOS = {errno.ENOSPC, errno.EFBIG, errno.EDQUOT, errno.EROFS}
+
+
 def run_command(prog: str, fn, args) -> int:
     """Run a CLI command function: a UserError prints one line and exits 2; Ctrl-C, SIGTERM and SIGHUP
     stop it in order (``formats.lifetime``: its workers are stopped, one line, exit 130 / 143 / 129);
@@ -88,6 +92,14 @@ def run_command(prog: str, fn, args) -> int:
         _end_progress_line()
         print(f"{prog}: interrupted ({signal_name(e)})", file=sys.stderr)
         return exit_status(e)
+    except OSError as e:
+        if e.errno not in _WRITE_ERRNOS:
+            raise
+        _end_progress_line()  # a full disk, a file size limit, a quota, a read-only file system: not a bug
+        where = f" {e.filename}" if e.filename else ""
+        print(f"{prog}: error: cannot write{where}: {e.strerror or e} ({errno.errorcode.get(e.errno, e.errno)}); "
+              "free space and rerun (finished work is kept)", file=sys.stderr)
+        return 2
     except BrokenPipeError:
         if not _stdout_reader_gone():  # a broken pipe elsewhere is a real error
             raise

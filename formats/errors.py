@@ -49,8 +49,12 @@ def _check_output(path, kind: str) -> None:
     what = f"cannot write to output {kind} {path}"
     p = Path(path).absolute()
     if kind == "file":
+        if p.is_symlink():  # the atomic rename would replace the link, not write where it points
+            raise UserError(f"{what}: it is a symbolic link (to {os.readlink(p)}); give the path itself")
         if p.is_dir():
             raise UserError(f"{what}: it is a folder")
+        if p.exists() and not p.is_file():  # a device, a pipe, a socket: the atomic rename would replace it
+            raise UserError(f"{what}: it is not a regular file (a device or pipe); give a new path or a file")
         if p.exists() and not os.access(p, os.W_OK):
             raise UserError(f"{what}: it is not writable")
         p = p.parent  # written under a temporary name next to it, then renamed

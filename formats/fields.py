@@ -100,3 +100,34 @@ def listing(file, v, field: str) -> list:
     if not isinstance(v, list):
         fail(file, field, f"expected a list, got {type(v).__name__}")
     return v
+
+
+# a frame's size: at most 8192 px a side and 16.8 million pixels (4096 x 4096); a frame of that size
+# holds about 400 MB in memory while it is rendered and written (RGB, depth, instance and class ids)
+MAX_SIDE = 8192
+MAX_PIXELS = 4096 * 4096
+BYTES_PER_PIXEL = 24
+
+
+def frame_size(file, v, field: str) -> tuple[int, int]:
+    """``[width, height]`` in pixels, within the bounds above (checked before anything is written)."""
+    if not isinstance(v, list) or len(v) != 2:
+        fail(file, field, f"expected [width, height], got {v!r}")
+    w, h = (positive_int(file, x, field) for x in v)
+    if max(w, h) > MAX_SIDE or w * h > MAX_PIXELS:
+        fail(file, field, f"{w}x{h} is too large: at most {MAX_SIDE} px a side and {MAX_PIXELS:,} pixels "
+                          f"(a frame would need about {w * h * BYTES_PER_PIXEL / 2**30:.1f} GiB)")
+    return w, h
+
+
+def out_folder(file, v, field: str = "out") -> str:
+    """A spec's output folder: a non-empty string; a relative one may not climb out of the working
+    folder it is resolved against (``../..``): give an absolute path, or ``--out`` on the command line."""
+    import os
+
+    s = string(file, v, field)
+    if not os.path.isabs(s):
+        norm = os.path.normpath(s)
+        if norm == ".." or norm.startswith(".." + os.sep):
+            fail(file, field, f"{s!r} leaves the working folder; give an absolute path in the spec, or --out")
+    return s

@@ -233,3 +233,131 @@ def test_a_stale_lock_file_never_blocks(tmp_path):
     (tmp_path / ".lock").write_text("999999999\n")  # left by a run killed long ago
     with FolderLock(tmp_path, "x") as lk:
         assert (tmp_path / ".lock").read_text().strip() == str(os.getpid()) and lk.folder == tmp_path
+
+
+# ---------------------------------------------------------------------------------------------
+# specs and outputs that cannot hurt
+
+
+def _render_spec(tmp_path, **changes) -> Path:
+    doc = {"name": "x", "out": "o", "renderer": "fast", "size": [32, 24],
+           "designs": [{"layouts": ["apt_0"], "path": {"name": "query", "frames": 3}}]}
+    doc.update(changes)
+    p = tmp_path / "spec.yaml"
+    p.write_text(yaml.safe_dump(doc))
+    return p
+
+
+@pytest.mark.parametrize("changes, says", [
+    ({"out": "../../etc/x"}, "out: '../../etc/x' leaves the working folder; give an absolute path in the spec, or --out"),
+    ({"size": [100000, 100000]}, "size: 100000x100000 is too large: at most 8192 px a side"),
+    ({"size": [8192, 4096]}, "is too large"),
+    ({"previews": "no"}, "previews: expected true or false, got 'no'"),
+    ({"name": ["a", "b"]}, "name: expected a non-empty string, got ['a', 'b']"),
+    ({"description": 3}, "description: expected text, got 3"),
+])
+def test_render_specs_that_could_hurt_are_refused(tmp_path, monkeypatch, capsys, changes, says):
+    from synth.cli import main as synth_main
+
+    sub = tmp_path / "a" / "b"
+    sub.mkdir(parents=True)
+    monkeypatch.chdir(sub)
+    spec = _render_spec(sub, **changes)
+    assert synth_main(["render", str(spec), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert says in err and len(err.splitlines()) == 1, err
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["a", "b", "spec.yaml"]  # nothing written
+
+
+def test_a_relative_out_inside_the_working_folder_and_an_absolute_one_are_fine(tmp_path, monkeypatch):
+    from formats import fields
+
+    monkeypatch.chdir(tmp_path)
+    assert fields.out_folder("s.yaml", "out/demo/../x") == "out/demo/../x"
+    assert fields.out_folder("s.yaml", "/abs/elsewhere") == "/abs/elsewhere"
+    with pytest.raises(Exception, match="leaves the working folder"):
+        fields.out_folder("s.yaml", "out/../../x")
+
+
+def test_an_experiment_spec_out_that_climbs_out_is_refused(tmp_path, capsys):
+    from reloc.cli import main as reloc_main
+    from tests.jobspecs import write_experiment_spec
+
+    spec = write_experiment_spec(tmp_path, out="../../../etc/exp")
+    assert reloc_main(["experiment", str(spec), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "out: '../../../etc/exp' leaves the working folder" in err and len(err.splitlines()) == 1
+
+
+@pytest.mark.slow
+def test_an_experiment_into_a_render_folder_is_refused(fault_design, capsys):
+    from reloc.cli import main as reloc_main
+
+    tours = fault_design / "tours"
+    before = sorted(p.name for p in tours.iterdir())
+    assert reloc_main(["experiment", str(fault_design / "exp.yaml"), "--out", str(tours), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith("holds a rendered design (design.json); write the experiment into another folder")
+    assert sorted(p.name for p in tours.iterdir()) == before
+
+
+def test_an_unknown_key_in_a_check_spec_is_refused(tmp_path, capsys):
+    from reloc.cli import main as reloc_main
+
+    (tmp_path / "results.json").write_text("{}")
+    p = tmp_path / "c.yaml"
+    p.write_text(yaml.safe_dump({"checks": ["videoreloc.kept >= 0.5"], "chekcs": ["x > 1"]}))
+    assert reloc_main(["check", str(p), str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"reloc: error: {p}: chekcs: unknown key; allowed: checks, description"
+
+
+@pytest.mark.parametrize("kind", ["device", "symlink"])
+def test_an_out_file_that_is_not_a_file_is_refused(tmp_path, capsys, kind):
+    """--out /dev/null (a device) or a symbolic link: refused before anything is written, and left as it was."""
+    from synth.cli import main as synth_main
+
+    if kind == "device":
+        out = Path("/dev/null")
+    else:
+        out = tmp_path / "link.json"
+        out.symlink_to(tmp_path / "elsewhere.json")
+    assert synth_main(["scene", "export-boxes", "apt_0", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and ("not a regular file" in err if kind == "device" else "symbolic link" in err)
+    if kind == "device":
+        assert out.is_char_device()
+    else:
+        assert out.is_symlink() and not (tmp_path / "elsewhere.json").exists()
+
+
+def _with_file_size_limit(kb: int):
+    def limit():
+        import resource
+
+        resource.setrlimit(resource.RLIMIT_FSIZE, (kb * 1024, kb * 1024))
+    return limit
+
+
+def test_a_full_disk_is_one_line(tmp_path):
+    """A write past the file size limit (``ulimit -f``: EFBIG, as a full disk gives ENOSPC): one line
+    naming the file, exit 2, and no file left behind, half-written or temporary."""
+    out = tmp_path / "boxes.json"
+    r = subprocess.run([sys.executable, "-m", "synth.cli", "scene", "export-boxes", "apt_0", "--out", str(out)], cwd=REPO,
+                       capture_output=True, text=True, preexec_fn=_with_file_size_limit(8), timeout=120)
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.strip() == (f"synth: error: cannot write {out}: File too large (EFBIG); free space and rerun "
+                                "(finished work is kept)")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.slow
+def test_a_full_disk_during_an_experiment_is_one_line(fault_design, tmp_path):
+    spec = yaml.safe_load((fault_design / "exp.yaml").read_text())
+    spec.update(render=str(fault_design / "render.yaml"), out=str(tmp_path / "exp"))
+    (tmp_path / "exp.yaml").write_text(yaml.safe_dump(spec))
+    r = subprocess.run([sys.executable, "-m", "reloc.cli", "experiment", str(tmp_path / "exp.yaml"), "--quiet", "--no-plots"],
+                       cwd=REPO, capture_output=True, text=True, preexec_fn=_with_file_size_limit(30), timeout=600)
+    assert r.returncode == 2, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "File too large" in r.stderr, r.stderr
+    assert not list((tmp_path / "exp").rglob("*.tmp"))

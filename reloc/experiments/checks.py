@@ -74,6 +74,9 @@ class Check:
     right: str  # a number or a metric name
 
 
+CHECK_SPEC_KEYS = {"checks", "description"}
+
+
 def parse_checks(path) -> list[Check]:
     from formats.yamlfile import read_yaml
 
@@ -83,6 +86,10 @@ def parse_checks(path) -> list[Check]:
     if not p.is_file():
         raise UserError(f"{p}: check file not found")
     doc = read_yaml(p)
+    if isinstance(doc, dict):
+        unknown = sorted(map(str, set(doc) - CHECK_SPEC_KEYS))
+        if unknown:  # as render and experiment specs do: a misspelt key must not pass silently
+            raise SceneFormatError(p, unknown[0], f"unknown key; allowed: {', '.join(sorted(CHECK_SPEC_KEYS))}")
     items = doc.get("checks") if isinstance(doc, dict) else doc
     if not isinstance(items, list) or not items:
         raise SceneFormatError(p, "checks", "expected a non-empty list of assertions like 'videoreloc.kept >= 0.75'")

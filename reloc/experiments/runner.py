@@ -221,6 +221,8 @@ def _run_experiment(spec: ExperimentSpec, out: Path, workers: int | None, progre
     workers = workers or spec.workers
     queries, mapping = design_tours(spec)
     _check_detector_inputs(spec, queries, mapping)
+    if (out / DESIGN_FILE).is_file():  # results written among a render job's tours would mix two kinds of folder
+        raise UserError(f"{out}: holds a rendered design ({DESIGN_FILE}); write the experiment into another folder")
     lock.acquire()  # one experiment per folder; made and locked only once the inputs are known to be good
     out.mkdir(parents=True, exist_ok=True)
     maps_dir = out / "maps"

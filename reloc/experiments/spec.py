@@ -71,6 +71,7 @@ import dataclasses
 import json
 from pathlib import Path
 
+from formats import fields
 from formats.errors import SceneFormatError, UserError
 from formats.sensors import load_sensor
 from formats.yamlfile import read_yaml
@@ -302,14 +303,21 @@ def load_experiment(path) -> ExperimentSpec:
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         _fail(src, "seed", f"expected a non-negative integer, got {seed!r}")
     return ExperimentSpec(
-        name=str(doc["name"]), source=src, render=render, tours_root=tours_root, out=Path(doc["out"]),
-        mapping=mapping, query=str(doc["query"]), unchanged=str(doc["unchanged"]), map=doc.get("map", "build"),
+        name=fields.string(src, doc["name"], "name"), source=src, render=render, tours_root=tours_root,
+        out=Path(fields.out_folder(src, doc["out"])), mapping=mapping, query=fields.string(src, doc["query"], "query"),
+        unchanged=fields.string(src, doc["unchanged"], "unchanged"), map=doc.get("map", "build"),
         methods=tuple(methods), tables=tuple(tables), one_frame_stride=int(doc.get("one_frame_stride", 15)),
         detector=det, config=cfg, appearance=app, fpfh_icp=fp, workers=int(doc.get("workers", 2)),
-        seed=seed, description=str(doc.get("description", "")), externals=tuple(externals),
+        seed=seed, description=_text(src, doc.get("description", ""), "description"), externals=tuple(externals),
         sensors=sensors, map_sensor=map_sensor, intervals=IntervalSettings.from_spec(src, doc.get("intervals")),
         replicates=int(doc.get("replicates", 1)),
     )
+
+
+def _text(src, v, field: str) -> str:
+    if not isinstance(v, str):
+        _fail(src, field, f"expected text, got {v!r}")
+    return v
 
 
 def replicate_spec(spec: ExperimentSpec, k: int) -> ExperimentSpec:

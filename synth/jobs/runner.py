@@ -76,6 +76,9 @@ def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, back
                 check_output_folder(plan.out)
             except UserError as e:
                 out_error(spec, from_cli, e)
+            if (plan.out / "results.json").is_file() and not (plan.out / STATE_FILE).is_file():
+                out_error(spec, from_cli, UserError(f"{plan.out} holds an experiment's results (results.json); "
+                                                    "render into another folder"))
             # one run per job folder (with or without --resume); the kernel drops the lock with the process
             lock = folder_lock(plan.out, "synth render").acquire()
             state_path = plan.out / STATE_FILE

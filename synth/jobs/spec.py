@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
+from formats import fields
 from formats.errors import UserError
 from formats.fields import fail, names, positive_int
 from formats.yamlfile import read_yaml
@@ -52,6 +53,12 @@ class JobSpec:
     replicacad: dict | None = None  # layouts are scenes of a ReplicaCAD folder (synth.replicacad.job)
 
 
+def _description(source, v) -> str:
+    if not isinstance(v, str):
+        fail(source, "description", f"expected text, got {v!r}")
+    return v
+
+
 def parse_spec(doc, source: str) -> JobSpec:
     """Validate a spec document; every error names the file and the key."""
     if not isinstance(doc, dict):
@@ -75,10 +82,7 @@ def parse_spec(doc, source: str) -> JobSpec:
         quality(q)
     except UserError as e:
         fail(source, "quality", str(e))
-    size = doc.get("size", [DEFAULTS.width, DEFAULTS.height])
-    if not isinstance(size, list) or len(size) != 2:
-        fail(source, "size", f"expected [width, height], got {size!r}")
-    w, h = (positive_int(source, v, "size") for v in size)
+    w, h = fields.frame_size(source, doc.get("size", [DEFAULTS.width, DEFAULTS.height]), "size")
     device = doc.get("device", DEFAULTS.device)
     if device not in DEVICES:
         fail(source, "device", f"expected one of {', '.join(DEVICES)}, got {device!r}")
@@ -124,11 +128,12 @@ def parse_spec(doc, source: str) -> JobSpec:
             fail(source, f + ".rgb_every", "a geometry-only design renders no RGB: leave rgb_every out")
         designs.append(Design(layouts, lightings, str(p["name"]), frames, rgb_every))
     return JobSpec(
-        name=str(doc["name"]), out=str(doc["out"]), designs=designs, renderer=renderer, geometry=geometry, quality=q,
+        name=fields.string(source, doc["name"], "name"), out=fields.out_folder(source, doc["out"]), designs=designs, renderer=renderer, geometry=geometry, quality=q,
         width=w, height=h,
         hfov_deg=float(hfov), seed=seed, device=device,
         chunk_size=positive_int(source, doc.get("chunk_size", DEFAULTS.chunk_size), "chunk_size"), retries=retries,
-        previews=bool(doc.get("previews", DEFAULTS.previews)), description=str(doc.get("description", "")), source=source,
+        previews=fields.boolean(source, doc.get("previews", DEFAULTS.previews), "previews"),
+        description=_description(source, doc.get("description", "")), source=source,
         replicacad=_replicacad_section(doc, source),
     )
 
