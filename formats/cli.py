@@ -92,20 +92,20 @@ def run_command(prog: str, fn, args) -> int:
         _end_progress_line()
         print(f"{prog}: interrupted ({signal_name(e)})", file=sys.stderr)
         return exit_status(e)
-    except OSError as e:
-        if e.errno not in _WRITE_ERRNOS:
-            raise
-        _end_progress_line()  # a full disk, a file size limit, a quota, a read-only file system: not a bug
-        where = f" {e.filename}" if e.filename else ""
-        print(f"{prog}: error: cannot write{where}: {e.strerror or e} ({errno.errorcode.get(e.errno, e.errno)}); "
-              "free space and rerun (finished work is kept)", file=sys.stderr)
-        return 2
     except BrokenPipeError:
         if not _stdout_reader_gone():  # a broken pipe elsewhere is a real error
             raise
         # point stdout at /dev/null so that the interpreter's final flush is quiet too
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
+    except OSError as e:
+        if e.errno not in _WRITE_ERRNOS:
+            raise
+        _end_progress_line()  # a full disk, a file size limit, a quota, a read-only file system: not a bug
+        where = f" {e.filename}" if e.filename else ""
+        print(f"{prog}: error: cannot write{where}: {e.strerror or e} ({errno.errorcode.get(e.errno, e.errno)}); "
+              "rerun once it can be written (finished work is kept)", file=sys.stderr)
+        return 2
 
 
 def _end_progress_line() -> None:

@@ -23,6 +23,7 @@ Layouts (``role`` "mapping" or "query")::
     ace        train/ (mapping) or test/ (query): rgb/frame-NNNNNN.color.png,
                depth/frame-NNNNNN.depth.png, poses/frame-NNNNNN.pose.txt,
                calibration/frame-NNNNNN.calibration.txt (3x3 K)
+    dsacstar   the ace layout, each calibration file one number: fx (DSAC*, ACE's one-number path)
     tum-rgbd   rgb/NNNNNN.png, depth/NNNNNN.png, rgb.txt, depth.txt, groundtruth.txt,
                associations.txt, intrinsics.txt
     colmap     images/frame-NNNNNN.png, sparse/{cameras,images,points3D}.txt,
@@ -53,7 +54,8 @@ Conventions, and where they come from:
   ONE focal length (``float(np.loadtxt(f))``: our 3x3 files do not load) and the principal
   point is assumed at W/2, H/2 ("assume image center"). The toolkit's centred camera has
   cx = (W - 1) / 2: DSAC* would put it half a pixel right of and below ours. Recorded in
-  export.json (``intrinsics.dsacstar``); this exporter does not write DSAC*'s one-number files.
+  export.json (``intrinsics.dsacstar``). ``--format dsacstar`` writes that layout: the ace one
+  with fx as the one number (refused when fx != fy).
 - TUM RGB-D (the benchmark's file-format page; read by RGB-D SLAM systems and evo):
   ``rgb.txt``/``depth.txt`` ("timestamp filename"), 8-bit colour PNGs, 16-bit depth PNGs scaled
   by 5000 (5000 = 1 m, 0 = no data), ``groundtruth.txt`` "timestamp tx ty tz qx qy qz qw",
@@ -96,6 +98,7 @@ import math
 import os
 import sys
 from collections.abc import Callable
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -247,6 +250,7 @@ class ExportFormat:
     write_whole_files: Callable[[Path, Tour, str, list[_Frame]], None]  # (out, tour, role, exported frames)
     intrinsics: Callable[[object], dict]  # (tour intrinsics) -> this format's entries of export.json "intrinsics"
     named_kinds: tuple[str, ...] = ("rgb",)  # the frame files export.json "frames" names
+    focal_only: bool = False  # calibration files hold one focal length (DSAC*), not a 3x3 K
     manifest_extra: Callable[[Tour, list[_Frame]], dict] | None = None  # more export.json entries
 
 
@@ -324,11 +328,19 @@ def _ace_frame_files(role: str, i: int, has_rgb: bool) -> dict[str, str]:
             "pose": f"{split}/poses/{stem}.pose.txt", "calibration": f"{split}/calibration/{stem}.calibration.txt"}
 
 
+# ACE rescales images to --image_resolution px of height and multiplies K by the same factor s, which
+# moves a pixel-centre principal point by (s - 1) / 2 px: exact only at the export's own height
+ACE_RESIZE_NOTE = ("run train_ace.py and test_ace.py with --image_resolution {h} (this export's height): ACE scales "
+                   "K with the image, exact only at its own height")
+
+
 def _ace_intrinsics(intr) -> dict:
     return {
         "ace": {
             "file": "{train,test}/calibration/frame-NNNNNN.calibration.txt",
             "content": "3x3 K, toolkit convention (ACE uses fx, fy, cx, cy of a 3x3 K as given; pixel u at u)",
+            "image_resolution": intr.height,
+            "note": ACE_RESIZE_NOTE.format(h=intr.height),
         },
         "dsacstar": _dsacstar_doc(intr, "the 3x3 calibration files of this export do not load in DSAC*: replace "
                                         "each with fx"),
@@ -459,7 +471,17 @@ COLMAP = ExportFormat(
     intrinsics=_colmap_intrinsics,
 )
 
-FORMATS: dict[str, ExportFormat] = {f.name: f for f in (SEVEN_SCENES, ACE, TUM_RGBD, COLMAP)}
+def _dsacstar_intrinsics(intr) -> dict:
+    return {"dsacstar": {**_dsacstar_doc(intr, "this export writes fx in every calibration file"),
+                         "file": "{train,test}/calibration/frame-NNNNNN.calibration.txt (one number: fx)",
+                         "image_resolution": intr.height, "resize_note": ACE_RESIZE_NOTE.format(h=intr.height)}}
+
+
+# DSAC* (and ACE's one-number calibration path, which its RGB-D initialisation uses): the ACE layout,
+# each calibration file one focal length; the principal point is then the image centre (W/2, H/2)
+DSACSTAR = dataclasses.replace(ACE, name="dsacstar", focal_only=True, intrinsics=_dsacstar_intrinsics)
+
+FORMATS: dict[str, ExportFormat] = {f.name: f for f in (SEVEN_SCENES, ACE, DSACSTAR, TUM_RGBD, COLMAP)}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -639,6 +661,11 @@ def export_tour(tour_dir, fmt: str, out_dir, role: str = "query", exposure: str 
     """
     fmt = _check_choice(fmt, FORMATS, "--format", "export format")
     layout = FORMATS[fmt]
+    if layout.focal_only:
+        intr = Tour(tour_dir).intrinsics
+        if not math.isclose(intr.fx, intr.fy, rel_tol=1e-9):
+            raise UserError(f"{tour_dir}: fx {intr.fx} != fy {intr.fy}: the {fmt} format holds one focal length; "
+                            "export --format ace (a 3x3 K) instead")
     role = _check_choice(role, ROLES, "--role", "role")
     exp_req = parse_exposure(exposure)
     sensor_doc = sensor_record(sensor, sensor_seed)
@@ -707,7 +734,8 @@ def export_tour(tour_dir, fmt: str, out_dir, role: str = "query", exposure: str 
                 raise UserError(f"{tour.frame_path(f.index)}: no depth channel (Z)")
             _write_bytes_atomic(out / f.files["depth"], _encode_png(depth16(fr.depth, layout.depth["scale"])))
         if "calibration" in f.files:
-            write_text_atomic(out / f.files["calibration"], _matrix_text(tour.K))
+            write_text_atomic(out / f.files["calibration"], f"{tour.intrinsics.fx!r}\n" if layout.focal_only
+                              else _matrix_text(tour.K))
         if "pose" in f.files:  # last: a frame is complete when all its files exist
             write_text_atomic(out / f.files["pose"], _matrix_text(fr.pose))
         written += 1

@@ -67,6 +67,10 @@ class OdometryConfig:
     max_step_translation_m: float = 0.5  # per odometry step: larger means a capture gap
     max_step_rotation_deg: float = 30.0
     min_valid_depth_fraction: float = 0.05
+    # ours: a frame with less valid depth than min_valid_depth_fraction (or, where the detector needs
+    # it, no RGB) is degenerate; reloc run counts them, and a tour with a larger share than this fails
+    # (a broken render or capture, not a relocalization result)
+    max_degenerate_fraction: float = 0.25
     # ours: directions whose point-to-plane information (normalised, per inlier; rotations scaled
     # by the median depth) is below this are degenerate (e.g. sliding along one wall); the
     # constant-velocity prediction replaces the estimate along them

@@ -199,6 +199,21 @@ def test_ace(tour, tmp_path):
     assert m["skipped"]["frames"] == [1, 3, 5]
 
 
+def test_dsacstar(tour, tmp_path):
+    """--format dsacstar: the ACE layout with one number per calibration file, read as DSAC*'s and ACE's
+    dataset.py read it (``np.loadtxt``, size 1: the focal length, principal point at W/2, H/2)."""
+    root, truth = tour
+    out = tmp_path / "dsac"
+    m = export_tour(root, "dsacstar", out, role="query")
+    cal = sorted((out / "test" / "calibration").iterdir())
+    assert len(cal) == len(rgb_frames())
+    for f in cal:
+        k = np.loadtxt(f)
+        assert k.size == 1 and float(k) == INTR.fx
+    assert m["export_format"] == "dsacstar" and "one number" in m["intrinsics"]["dsacstar"]["file"]
+    assert m["frames"][f"test/rgb/frame-{rgb_frames()[0]:06d}.color.png"] == rgb_frames()[0]
+
+
 def test_tum_rgbd(tour, tmp_path):
     root, truth = tour
     out = tmp_path / "tum"
@@ -449,7 +464,7 @@ def test_cli_summary(tour, tmp_path, capsys):
 
 
 @pytest.mark.parametrize("argv, match", [
-    (["--format", "kitti"], ["kitti", "7scenes", "ace", "tum-rgbd", "colmap"]),
+    (["--format", "kitti"], ["kitti", "7scenes", "ace", "dsacstar", "tum-rgbd", "colmap"]),
     (["--format", "ace", "--role", "train"], ["train", "mapping", "query"]),
     (["--format", "ace", "--exposure", "bright"], ["--exposure", "bright"]),
     (["--format", "ace", "--exposure", "-1"], ["--exposure"]),
@@ -504,3 +519,69 @@ def test_progress_bar_goes_to_stderr(tour, tmp_path, capsys):
     export_tour(root, "tum-rgbd", tmp_path / "p", progress=True)
     cap = capsys.readouterr()
     assert "export tum-rgbd" in cap.err and cap.out == ""
+
+
+FAKE_TEST_ACE = '''#!/usr/bin/env python3
+"""A stand-in for nianticlabs/ace test_ace.py: the same arguments, and its pose file written where the
+real one writes it (the network's folder, poses_<scene name>_<session>.txt; one line per test image:
+NAME qw qx qy qz tx ty tz r_err t_err inliers, world-to-camera), here with the ground-truth poses."""
+import argparse, math, os
+from pathlib import Path
+
+p = argparse.ArgumentParser()
+p.add_argument("scene", type=Path)
+p.add_argument("network", type=Path)
+p.add_argument("--session", default="")
+p.add_argument("--image_resolution", type=int, default=480)
+a = p.parse_args()
+rgb = sorted((a.scene / "test" / "rgb").iterdir())
+poses = sorted((a.scene / "test" / "poses").iterdir())
+assert len(rgb) == len(poses)
+with open(a.network.parent / f"poses_{a.scene.name}_{a.session}.txt", "w") as out:
+    for img, pf in zip(rgb, poses):
+        T = [[float(v) for v in ln.split()] for ln in pf.read_text().splitlines() if ln.strip()]
+        R = [[T[j][i] for j in range(3)] for i in range(3)]  # world-to-camera: R^T, -R^T t
+        t = [-sum(R[i][k] * T[k][3] for k in range(3)) for i in range(3)]
+        w = math.sqrt(max(0.0, 1 + R[0][0] + R[1][1] + R[2][2])) / 2
+        x = math.copysign(math.sqrt(max(0.0, 1 + R[0][0] - R[1][1] - R[2][2])) / 2, R[2][1] - R[1][2])
+        y = math.copysign(math.sqrt(max(0.0, 1 - R[0][0] + R[1][1] - R[2][2])) / 2, R[0][2] - R[2][0])
+        z = math.copysign(math.sqrt(max(0.0, 1 - R[0][0] - R[1][1] + R[2][2])) / 2, R[1][0] - R[0][1])
+        out.write(f"{img.name} {w} {x} {y} {z} {t[0]} {t[1]} {t[2]} 0.0 0.0 1000\\n")
+'''
+
+
+def test_the_documented_ace_wrapper_runs(tour, tmp_path):
+    """docs/external_relocalizers.md's run_ace.sh, run as written against a fake test_ace.py that writes
+    its pose file where the real one does; the file it copies scores every exported frame right."""
+    import json
+    import os
+    import re
+    import subprocess
+
+    from reloc.cli import main as reloc_main
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "external_relocalizers.md").read_text()
+    script = re.search(r"```bash\n(#!/usr/bin/env bash\n# run_ace\.sh.*?)```", doc, re.S).group(1)
+    home = tmp_path / "home"
+    (home / "ace").mkdir(parents=True)
+    fake = home / "ace" / "test_ace.py"
+    fake.write_text(FAKE_TEST_ACE)
+    fake.chmod(0o755)
+    root, _ = tour
+    query = tmp_path / "exports" / "tour_a_query"
+    export_tour(root, "ace", query, role="query")
+    mp, out = tmp_path / "map", tmp_path / "out"
+    mp.mkdir()
+    out.mkdir()
+    (mp / "ace.pt").write_bytes(b"head weights")
+    (tmp_path / "run_ace.sh").write_text(script)
+    r = subprocess.run(["bash", str(tmp_path / "run_ace.sh"), str(query), str(mp), str(out)], capture_output=True,
+                       text=True, env={**os.environ, "HOME": str(home)}, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert (out / "poses.txt").is_file()
+    save = tmp_path / "eval.json"
+    assert reloc_main(["eval", str(out / "poses.txt"), "--poses", "ace", "--names", str(query), "--gt", str(root),
+                       "--save", str(save)]) == 0
+    res = json.loads(save.read_text())
+    got = res["poses.txt"]
+    assert res["frames"] == len(rgb_frames()) and got["recall_1m_10deg"] == 1.0 and got["median_pos_m"] < 1e-6

@@ -28,6 +28,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -346,7 +347,7 @@ def test_a_full_disk_is_one_line(tmp_path):
     r = subprocess.run([sys.executable, "-m", "synth.cli", "scene", "export-boxes", "apt_0", "--out", str(out)], cwd=REPO,
                        capture_output=True, text=True, preexec_fn=_with_file_size_limit(8), timeout=120)
     assert r.returncode == 2, r.stderr
-    assert r.stderr.strip() == (f"synth: error: cannot write {out}: File too large (EFBIG); free space and rerun "
+    assert r.stderr.strip() == (f"synth: error: cannot write {out}: File too large (EFBIG); rerun once it can be written "
                                 "(finished work is kept)")
     assert list(tmp_path.iterdir()) == []
 
@@ -361,3 +362,45 @@ def test_a_full_disk_during_an_experiment_is_one_line(fault_design, tmp_path):
     assert r.returncode == 2, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and "File too large" in r.stderr, r.stderr
     assert not list((tmp_path / "exp").rglob("*.tmp"))
+
+
+# ---------------------------------------------------------------------------------------------
+# degenerate frames and errors on their own line
+
+
+def _zero_depth(tour: Path, frames) -> None:
+    from formats import frames as fr
+
+    for i in frames:
+        p = tour / "frames" / fr.frame_name(i)
+        f = fr.read_frame(p)
+        fr.write_frame(p, rgb=f.rgb, depth=np.zeros_like(f.depth), instance=f.instance, semantic=f.semantic)
+
+
+@pytest.mark.slow
+def test_degenerate_frames_are_counted_and_too_many_fail(fault_design, tmp_path, capsys):
+    """A frame with all-zero depth inside a tour: reloc run counts it (run.json, a note); more than
+    odometry.max_degenerate_fraction of them: one line, exit 2, on its own line after the progress bar."""
+    import shutil
+
+    from reloc.cli import main as reloc_main
+
+    tour = tmp_path / "tour"
+    shutil.copytree(fault_design / "tours" / "apt_0__geometry__query", tour)
+    assert reloc_main(["map", "ground-truth", str(tour), "--out", str(tmp_path / "map.json")]) == 0
+    _zero_depth(tour, [120])
+    argv = ["run", "--map", str(tmp_path / "map.json"), "--tour", str(tour), "--detector", "oracle", "--frames", "300"]
+    capsys.readouterr()
+    assert reloc_main([*argv, "--out", str(tmp_path / "one"), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "note: 1 degenerate frame(s) (1 without usable depth, 0 without RGB): 120" in out
+    dg = json.loads((tmp_path / "one" / "run.json").read_text())["degenerate_frames"]
+    assert dg == {"no_usable_depth": 1, "no_rgb": 0, "frames": 1, "fraction": round(1 / 300, 4), "first": [120]}
+    _zero_depth(tour, range(0, 300, 3))  # a third of the frames (120 among them)
+    assert reloc_main([*argv, "--out", str(tmp_path / "many")]) == 2
+    err = capsys.readouterr().err
+    line = err.splitlines()[-1]
+    assert line.startswith(f"reloc: error: {tour}: 100 of 300 frames are degenerate (100 without usable depth, 0 without")
+    assert "odometry.max_degenerate_fraction = 0.25" in line
+    assert err.endswith(line + "\n") and ("\r" not in line)  # its own line, after the closed progress bar
+    assert not (tmp_path / "many" / "run.json").exists()

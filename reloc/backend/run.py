@@ -28,7 +28,7 @@ import numpy as np
 
 from formats.atomic import save_npz_atomic, write_json_atomic
 from formats.camera import write_tum
-from formats.errors import check_output_folder
+from formats.errors import UserError, check_output_folder
 from formats.cli import add_quiet, add_sensor
 
 from .online import Backend, ClipState
@@ -189,18 +189,57 @@ def relocalize(tour, bmap: BoxMap, out, cfg: Config | None = None, detector: Det
         bar = tqdm(total=len(idx), desc="reloc run", unit="frame", file=sys.stderr)
     t0 = time.perf_counter()
     rgb = needs_rgb(detector) or cfg.odometry.method == "hybrid"
+    degenerate = Degenerate(cfg, needs_rgb(detector))
     for i in idx:
-        r.add(read_frame(tour, i, detector, rgb=rgb), tour.pose(i))
+        fd = read_frame(tour, i, detector, rgb=rgb)
+        degenerate.see(fd)
+        r.add(fd, tour.pose(i))
         if bar is not None:
             bar.update(1)
     r.finish()
     if bar is not None:
         bar.close()
+    degenerate.check(tour.root, len(idx))
     seconds = time.perf_counter() - t0
-    return write_outputs(r, out, tour, idx, seconds, poses)
+    return write_outputs(r, out, tour, idx, seconds, poses, degenerate=degenerate.summary(len(idx)))
 
 
-def write_outputs(r: Relocalizer, out, tour, idx, seconds: float, poses: str) -> dict:
+class Degenerate:
+    """Frames a tour should not have: less valid depth than ``odometry.min_valid_depth_fraction``, or no
+    RGB on a frame the detector reads (every ``observation.stride``-th). Counted per tour; a tour with a
+    larger share than ``odometry.max_degenerate_fraction`` fails with one line."""
+
+    def __init__(self, cfg: Config, rgb_needed: bool):
+        self.cfg, self.rgb_needed = cfg, rgb_needed
+        self.no_depth: list[int] = []
+        self.no_rgb: list[int] = []
+
+    def see(self, fd) -> None:
+        d = fd.depth
+        valid = np.count_nonzero(np.isfinite(d) & (d > 0)) if d is not None else 0
+        if d is None or valid < self.cfg.odometry.min_valid_depth_fraction * d.size:
+            self.no_depth.append(int(fd.index))
+        if self.rgb_needed and fd.index % self.cfg.observation.stride == 0 and fd.rgb is None:
+            self.no_rgb.append(int(fd.index))
+
+    def frames(self) -> list[int]:
+        return sorted(set(self.no_depth) | set(self.no_rgb))
+
+    def summary(self, n: int) -> dict:
+        bad = self.frames()
+        return {"no_usable_depth": len(self.no_depth), "no_rgb": len(self.no_rgb), "frames": len(bad),
+                "fraction": round(len(bad) / n, 4) if n else 0.0, "first": bad[:10]}
+
+    def check(self, where, n: int) -> None:
+        bad = self.frames()
+        limit = self.cfg.odometry.max_degenerate_fraction
+        if n and len(bad) > limit * n:
+            raise UserError(f"{where}: {len(bad)} of {n} frames are degenerate ({len(self.no_depth)} without usable depth, "
+                            f"{len(self.no_rgb)} without the RGB the detector reads), more than "
+                            f"odometry.max_degenerate_fraction = {limit}; first: {', '.join(map(str, bad[:5]))}")
+
+
+def write_outputs(r: Relocalizer, out, tour, idx, seconds: float, poses: str, degenerate: dict | None = None) -> dict:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     fps = tour.fps
@@ -237,6 +276,7 @@ def write_outputs(r: Relocalizer, out, tour, idx, seconds: float, poses: str) ->
         "budgets": list(r.budget_out),
         "detector": detector_record(r.detector), "seed": r.seed,
         "stage_ms_per_frame": {k: round(v * 1000 / max(len(idx), 1), 2) for k, v in r.fe.timings.items()},
+        "degenerate_frames": degenerate or {"no_usable_depth": 0, "no_rgb": 0, "frames": 0, "fraction": 0.0, "first": []},
     }
     if not clips:
         summary["note"] = "no clip was formed: no frame had usable depth"
@@ -306,6 +346,10 @@ def cmd_run(args) -> int:
           f"closure {s['closure_frames']} -> {args.out}")
     if "note" in s:
         print(f"note: {s['note']}")
+    dg = s["degenerate_frames"]
+    if dg["frames"]:
+        print(f"note: {dg['frames']} degenerate frame(s) ({dg['no_usable_depth']} without usable depth, {dg['no_rgb']} "
+              f"without RGB): {', '.join(map(str, dg['first']))}{', ...' if dg['frames'] > len(dg['first']) else ''}")
     return 0
 
 

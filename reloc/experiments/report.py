@@ -331,6 +331,13 @@ def build_markdown(results_dir, results: dict) -> str:
         rows = [[k, _seconds(v)] for k, v in secs.items()]
         md += [_md_table(["step", "seconds"], rows), "", "\u2014: no time recorded.", ""]
 
+    degenerate = results.get("degenerate_frames")
+    if degenerate:
+        md += ["## Degenerate frames", "", "Frames without usable depth, or without the RGB the detector reads, as "
+               "VideoReloc's runs counted them (a tour with more than odometry.max_degenerate_fraction of them fails):", ""]
+        md += [_md_table(["tour", "frames", "no usable depth", "no RGB", "first"],
+                         [[k, d["frames"], d["no_usable_depth"], d["no_rgb"], ", ".join(map(str, d["first"][:5]))]
+                          for k, d in degenerate.items()]), ""]
     failed = results.get("failed")
     if failed:
         md += ["## Failed runs", "", "These runs failed or were skipped; their frames count as failures.", ""]

@@ -324,6 +324,7 @@ def _run_experiment(spec: ExperimentSpec, out: Path, workers: int | None, progre
     results["seconds"] = _seconds(out, queries, methods, variants, files)
     results["seconds"]["this_run_wall"] = round(time.time() - t_start, 1)
     results["failed"] = runner.failed
+    results["degenerate_frames"] = _degenerate_frames(out, queries, methods)
     results["code"] = code
     ran = {"maps": map_seconds, "runs": run_seconds}
     if spec.replicates > 1:  # the same experiment reseeded, each in its own folder; their spread beside the intervals
@@ -432,6 +433,23 @@ def _sensor_key(spec: ExperimentSpec, name: str) -> dict | None:
     return None if name == "ideal" else {"name": name, "params": s["params"], "seed": spec.seed}
 
 
+def _degenerate_frames(out: Path, queries: dict, methods: list) -> dict:
+    """Per query tour with any, its degenerate frames as VideoReloc's run counted them (``run.json``:
+    no usable depth, no RGB where the detector reads it; ``reloc.backend.run.Degenerate``)."""
+    found: dict = {}
+    for m in ("videoreloc", "videoreloc_oracle"):
+        if m not in methods:
+            continue
+        for name in queries:
+            try:
+                dg = json.loads((out / "runs" / m / name / "run.json").read_text()).get("degenerate_frames")
+            except (OSError, ValueError):
+                continue
+            if dg and dg.get("frames") and name not in found:
+                found[name] = dg
+    return found
+
+
 def _seconds(out: Path, queries: dict, methods: list, variants: list, files: dict) -> dict:
     """Compute time of each method summed over tours (from the done markers), and of each map."""
     s: dict = {}
@@ -467,6 +485,9 @@ def cmd_experiment(args) -> int:
     print(f"\n{len(ran['runs'])} runs and {len(ran['maps'])} maps computed now "
           f"({r['seconds']['this_run_wall']:.0f} s wall); results, tables"
           f"{', plots and report' if not args.no_plots else ''} in {out}")
+    for name, dg in (r.get("degenerate_frames") or {}).items():
+        print(f"note: {name}: {dg['frames']} degenerate frame(s) ({dg['no_usable_depth']} without usable depth, "
+              f"{dg['no_rgb']} without RGB), first {', '.join(map(str, dg['first'][:5]))}", file=sys.stderr)
     if r["failed"]:
         for k, v in r["failed"].items():
             print(f"failed: {k}: {v}", file=sys.stderr)

@@ -764,6 +764,10 @@ def cmd_export(args) -> int:
                            progress=not args.quiet and sys.stderr.isatty(), sensor=args.sensor,
                            sensor_seed=args.sensor_seed)
     print(export.summary_line(m, args.out))
+    intr = m.get("intrinsics") or {}
+    note = (intr.get("ace") or {}).get("note") or (intr.get("dsacstar") or {}).get("resize_note")
+    if note:
+        print(f"note: {note}")
     return 0
 
 
@@ -786,7 +790,7 @@ def register_cli(subparsers) -> None:
     a = ds.add_parser("export", help="write a tour in a layout other relocalizers read: 7scenes (DSAC*, ACE, hloc), "
                                      "ace (ACE/DSAC* train|test), tum-rgbd (RGB-D SLAM, evo), colmap (hloc)")
     a.add_argument("dir", help="tour directory")
-    a.add_argument("--format", required=True, help="7scenes | ace | tum-rgbd | colmap")
+    a.add_argument("--format", required=True, help="7scenes | ace | dsacstar | tum-rgbd | colmap")
     a.add_argument("--out", required=True, help="export folder (new or empty; the same export again resumes "
                                                 "or does nothing)")
     a.add_argument("--role", default="query", help="mapping (ACE train/, 7-Scenes train split) | query (default)")
