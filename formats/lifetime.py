@@ -46,17 +46,31 @@ class Interrupted(KeyboardInterrupt):
         return 128 + self.signum
 
 
+_LAST: list[int] = []  # the stop signal received in this command (a library may re-raise it as KeyboardInterrupt)
+
+
+def _signum(e: KeyboardInterrupt) -> int:
+    if isinstance(e, Interrupted):
+        return e.signum
+    return _LAST[-1] if _LAST else int(signal.SIGINT)
+
+
 def exit_status(e: KeyboardInterrupt) -> int:
-    """130 for Ctrl-C, ``128 + signal`` for :class:`Interrupted`."""
-    return e.exit_status if isinstance(e, Interrupted) else 128 + signal.SIGINT
+    """``128 + signal``: 130 for Ctrl-C, 143 for SIGTERM, 129 for SIGHUP (also when a library turned
+    :class:`Interrupted` into a plain ``KeyboardInterrupt``, as Ray's waits do)."""
+    return 128 + _signum(e)
 
 
 def signal_name(e: KeyboardInterrupt) -> str:
-    return signal.Signals(e.signum).name if isinstance(e, Interrupted) else "SIGINT"
+    return signal.Signals(_signum(e)).name
 
 
 def _raise(signum, _frame):
+    _LAST.append(int(signum))
     raise Interrupted(signum)
+
+
+_ACTIVE = threading.Event()  # inside signals_interrupt
 
 
 @contextmanager
@@ -71,11 +85,24 @@ def signals_interrupt():
         s = getattr(signal, name, None)
         if s is not None:
             old[s] = signal.signal(s, _raise)
+    _ACTIVE.set()
+    _LAST.clear()
     try:
         yield
     finally:
+        _ACTIVE.clear()
         for s, h in old.items():
             signal.signal(s, h)
+
+
+def reclaim_signals() -> None:
+    """Put :func:`signals_interrupt`'s handlers back after a library replaced them (``ray.init`` installs
+    its own SIGTERM handler, which prints a stack and kills the driver before it can stop its tasks)."""
+    if _ACTIVE.is_set() and threading.current_thread() is threading.main_thread():
+        for name in ("SIGTERM", "SIGHUP"):
+            s = getattr(signal, name, None)
+            if s is not None:
+                signal.signal(s, _raise)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -208,6 +235,10 @@ class FolderLock:
         self._fd = fd
         return self
 
+    @property
+    def held(self) -> bool:
+        return self._fd is not None
+
     def release(self) -> None:
         if self._fd is not None:
             os.close(self._fd)  # closing the descriptor drops the flock
@@ -224,3 +255,67 @@ def folder_lock(folder, what: str) -> FolderLock:
     """``with folder_lock(out, "synth render"):``: refuse a second run into ``folder`` (one line, the
     owner's pid); the folder is created if needed."""
     return FolderLock(folder, what)
+
+
+# ---------------------------------------------------------------------------------------------
+# a reaper for process trees that do not die with their parent by themselves
+
+
+def _proc_table() -> dict[int, tuple[int, str]]:
+    """pid -> (parent pid, start time) of every process, from /proc (Linux)."""
+    out = {}
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            fields = (d / "stat").read_text().rsplit(")", 1)[1].split()
+            out[int(d.name)] = (int(fields[1]), fields[19])
+        except (OSError, IndexError, ValueError):
+            continue
+    return out
+
+
+def _reap(driver: int, poll_s: float = 0.5) -> None:
+    """The reaper process: every ``poll_s`` it notes the driver's descendants; once the driver is gone
+    it stops those still running (SIGTERM, then SIGKILL after 2 s) and exits."""
+    me = os.getpid()
+    seen: dict[int, str] = {}
+    while os.getppid() == driver:
+        table = _proc_table()
+        frontier, tree = {driver}, set()
+        while frontier:
+            kids = {p for p, (pp, _) in table.items() if pp in frontier and p != me} - tree
+            tree |= kids
+            frontier = kids
+        seen.update({p: table[p][1] for p in tree})
+        time.sleep(poll_s)
+    table = _proc_table()
+    left = [p for p, st in seen.items() if p in table and table[p][1] == st]  # the same processes, not reused pids
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        for p in left:
+            try:
+                os.kill(p, sig)
+            except OSError:
+                pass
+        deadline = time.monotonic() + 2.0
+        while time.monotonic() < deadline:
+            table = _proc_table()
+            left = [p for p in left if p in table and table[p][1] == seen[p]]
+            if not left:
+                return
+            time.sleep(0.1)
+
+
+def start_reaper() -> "subprocess.Popen | None":
+    """Start a reaper for this process's tree (Linux): when this process ends, however it ends, every
+    process it started, directly or not, that still runs is stopped. For libraries whose helpers do not
+    die with the driver (a local Ray instance's agents outlive a ``kill -9`` of the driver)."""
+    import subprocess
+
+    if not Path("/proc/self/stat").exists():
+        return None
+    code = "import sys; from formats.lifetime import _reap; _reap(int(sys.argv[1]))"
+    root = str(Path(__file__).resolve().parents[1])
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")]))}
+    return subprocess.Popen([sys.executable, "-c", code, str(os.getpid())], env=env, stdin=subprocess.DEVNULL,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, close_fds=True)

@@ -153,13 +153,20 @@ def test_a_signal_to_the_experiment_driver_stops_its_workers(fault_design, tmp_p
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=lambda s: signal.Signals(s).name)
-def test_a_signal_to_the_render_driver_stops_its_chunk_workers(fault_design, tmp_path, sig):
+@pytest.mark.parametrize("sig, backend", [(signal.SIGTERM, "local"), (signal.SIGKILL, "local"), (signal.SIGTERM, "ray"),
+                                          (signal.SIGKILL, "ray")],
+                         ids=lambda v: signal.Signals(v).name if isinstance(v, int) else v)
+def test_a_signal_to_the_render_driver_stops_its_chunk_workers(fault_design, tmp_path, sig, backend):
+    """The local backend's chunk processes, and the Ray backend's whole local instance (GCS, raylet, its
+    workers and their chunk processes: all descendants of the driver), end with the driver; Ray's own
+    SIGTERM handler does not replace the orderly stop (formats.lifetime.reclaim_signals)."""
+    if backend == "ray":
+        pytest.importorskip("ray")
     spec = yaml.safe_load((fault_design / "render.yaml").read_text())
     spec.update(out=str(tmp_path / "tours"), chunk_size=25)
     (tmp_path / "render.yaml").write_text(yaml.safe_dump(spec))
-    argv = ["synth.cli", "render", str(tmp_path / "render.yaml"), "--workers", "2", "--quiet"]
-    proc, kids = _start(argv, 2, "synth.render.chunk_worker")
+    argv = ["synth.cli", "render", str(tmp_path / "render.yaml"), "--workers", "2", "--quiet", "--backend", backend]
+    proc, kids = _start(argv, 1 if backend == "ray" else 2, "synth.render.chunk_worker")
     _signal_and_check(proc, kids, sig, "synth")
     done = subprocess.run([sys.executable, "-m", *argv, "--resume"], cwd=REPO, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]

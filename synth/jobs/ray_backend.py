@@ -42,6 +42,7 @@ from pathlib import Path
 from formats import frames as fr
 from formats.atomic import replacing, write_text_atomic
 from formats.errors import UserError, one_line
+from formats.lifetime import reclaim_signals, start_reaper
 
 from ..render.chunks import run_chunk_process
 from .chunk_queue import ChunkQueue, chunk_files
@@ -187,6 +188,9 @@ def connect(address: str | None, env_mode: str = "auto", device: str = "cpu", ou
             ray.init(_node_ip_address="127.0.0.1", include_dashboard=False, log_to_driver=False, runtime_env=env,
                      configure_logging=False)
         session = Session(ray, True, address)
+        reclaim_signals()  # SIGTERM stops the driver in order (its tasks cancelled), not by Ray's handler
+        if not address:  # a local instance's agents outlive a kill -9 of the driver: a reaper stops them then
+            start_reaper()
     try:
         res = ray.cluster_resources()
         where = f"the cluster at {address}" if address else "the local Ray instance"

@@ -79,8 +79,12 @@ def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, back
             if (plan.out / "results.json").is_file() and not (plan.out / STATE_FILE).is_file():
                 out_error(spec, from_cli, UserError(f"{plan.out} holds an experiment's results (results.json); "
                                                     "render into another folder"))
-            # one run per job folder (with or without --resume); the kernel drops the lock with the process
-            lock = folder_lock(plan.out, "synth render").acquire()
+            # one run per job folder (with or without --resume); the kernel drops the lock with the process.
+            # A folder that does not exist yet is made and locked only once the run can start (below), so that
+            # a refused run (an unreachable cluster, say) writes nothing
+            lock = folder_lock(plan.out, "synth render")
+            if plan.out.is_dir():
+                lock.acquire()
             state_path = plan.out / STATE_FILE
             old = JobState.load(state_path)
             shown = str(state_path)
@@ -104,6 +108,8 @@ def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, back
             session = ray_backend.connect(ray_address, ray_runtime_env, spec.device,  # out: kept out of the upload
                                           plan.out if store is None else local_path(store.uri), spec.renderer,
                                           progress=(lambda m: print(m, file=sys.stderr)) if progress else None)
+        if lock is not None and not lock.held:
+            lock.acquire()
         return _run_plan(plan, old, backend, workers, progress, t0, from_cli=from_cli)
     finally:
         if session is not None:
