@@ -436,3 +436,27 @@ def test_a_truncated_frame_is_one_line_after_the_progress_bar(fault_design, tmp_
     last = err.rstrip("\n").split("\n")[-1]
     assert last.startswith("reloc: error: ") and str(bad) in last and "\r" not in last, err[-500:]
     assert not (tmp_path / "run" / "run.json").exists()
+
+
+@pytest.mark.parametrize("changes, field", [({"window_portals": "no"}, "window_portals"), ({"name": ["a"]}, "name"),
+                                            ({"description": 5}, "description")])
+def test_lighting_presets_are_type_checked(changes, field):
+    from formats.errors import SceneFormatError
+    from synth.scene.lighting import parse_preset, preset_document, load_lighting
+
+    doc = {**preset_document(load_lighting("day")), **changes}
+    with pytest.raises(SceneFormatError, match=f"day.yaml: {field}: expected"):
+        parse_preset(doc, "day.yaml")
+
+
+@pytest.mark.parametrize("changes, says", [({"size": [20000, 20000]}, "size: 20000x20000 is too large"),
+                                           ({"name": ["a"]}, "name: expected a non-empty string"),
+                                           ({"out": "../../x"}, "out: '../../x' leaves the working folder"),
+                                           ({"quality": 3}, "quality: expected text")])
+def test_trainset_specs_are_type_checked(changes, says):
+    from formats.errors import SceneFormatError
+    from synth.datasets.trainset import parse_trainset
+
+    doc = {"name": "t", "out": "o", "seeds": [103], **changes}
+    with pytest.raises(SceneFormatError, match=re.escape(says)):
+        parse_trainset(doc, "t.yaml")

@@ -35,6 +35,7 @@ from pathlib import Path
 import yaml
 
 from formats.atomic import write_text_atomic
+from formats import fields
 from formats.errors import SceneFormatError, UserError
 from formats.fields import integer
 from formats.yamlfile import read_yaml
@@ -101,12 +102,12 @@ def parse_trainset(doc, source: str) -> TrainsetSpec:
             load_lighting(name)
         except UserError as e:
             raise SceneFormatError(source, f"lightings[{i}]", str(e)) from None
-    size = doc.get("size", [160, 120])
-    if (not isinstance(size, list) or len(size) != 2
-            or any(isinstance(v, bool) or not isinstance(v, int) or v <= 0 for v in size)):
-        raise SceneFormatError(source, "size", f"expected [width, height], got {size!r}")
+    size = fields.frame_size(source, doc.get("size", [160, 120]), "size")
+    for k in ("quality", "description"):
+        if k in doc and not isinstance(doc[k], str):
+            raise SceneFormatError(source, k, f"expected text, got {doc[k]!r}")
     return TrainsetSpec(
-        name=str(doc["name"]), out=str(doc["out"]), seeds=tuple(seeds),
+        name=fields.string(source, doc["name"], "name"), out=fields.out_folder(source, doc["out"]), seeds=tuple(seeds),
         variants=integer(source, doc.get("variants", 1), "variants", lo=0), lightings=tuple(lightings), jitter=integer(source, doc.get("jitter", 2), "jitter", lo=1),
         views=integer(source, doc.get("views", 40), "views", lo=1), size=(size[0], size[1]), quality=str(doc.get("quality", "preview")),
         seed=integer(source, doc.get("seed", 0), "seed", lo=0), chunk_size=integer(source, doc.get("chunk_size", 40), "chunk_size", lo=1),

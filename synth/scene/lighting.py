@@ -112,10 +112,17 @@ def parse_preset(doc, source: str) -> LightingPreset:
                               number(source, d.get("power", 60.0), f"fixtures.{kind}.power", lo=0.0), count)
 
     name = doc.get("name") or Path(source).stem
+    if not isinstance(name, str):
+        raise SceneFormatError(source, "name", f"expected a name, got {name!r}")
+    if not isinstance(doc.get("description", ""), str):
+        raise SceneFormatError(source, "description", f"expected text, got {doc.get('description')!r}")
+    portals = doc.get("window_portals", False)
+    if not isinstance(portals, bool):
+        raise SceneFormatError(source, "window_portals", f"expected true or false, got {portals!r}")
     return LightingPreset(
-        name=str(name), description=str(doc.get("description", "")), sky_color=sky_color,
+        name=name, description=doc.get("description", ""), sky_color=sky_color,
         sky_strength=number(source, sky.get("strength", 1.0), "sky.strength", lo=0.0), sun=sun,
-        window_portals=bool(doc.get("window_portals", False)), ceiling=setting("ceiling"), lamp=setting("lamp"), source=source,
+        window_portals=portals, ceiling=setting("ceiling"), lamp=setting("lamp"), source=source,
     )
 
 
