@@ -12,9 +12,10 @@ with their parent, and one run per output folder.
   a daemon thread checks every half second that the parent is still its parent (``os.getppid``),
   so a ``kill -9`` of the driver leaves no worker rendering into the void.
 * **One run per folder.** :func:`folder_lock` takes an exclusive ``flock`` on ``FOLDER/.lock`` for as
-  long as the run lives. The kernel drops it when the process ends, however it ends, so a lock left
-  by a killed run never blocks; a second run into the same folder is refused with one line naming
-  the owner's pid (written into the lock file for that message only).
+  long as the run lives, and removes the file when the run ends normally. The kernel drops the lock
+  when the process ends, however it ends, so a lock file left by a killed run never blocks; a second
+  run into the same folder is refused with one line naming the owner's pid (written into the lock
+  file for that message only).
 """
 
 from __future__ import annotations
@@ -230,6 +231,13 @@ class FolderLock:
         except OSError as e:  # a file system without locks: say so rather than run unprotected silently
             os.close(fd)
             raise UserError(f"{path}: cannot lock the output folder ({e.strerror or e})") from None
+        try:  # the file may have been removed by its previous owner after we opened it: lock the current one
+            same = os.fstat(fd).st_ino == os.stat(path).st_ino
+        except FileNotFoundError:
+            same = False
+        if not same:
+            os.close(fd)
+            return self.acquire()
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
         self._fd = fd
@@ -240,7 +248,12 @@ class FolderLock:
         return self._fd is not None
 
     def release(self) -> None:
+        """Remove the lock file (while still holding it, so no other run can be between) and drop the lock."""
         if self._fd is not None:
+            try:
+                os.unlink(self.folder / LOCK_FILE)
+            except OSError:
+                pass
             os.close(self._fd)  # closing the descriptor drops the flock
             self._fd = None
 
