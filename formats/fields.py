@@ -75,6 +75,13 @@ def string(file, v, field: str) -> str:
     return v
 
 
+def text(file, v, field: str) -> str:
+    """Free text (a description); may be empty, but must be text."""
+    if not isinstance(v, str):
+        fail(file, field, f"expected text, got {v!r}")
+    return v
+
+
 def names(file, v, field: str) -> list[str]:
     """A non-empty list of non-empty strings; a single string is a list of one."""
     if isinstance(v, str):

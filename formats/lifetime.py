@@ -288,6 +288,17 @@ def _proc_table() -> dict[int, tuple[int, str]]:
     return out
 
 
+def descendants(pid: int, table: dict | None = None) -> set[int]:
+    """Every live process below ``pid`` (children, their children, ...), from /proc (Linux)."""
+    table = _proc_table() if table is None else table
+    frontier, tree = {pid}, set()
+    while frontier:
+        kids = {p for p, (pp, _) in table.items() if pp in frontier} - tree
+        tree |= kids
+        frontier = kids
+    return tree
+
+
 def _reap(driver: int, poll_s: float = 0.5) -> None:
     """The reaper process: every ``poll_s`` it notes the driver's descendants; once the driver is gone
     it stops those still running (SIGTERM, then SIGKILL after 2 s) and exits."""
@@ -295,12 +306,7 @@ def _reap(driver: int, poll_s: float = 0.5) -> None:
     seen: dict[int, str] = {}
     while os.getppid() == driver:
         table = _proc_table()
-        frontier, tree = {driver}, set()
-        while frontier:
-            kids = {p for p, (pp, _) in table.items() if pp in frontier and p != me} - tree
-            tree |= kids
-            frontier = kids
-        seen.update({p: table[p][1] for p in tree})
+        seen.update({p: table[p][1] for p in descendants(driver, table) - {me}})
         time.sleep(poll_s)
     table = _proc_table()
     left = [p for p, st in seen.items() if p in table and table[p][1] == st]  # the same processes, not reused pids

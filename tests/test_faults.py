@@ -32,27 +32,14 @@ import numpy as np
 import pytest
 import yaml
 
-from formats.lifetime import FolderLock
+from formats.lifetime import FolderLock, descendants
 
 REPO = Path(__file__).resolve().parents[1]
 
 
 def _children(pid: int) -> set[int]:
     """Every live descendant of ``pid`` (from /proc)."""
-    parent_of = {}
-    for d in Path("/proc").iterdir():
-        if d.name.isdigit():
-            try:
-                fields = (d / "stat").read_text().rsplit(")", 1)[1].split()
-                parent_of[int(d.name)] = int(fields[1])
-            except (OSError, IndexError, ValueError):
-                continue
-    out, frontier = set(), {pid}
-    while frontier:
-        kids = {p for p, pp in parent_of.items() if pp in frontier} - out
-        out |= kids
-        frontier = kids
-    return out
+    return descendants(pid)
 
 
 def _alive(pid: int) -> bool:

@@ -308,16 +308,10 @@ def load_experiment(path) -> ExperimentSpec:
         unchanged=fields.string(src, doc["unchanged"], "unchanged"), map=doc.get("map", "build"),
         methods=tuple(methods), tables=tuple(tables), one_frame_stride=int(doc.get("one_frame_stride", 15)),
         detector=det, config=cfg, appearance=app, fpfh_icp=fp, workers=int(doc.get("workers", 2)),
-        seed=seed, description=_text(src, doc.get("description", ""), "description"), externals=tuple(externals),
+        seed=seed, description=fields.text(src, doc.get("description", ""), "description"), externals=tuple(externals),
         sensors=sensors, map_sensor=map_sensor, intervals=IntervalSettings.from_spec(src, doc.get("intervals")),
         replicates=int(doc.get("replicates", 1)),
     )
-
-
-def _text(src, v, field: str) -> str:
-    if not isinstance(v, str):
-        _fail(src, field, f"expected text, got {v!r}")
-    return v
 
 
 def replicate_spec(spec: ExperimentSpec, k: int) -> ExperimentSpec:

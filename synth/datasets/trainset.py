@@ -103,15 +103,12 @@ def parse_trainset(doc, source: str) -> TrainsetSpec:
         except UserError as e:
             raise SceneFormatError(source, f"lightings[{i}]", str(e)) from None
     size = fields.frame_size(source, doc.get("size", [160, 120]), "size")
-    for k in ("quality", "description"):
-        if k in doc and not isinstance(doc[k], str):
-            raise SceneFormatError(source, k, f"expected text, got {doc[k]!r}")
     return TrainsetSpec(
         name=fields.string(source, doc["name"], "name"), out=fields.out_folder(source, doc["out"]), seeds=tuple(seeds),
         variants=integer(source, doc.get("variants", 1), "variants", lo=0), lightings=tuple(lightings), jitter=integer(source, doc.get("jitter", 2), "jitter", lo=1),
-        views=integer(source, doc.get("views", 40), "views", lo=1), size=(size[0], size[1]), quality=str(doc.get("quality", "preview")),
+        views=integer(source, doc.get("views", 40), "views", lo=1), size=(size[0], size[1]), quality=fields.text(source, doc.get("quality", "preview"), "quality"),
         seed=integer(source, doc.get("seed", 0), "seed", lo=0), chunk_size=integer(source, doc.get("chunk_size", 40), "chunk_size", lo=1),
-        description=str(doc.get("description", "")), source=source)
+        description=fields.text(source, doc.get("description", ""), "description"), source=source)
 
 
 def load_trainset(path) -> TrainsetSpec:

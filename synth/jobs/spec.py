@@ -53,12 +53,6 @@ class JobSpec:
     replicacad: dict | None = None  # layouts are scenes of a ReplicaCAD folder (synth.replicacad.job)
 
 
-def _description(source, v) -> str:
-    if not isinstance(v, str):
-        fail(source, "description", f"expected text, got {v!r}")
-    return v
-
-
 def parse_spec(doc, source: str) -> JobSpec:
     """Validate a spec document; every error names the file and the key."""
     if not isinstance(doc, dict):
@@ -133,7 +127,7 @@ def parse_spec(doc, source: str) -> JobSpec:
         hfov_deg=float(hfov), seed=seed, device=device,
         chunk_size=positive_int(source, doc.get("chunk_size", DEFAULTS.chunk_size), "chunk_size"), retries=retries,
         previews=fields.boolean(source, doc.get("previews", DEFAULTS.previews), "previews"),
-        description=_description(source, doc.get("description", "")), source=source,
+        description=fields.text(source, doc.get("description", ""), "description"), source=source,
         replicacad=_replicacad_section(doc, source),
     )
 

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from formats import fields
 from formats.errors import SceneFormatError, UnknownNameError
 from formats.fields import number
 from formats.yamlfile import read_yaml
@@ -114,13 +115,9 @@ def parse_preset(doc, source: str) -> LightingPreset:
     name = doc.get("name") or Path(source).stem
     if not isinstance(name, str):
         raise SceneFormatError(source, "name", f"expected a name, got {name!r}")
-    if not isinstance(doc.get("description", ""), str):
-        raise SceneFormatError(source, "description", f"expected text, got {doc.get('description')!r}")
-    portals = doc.get("window_portals", False)
-    if not isinstance(portals, bool):
-        raise SceneFormatError(source, "window_portals", f"expected true or false, got {portals!r}")
+    portals = fields.boolean(source, doc.get("window_portals", False), "window_portals")
     return LightingPreset(
-        name=name, description=doc.get("description", ""), sky_color=sky_color,
+        name=name, description=fields.text(source, doc.get("description", ""), "description"), sky_color=sky_color,
         sky_strength=number(source, sky.get("strength", 1.0), "sky.strength", lo=0.0), sun=sun,
         window_portals=portals, ceiling=setting("ceiling"), lamp=setting("lamp"), source=source,
     )
