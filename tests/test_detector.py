@@ -23,7 +23,7 @@ from synth.cli import main as synth_main
 torch = pytest.importorskip("torch")  # the [train] extra; make test installs it
 
 from reloc.detector.data import boundaries, load  # noqa: E402
-from reloc.detector.model import SegNet  # noqa: E402
+from reloc.detector.model import FastSeg, SegNet  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -37,6 +37,9 @@ def tiny(tmp_path_factory):
     assert reloc_main(["detector", "pack", str(root / "renders"), "--out", str(root / "set.npz"), "--quiet"]) == 0
     assert reloc_main(["detector", "train", str(root / "set.npz"), "--out", str(root / "run"), "--epochs", "15",
                        "--batch", "2", "--width", "8", "--lr", "0.01", "--quiet"]) == 0
+    assert reloc_main(["detector", "train", str(root / "set.npz"), "--out", str(root / "fast"), "--epochs", "15",
+                       "--batch", "2", "--width", "8", "--lr", "0.01", "--arch", "fastseg", "--augment", "camera",
+                       "--quiet"]) == 0
     return root
 
 
@@ -84,6 +87,34 @@ def test_training_learns_and_onnx_matches_pytorch(tiny):
             ts, tb = (t.numpy() for t in model(torch.from_numpy(x)))
         os_, ob = det.session.run(None, {"image": x})
         assert np.abs(ts - os_).max() < 1e-4 and np.abs(tb - ob).max() < 1e-4
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_fastseg_with_camera_augmentation_learns_exports_and_refuses_other_sizes(tiny):
+    """The issue-28 path: the stride-16 network, trained through the camera augmentation, exports
+    its stride and training resolution; the detector pads frames to the stride and refuses a tour
+    of another size in one line naming the model and both sizes."""
+    log = json.loads((tiny / "fast" / "train_log.json").read_text())
+    losses = [e["loss"] for e in log["epochs"]]
+    assert log["config"]["arch"] == "fastseg" and log["augment_config"]["electrons_per_ms"] > 0
+    assert losses[-1] < 0.85 * losses[0]
+    state = torch.load(tiny / "fast" / "checkpoint.pt", map_location="cpu")
+    model = FastSeg(len(log["classes"]), 8)
+    model.load_state_dict(state["model"])
+    model.eval()
+    det = LearnedDetector(tiny / "fast" / "model.onnx")
+    assert det.stride == 16 and det.resolution == (64, 48)
+    x = np.random.default_rng(0).random((1, 3, 48, 64)).astype(np.float32)
+    with torch.no_grad():
+        ts, tb = (t.numpy() for t in model(torch.from_numpy(x)))
+    os_, ob = det.session.run(None, {"image": x})
+    assert np.abs(ts - os_).max() < 1e-4 and np.abs(tb - ob).max() < 1e-4
+    rgb = np.random.default_rng(1).random((48, 64, 3)).astype(np.float32)
+    cls, conf, bnd = det.predict(rgb)
+    assert cls.shape == (48, 64) and bnd.shape == (48, 64)
+    with pytest.raises(UserError, match=r"model\.onnx: the model was trained on 64x48 frames, but this tour is 160x120"):
+        det.predict(np.zeros((120, 160, 3), np.float32))
 
 
 @pytest.mark.blender

@@ -107,6 +107,70 @@ def test_jittered_presets_keep_their_lights_and_stay_in_range(name):
     assert len(set(seen)) == 12  # every seed a different light
 
 
+def test_wide_jitter_reaches_one_lamp_and_more_power():
+    base = load_lighting("night")
+    wide = LightingJitter(strength_log2=1.0, lamps_fewer=1)
+    counts = {jitter_preset(base, s, wide).lamp.count for s in range(40)}
+    assert counts == {1, 2, 3, 4}  # one lamp fewer to two more
+    assert {jitter_preset(base, s).lamp.count for s in range(40)} == {2, 3, 4}  # the default never goes below
+    powers = [jitter_preset(base, s, wide).lamp.power / base.lamp.power for s in range(40)]
+    assert min(powers) < 2 ** -0.7 and max(powers) > 2 ** 0.7 and all(0.5 - 1e-3 <= p <= 2 + 1e-3 for p in powers)
+
+
+# ---------------------------------------------------------------------------------------------
+# appearance randomisation (synth.datasets.appearance) and the room finishes it writes
+
+
+def test_appearance_redraws_colours_and_materials_but_not_geometry():
+    from synth.datasets.appearance import FAMILIES, randomize_appearance
+    from synth.layout.apartment import generate_apartment
+    from synth.render.meshes import stage_finishes, stage_parts
+
+    lay = generate_apartment(seed=101, name="train_101")
+    same = randomize_appearance(lay, 3, 0.0)
+    assert same.objects == lay.objects and "finishes" not in same.meta
+    r = randomize_appearance(lay, 3, 1.0)
+    assert r == randomize_appearance(lay, 3, 1.0) and r != randomize_appearance(lay, 4, 1.0)  # seeded
+    assert [(o.id, o.cls, o.position, o.size, o.rotation) for o in r.objects] == \
+           [(o.id, o.cls, o.position, o.size, o.rotation) for o in lay.objects]
+    changed = 0
+    for a, b in zip(lay.objects, r.objects):
+        for k, v in a.params.items():
+            if k.endswith("material") and v != b.params[k]:
+                assert any(v in fam and b.params[k] in fam for fam in FAMILIES)  # within its family
+            if k == "color" or k.endswith("_color"):
+                changed += v != b.params[k]
+                assert all(0.0 <= c <= 1.0 for c in b.params[k])
+    assert changed >= 5
+    assert lay.objects[0].params == generate_apartment(seed=101, name="train_101").objects[0].params  # input untouched
+    fin = stage_finishes(r)
+    assert set(fin) == {"wall_color", "ceiling_color", "floor_color", "floor_material"}
+    walls = [p for p in stage_parts(r) if p.material == "wall_paint"]
+    floors = [p for p in stage_parts(r) if p.name.startswith("floor/")]
+    assert walls and all(p.color == fin["wall_color"] for p in walls)
+    assert all(p.material == fin["floor_material"] and p.color == fin["floor_color"] for p in floors)
+    assert all(p.color is None for p in stage_parts(lay) if p.material == "wall_paint")  # no finishes: defaults
+    with pytest.raises(ValueError, match="strength"):
+        randomize_appearance(lay, 3, 1.5)
+
+
+@pytest.mark.parametrize("finishes, field", [
+    ({"wall_color": [1.2, 0, 0]}, "meta.finishes.wall_color"),
+    ({"floor_material": "lava"}, "meta.finishes.floor_material"),
+    ({"roof": [0, 0, 0]}, "meta.finishes.roof"),
+    ([1, 2], "meta.finishes"),
+])
+def test_bad_finishes_name_the_layout_and_key(finishes, field):
+    from synth.layout.apartment import generate_apartment
+    from synth.render.meshes import stage_parts
+
+    lay = generate_apartment(seed=101, name="train_101")
+    lay.meta["finishes"] = finishes
+    with pytest.raises(SceneFormatError) as e:
+        stage_parts(lay)
+    assert e.value.field == field and "train_101" in str(e.value)
+
+
 # ---------------------------------------------------------------------------------------------
 # the trainset spec
 
@@ -126,6 +190,12 @@ def _doc(**kw):
     ({"views": 0}, "views"),
     ({"size": [32]}, "size"),
     ({"colour": 1}, "colour"),
+    ({"appearance": 1.5}, "appearance"),
+    ({"appearance": "lots"}, "appearance"),
+    ({"lighting_jitter": {"glow": 1}}, "lighting_jitter.glow"),
+    ({"lighting_jitter": {"lamps_fewer": -1}}, "lighting_jitter.lamps_fewer"),
+    ({"lighting_jitter": {"strength_log2": "x"}}, "lighting_jitter.strength_log2"),
+    ({"lighting_jitter": [1]}, "lighting_jitter"),
 ])
 def test_bad_trainset_specs_name_the_field(changes, field):
     with pytest.raises(SceneFormatError) as e:

@@ -137,16 +137,25 @@ class LearnedDetector:
         self.depth_edge_rel = float(depth_edge_rel)
         self.depth_edge_abs_m = float(depth_edge_abs_m)
         self._input = self.session.get_inputs()[0].name
+        try:  # models before issue 28 carry neither (stride 8, any resolution)
+            self.stride = int(meta.get("stride", 8))
+            res = json.loads(meta["resolution"]) if "resolution" in meta else None
+            self.resolution = None if res is None else (int(res[0]), int(res[1]))
+        except (ValueError, TypeError, IndexError) as e:
+            raise UserError(f"{where}: stride or resolution: malformed in the model's metadata ({one_line(e)})") from None
 
     # -- the network -------------------------------------------------------------------------------
 
     def predict(self, rgb_linear: np.ndarray, index: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(class index, its probability, boundary probability), each (H, W), for a linear RGB frame
         (``index``: the frame's, which seeds a perturbation's jitter)."""
+        h, w = np.asarray(rgb_linear).shape[:2]
+        if self.resolution is not None and (w, h) != self.resolution:
+            raise UserError(f"{self.model_path}: the model was trained on {self.resolution[0]}x{self.resolution[1]} "
+                            f"frames, but this tour is {w}x{h}: render the tour at the model's size, or train a model at {w}x{h}")
         srgb, _ = tonemap(rgb_linear)
         x = self.perturbation.jitter(np.round(srgb * 255.0), index) / 255.0  # the 8-bit frame the model was trained on
-        h, w = x.shape[:2]
-        ph, pw = (-h) % 8, (-w) % 8
+        ph, pw = (-h) % self.stride, (-w) % self.stride
         x = np.pad(x, ((0, ph), (0, pw), (0, 0)), mode="edge").transpose(2, 0, 1)[None].astype(np.float32)
         sem, bnd = self.session.run(None, {self._input: x})
         logits = sem[0, :, :h, :w]

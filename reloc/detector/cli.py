@@ -59,7 +59,7 @@ def cmd_train(args) -> int:
     if not Path(args.data).is_file():
         raise UserError(f"{args.data}: training set not found (make one with reloc detector pack)")
     cfg = TrainConfig(epochs=args.epochs, batch=args.batch, lr=args.lr, width=args.width, seed=args.seed,
-                      val_layouts=args.val_layouts)
+                      arch=args.arch, augment=args.augment, val_layouts=args.val_layouts)
     log = train(args.data, args.out, cfg, device=args.device, resume=args.resume, progress=not args.quiet)
     onnx_path = export_onnx(Path(args.out) / "checkpoint.pt", Path(args.out) / "model.onnx")
     last = log["epochs"][-1]
@@ -103,6 +103,10 @@ def register_cli(subparsers) -> None:
     a.add_argument("--lr", type=float, default=d.lr, help=f"Adam's learning rate (default {d.lr:g})")
     a.add_argument("--width", type=int, default=d.width, help=f"channels of the first stage (default {d.width})")
     a.add_argument("--seed", type=int, default=d.seed, help=f"default {d.seed}")
+    a.add_argument("--arch", default=d.arch, choices=["segnet", "fastseg"],
+                   help=f"network (reloc.detector.model; default {d.arch})")
+    a.add_argument("--augment", default=d.augment, choices=["exposure", "camera"],
+                   help=f"exposure: flips and exposure only; camera: the camera pipeline (reloc.detector.augment); default {d.augment}")
     a.add_argument("--val-layouts", nargs="*", default=[], help="layouts held out for validation (default: the last)")
     a.add_argument("--device", default="cpu", help="cpu or cuda")
     a.add_argument("--resume", action="store_true", help="continue from the folder's checkpoint")

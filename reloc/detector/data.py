@@ -1,7 +1,8 @@
 """Training sets for the learned detector: rendered tours packed into one small file.
 
 ``pack`` reads the RGB frames of tours (``formats.tour``), encodes them as the camera would (per-frame
-auto exposure, ``formats.tour.tonemap``, 8-bit sRGB) and stores each frame as a JPEG (RGB) and two
+auto exposure, ``formats.tour.tonemap``, 8-bit sRGB; the exposure's scale is kept per frame, so that
+training can recover linear light for the camera augmentation) and stores each frame as a JPEG (RGB) and two
 lossless PNGs (class index, 16-bit instance id), with the frame's tour, layout and lighting. One ``.npz`` of byte strings keeps 3,840 frames at 160x120 near
 45 MB, small enough to travel to a training machine; ``load`` decodes it with Pillow, so training
 needs neither OpenEXR nor the rest of the toolkit.
@@ -34,6 +35,7 @@ class TrainingSet:
     lightings: list[str | None]
     layouts: list[str]
     classes: list[str]  # index -> class name (index 0: "background")
+    scales: np.ndarray | None = None  # (N,) the tonemap's exposure scale per frame (linear = decode(rgb) / scale); None: an older pack
 
     def __len__(self) -> int:
         return len(self.rgb)
@@ -90,12 +92,13 @@ def pack(tour_dirs, out, classes: list[str], every: int = 1, progress: bool = Tr
             f = tour.frame(int(i), rgb=True, depth=False, instance=True, semantic=True)
             if f.rgb is None:
                 continue
-            srgb, _ = tonemap(f.rgb)
+            srgb, scale = tonemap(f.rgb)
             rgb8 = np.round(srgb * 255.0).astype(np.uint8)
             sem = sem_map[np.minimum(f.semantic, 65535).astype(np.int64)]
             inst = np.minimum(f.instance, 65535).astype(np.uint16)
             blobs += [_encode(rgb8, "JPEG"), _encode(sem, "PNG"), _encode(inst, "PNG")]
-            meta.append({"tour": tour.name, "frame": int(i), "lighting": lighting, "layout": layout})
+            meta.append({"tour": tour.name, "frame": int(i), "lighting": lighting, "layout": layout,
+                         "exposure": float(scale)})
         if progress:
             print(f"packed {tour.name}: {len(meta)} frames so far", file=sys.stderr)
     if not meta:
@@ -121,8 +124,9 @@ def load(path) -> TrainingSet:
     sem = np.stack([_decode(b) for b in parts[1::3]]).astype(np.uint8)
     inst = np.stack([_decode(b) for b in parts[2::3]]).astype(np.int32)
     fr = header["frames"]
+    scales = np.array([m["exposure"] for m in fr], np.float32) if all("exposure" in m for m in fr) else None
     return TrainingSet(rgb, sem, inst, [m["tour"] for m in fr], [m["lighting"] for m in fr],
-                       [m["layout"] for m in fr], header["classes"])
+                       [m["layout"] for m in fr], header["classes"], scales)
 
 
 def boundaries(instance: np.ndarray) -> np.ndarray:

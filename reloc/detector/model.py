@@ -6,9 +6,18 @@ logits (one channel: the pixel lies on the border between two instances, or betw
 and the background). Instances are cut from these by ``reloc.detection.learned``, which
 also splits them at depth discontinuities.
 
-Three stride-2 stages (24, 48, 96 channels, a 128-channel bottleneck at 1/8) with skip
-connections; about 0.6 M parameters. Only ONNX-friendly operations (convolutions, batch norm,
-ReLU, nearest upsampling, concatenation).
+Two architectures (``ARCHS``; the exported model's metadata names its ``stride``, which the input's
+height and width must divide):
+
+* ``segnet`` (the first shipped model): three stride-2 stages (24, 48, 96 channels, a 128-channel
+  bottleneck at 1/8) with skip connections and full-resolution decoding; stride 8.
+* ``fastseg`` (issue 28): the same U shape started at half resolution (a stride-2 stem), one
+  stage deeper (a bottleneck at 1/16 for more context), decoder stages that first reduce the
+  concatenated channels with a 1x1 convolution, and heads at 1/2 upsampled bilinearly to full
+  resolution; about a sixth of segnet's arithmetic at the same width; stride 16.
+
+Only ONNX-friendly operations (convolutions, batch norm, ReLU, nearest and bilinear upsampling,
+concatenation).
 """
 
 from __future__ import annotations
@@ -50,6 +59,55 @@ class SegNet(nn.Module):
         y = self.d2(torch.cat([self.up(y), x2], 1))
         y = self.d1(torch.cat([self.up(y), x1], 1))
         return self.semantic(y), self.boundary(y)
+
+
+def _reduce(cin: int, cout: int) -> nn.Sequential:
+    return nn.Sequential(
+        nn.Conv2d(cin, cout, 1, bias=False), nn.BatchNorm2d(cout), nn.ReLU(inplace=True),
+        nn.Conv2d(cout, cout, 3, padding=1, bias=False), nn.BatchNorm2d(cout), nn.ReLU(inplace=True),
+    )
+
+
+class FastSeg(nn.Module):
+    stride = 16
+
+    def __init__(self, n_classes: int, width: int = 24):
+        super().__init__()
+        w1, w2, w3, w4 = width, 2 * width, 4 * width, 6 * width
+        self.n_classes = int(n_classes)
+        self.width = int(width)
+        self.e1 = _block(3, w1, 2)  # 1/2
+        self.e2 = _block(w1, w2, 2)  # 1/4
+        self.e3 = _block(w2, w3, 2)  # 1/8
+        self.e4 = _block(w3, w4, 2)  # 1/16
+        self.up = nn.Upsample(scale_factor=2, mode="nearest")
+        self.d3 = _reduce(w4 + w3, w3)
+        self.d2 = _reduce(w3 + w2, w2)
+        self.d1 = _reduce(w2 + w1, w1)
+        self.semantic = nn.Conv2d(w1, n_classes, 1)
+        self.boundary = nn.Conv2d(w1, 1, 1)
+        self.full = nn.Upsample(scale_factor=2, mode="bilinear", align_corners=False)
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        x1 = self.e1(x)
+        x2 = self.e2(x1)
+        x3 = self.e3(x2)
+        x4 = self.e4(x3)
+        y = self.d3(torch.cat([self.up(x4), x3], 1))
+        y = self.d2(torch.cat([self.up(y), x2], 1))
+        y = self.d1(torch.cat([self.up(y), x1], 1))
+        return self.full(self.semantic(y)), self.full(self.boundary(y))
+
+
+SegNet.stride = 8
+ARCHS = {"segnet": SegNet, "fastseg": FastSeg}
+
+
+def build(arch: str, n_classes: int, width: int) -> nn.Module:
+    """The named architecture (``ARCHS``) for ``n_classes`` classes at ``width``."""
+    if arch not in ARCHS:
+        raise ValueError(f"unknown architecture {arch!r}; known: {', '.join(ARCHS)}")
+    return ARCHS[arch](n_classes, width)
 
 
 def parameter_count(model: nn.Module) -> int:

@@ -7,6 +7,45 @@ from dataclasses import dataclass, field
 
 
 @dataclass
+class AugmentConfig:
+    """Random strengths of the camera augmentation (``reloc.detector.augment.camera_augment``). The
+    colour camera's centre values come from the sensor preset ``sensor`` (``formats.sensors``) when
+    training starts (``with_sensor``)."""
+
+    brightness_log2: tuple[float, float] = (2.0, 1.0)  # scene radiance x 2^U(-a, b)
+    white_balance_log2: float = 0.2  # red and blue gains 2^U(-w, w)
+    blur_prob: float = 0.5
+    blur_px: float = 6.0  # longest shift over the exposure
+    blur_roll_deg: float = 2.0
+    blur_samples: int = 8
+    sensor_prob: float = 0.7
+    sensor: str = "structured_light"
+    electrons_log2: float = 1.0  # electrons_per_ms x 2^U(-e, e) around the preset's
+    jpeg_prob: float = 0.5
+    jpeg_quality: tuple[float, float] = (40.0, 95.0)
+    # the preset's colour camera (filled by with_sensor)
+    electrons_per_ms: float = 0.0
+    read_noise_e: float = 0.0
+    full_well_e: float = 0.0
+    exposure_percentile: float = 97.0
+    exposure_target: float = 0.8
+    exposure_min_ms: float = 0.01
+    exposure_max_ms: float = 33.3
+    max_gain: float = 16.0
+
+    def with_sensor(self) -> "AugmentConfig":
+        """A copy with the colour camera of the preset ``sensor``."""
+        from dataclasses import replace
+
+        from formats.sensors import load_sensor
+
+        c = load_sensor(self.sensor).color
+        return replace(self, electrons_per_ms=c.electrons_per_ms, read_noise_e=c.read_noise_e, full_well_e=c.full_well_e,
+                       exposure_percentile=c.exposure_percentile, exposure_target=c.exposure_target,
+                       exposure_min_ms=c.exposure_min_ms, exposure_max_ms=c.exposure_max_ms, max_gain=c.max_gain)
+
+
+@dataclass
 class TrainConfig:
     epochs: int = 40
     batch: int = 32
@@ -17,4 +56,6 @@ class TrainConfig:
     boundary_loss_weight: float = 1.0
     exposure_log2: float = 0.7
     seed: int = 0
+    arch: str = "segnet"  # reloc.detector.model.ARCHS
+    augment: str = "exposure"  # exposure (flips and exposure only) | camera (AugmentConfig)
     val_layouts: list[str] = field(default_factory=list)  # default: the last layout of the set

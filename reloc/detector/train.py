@@ -30,9 +30,10 @@ import torch.nn.functional as F
 from formats.atomic import replacing, write_json_atomic
 from formats.errors import UserError, one_line
 
+from .augment import camera_augment
 from .data import boundaries, load
-from .settings import TrainConfig
-from .model import SegNet, parameter_count
+from .settings import AugmentConfig, TrainConfig
+from .model import build, parameter_count
 
 MODEL_FORMAT = "videoreloc-segnet/1"
 
@@ -53,11 +54,28 @@ def _augment(x: torch.Tensor, g: torch.Generator, exposure_log2: float) -> torch
     return torch.where(lin <= 0.0031308, lin * 12.92, 1.055 * lin.clamp_min(1e-8) ** (1 / 2.4) - 0.055)
 
 
-def train(data_path, out, cfg: TrainConfig, device: str = "cpu", resume: bool = False, progress: bool = True) -> dict:
+def pad_to(x: torch.Tensor, stride: int) -> torch.Tensor:
+    """(B, C, H, W) padded at the bottom and right (edge values) to multiples of ``stride``, as
+    ``reloc.detection.learned`` pads a frame for the model."""
+    ph, pw = (-x.shape[-2]) % stride, (-x.shape[-1]) % stride
+    return F.pad(x, (0, pw, 0, ph), mode="replicate") if ph or pw else x
+
+
+def forward(model, x: torch.Tensor):
+    """The model's (semantic, boundary) logits for a batch of any size (padded, then cropped)."""
+    h, w = x.shape[-2:]
+    ls, lb = model(pad_to(x, model.stride))
+    return ls[..., :h, :w], lb[..., :h, :w]
+
+
+def train(data_path, out, cfg: TrainConfig, device: str = "cpu", resume: bool = False, progress: bool = True,
+          augment: AugmentConfig | None = None) -> dict:
     """Train on a packed set; writes ``out/checkpoint.pt``, ``out/train_log.json`` and returns the log."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(cfg.seed)
+    if str(device).startswith("cuda"):
+        torch.backends.cudnn.benchmark = True  # fixed input sizes: let cuDNN pick its fastest kernels
     ds = load(data_path)
     n_cls = len(ds.classes)
     layouts = sorted(set(ds.layouts))
@@ -69,14 +87,21 @@ def train(data_path, out, cfg: TrainConfig, device: str = "cpu", resume: bool = 
         val = np.array([t == ds.tours[-1] for t in ds.tours])
     if val.all() or not val.any():
         raise ValueError(f"validation layouts {sorted(val_layouts)} leave no training or no validation frames")
+    if cfg.augment not in ("exposure", "camera"):
+        raise UserError(f"augment: expected exposure or camera, got {cfg.augment!r}")
+    aug = (augment or AugmentConfig()).with_sensor() if cfg.augment == "camera" else None
+    if aug is not None and ds.scales is None:
+        raise UserError(f"{data_path}: packed without exposure scales (an older reloc detector pack): "
+                        "pack it again for --augment camera")
     bnd = boundaries(ds.instance)
     X = torch.from_numpy(ds.rgb).permute(0, 3, 1, 2).contiguous()  # uint8, moved per batch
     S = torch.from_numpy(ds.semantic.astype(np.int64))
     B = torch.from_numpy(bnd.astype(np.float32))
-    if device != "cpu":  # the whole set fits on any GPU (3,840 frames at 160x120: 0.3 GB)
-        X, S, B = X.to(device), S.to(device), B.to(device)
+    SC = torch.from_numpy(ds.scales if ds.scales is not None else np.ones(len(ds), np.float32))
+    if device != "cpu":  # the whole set fits on any GPU (6,000 frames at 160x120: 0.5 GB)
+        X, S, B, SC = X.to(device), S.to(device), B.to(device), SC.to(device)
     tr_idx, va_idx = np.flatnonzero(~val), np.flatnonzero(val)
-    model = SegNet(n_cls, cfg.width).to(device)
+    model = build(cfg.arch, n_cls, cfg.width).to(device)
     w = _weights(ds.semantic[~val], n_cls).to(device)
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     steps_per_epoch = math.ceil(len(tr_idx) / cfg.batch)
@@ -84,7 +109,9 @@ def train(data_path, out, cfg: TrainConfig, device: str = "cpu", resume: bool = 
                                                 pct_start=0.1)
     log = {"format": MODEL_FORMAT, "config": asdict(cfg), "classes": ds.classes, "data": str(data_path),
            "train_frames": int(len(tr_idx)), "val_frames": int(len(va_idx)), "val_layouts": sorted(val_layouts),
-           "parameters": parameter_count(model), "device": device, "epochs": []}
+           "parameters": parameter_count(model), "device": device, "stride": model.stride,
+           "resolution": [int(ds.rgb.shape[2]), int(ds.rgb.shape[1])],
+           "augment_config": asdict(aug) if aug is not None else None, "epochs": []}
     start = 0
     ck = out / "checkpoint.pt"
     if resume and ck.is_file():
@@ -108,12 +135,14 @@ def train(data_path, out, cfg: TrainConfig, device: str = "cpu", resume: bool = 
         tot = 0.0
         for k in range(steps_per_epoch):
             idx = torch.from_numpy(perm[k * cfg.batch:(k + 1) * cfg.batch]).to(X.device)
-            x = X[idx].to(device).float() / 255.0
             s, b = S[idx].to(device), B[idx].to(device)
+            if aug is not None:
+                x = camera_augment(X[idx].to(device), SC[idx].to(device), aug, gd)
+            else:
+                x = _augment(X[idx].to(device).float() / 255.0, gd, cfg.exposure_log2)
             flip = (torch.rand(len(idx), generator=g) < 0.5).to(device)
             x[flip], s[flip], b[flip] = x[flip].flip(-1), s[flip].flip(-1), b[flip].flip(-1)
-            x = _augment(x, gd, cfg.exposure_log2)
-            ls, lb = model(x)
+            ls, lb = forward(model, x)
             loss = F.cross_entropy(ls, s, weight=w) + cfg.boundary_loss_weight * F.binary_cross_entropy_with_logits(
                 lb[:, 0], b, pos_weight=torch.tensor(cfg.boundary_pos_weight, device=device))
             opt.zero_grad(set_to_none=True)
@@ -141,7 +170,7 @@ def evaluate_pixels(model, X: torch.Tensor, S: torch.Tensor, n_cls: int, device:
     conf = torch.zeros(n_cls, n_cls, dtype=torch.int64)
     for k in range(0, len(X), batch):
         x = X[k:k + batch].to(device).float() / 255.0
-        pred = model(x)[0].argmax(1).cpu()
+        pred = forward(model, x)[0].argmax(1).cpu()
         s = S[k:k + batch].cpu()
         conf += torch.bincount(s.reshape(-1) * n_cls + pred.reshape(-1), minlength=n_cls * n_cls).reshape(n_cls, n_cls)
     tp = conf.diag().double()
@@ -168,25 +197,30 @@ def load_checkpoint(path, device: str = "cpu") -> dict:
 
 
 def export_onnx(checkpoint, out_onnx, height: int = 120, width: int = 160) -> Path:
-    """The checkpoint's model as ONNX (input ``image``: N x 3 x H x W sRGB in [0, 1]; outputs
-    ``semantic`` and ``boundary`` logits), with its classes and format in the metadata."""
+    """The checkpoint's model as ONNX (input ``image``: N x 3 x H x W sRGB in [0, 1], H and W
+    multiples of the metadata's ``stride``; outputs ``semantic`` and ``boundary`` logits), with its
+    classes, format, stride and training resolution in the metadata."""
     import onnx
 
     state = load_checkpoint(checkpoint, "cpu")
     log = state["log"]
-    model = SegNet(len(log["classes"]), log["config"]["width"])
+    model = build(log["config"].get("arch", "segnet"), len(log["classes"]), log["config"]["width"])
     model.load_state_dict(state["model"])
     model.eval()
     out_onnx = Path(out_onnx)
     with replacing(out_onnx) as tmp, warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)  # the TorchScript exporter: no onnxscript needed
-        torch.onnx.export(model, torch.zeros(1, 3, height, width), str(tmp), input_names=["image"],
+        stride = model.stride
+        h, w = height + (-height) % stride, width + (-width) % stride
+        torch.onnx.export(model, torch.zeros(1, 3, h, w), str(tmp), input_names=["image"],
                           output_names=["semantic", "boundary"], opset_version=17, dynamo=False,
                           dynamic_axes={"image": {0: "n", 2: "h", 3: "w"}, "semantic": {0: "n", 2: "h", 3: "w"},
                                         "boundary": {0: "n", 2: "h", 3: "w"}})
         m = onnx.load(str(tmp))
         for k, v in (("format", MODEL_FORMAT), ("classes", json.dumps(log["classes"])),
-                     ("input", "sRGB 8-bit / 255, NCHW, H and W divisible by 8"),
+                     ("input", f"sRGB 8-bit / 255, NCHW, H and W divisible by {stride}"),
+                     ("stride", str(stride)),
+                     ("resolution", json.dumps(log.get("resolution") or [width, height])),
                      ("train", json.dumps({k: log[k] for k in ("config", "train_frames", "val_frames", "val_layouts",
                                                               "parameters") if k in log}))):
             p = m.metadata_props.add()

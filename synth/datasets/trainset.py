@@ -14,6 +14,9 @@ random views per (layout, lighting)::
     size: [160, 120]
     quality: preview
     seed: 0                     # views and jitter seeds derive from it
+    appearance: 0.0             # optional: per object (and per layout's finishes), the chance that
+                                # colours and materials are redrawn (synth.datasets.appearance)
+    lighting_jitter: {}         # optional: LightingJitter fields to override (strength_log2: 1.0, ...)
 
 ``prepare`` writes, into ``OUT/scenes/``, the layouts (``train_<seed>`` and its variants
 ``train_<seed>_v<k>``), one jittered preset per (layout, preset, k) and one views path per
@@ -42,7 +45,8 @@ from formats.yamlfile import read_yaml
 from formats.cli import add_quiet, add_workers
 
 from ..layout.apartment import DEFAULT_SEED, generate_apartment
-from ..scene.lighting import jitter_preset, load_lighting, preset_document
+from ..scene.lighting import LightingJitter, jitter_preset, load_lighting, preset_document
+from .appearance import randomize_appearance
 from ..paths.files import save_path
 from ..paths.views import plan_views
 from ..layout.rearrange import NoVariantFound, RearrangePlan, VariantSpec, make_variant
@@ -50,7 +54,7 @@ from ..resources import layouts_dir, trainset_spec
 from ..scene.model import dump_yaml, layout_to_dict, load_layout
 
 SPEC_KEYS = {"name", "description", "out", "seeds", "variants", "lightings", "jitter", "views", "size", "quality",
-             "seed", "chunk_size", "workers"}
+             "seed", "chunk_size", "workers", "appearance", "lighting_jitter"}
 # rearranged variants of a training apartment: the paper's ranges, like apt_1..apt_5's plans
 VARIANT_PLANS = (RearrangePlan(removed=4, added=9), RearrangePlan(removed=7, added=9, other_room=0.25))
 
@@ -70,6 +74,8 @@ class TrainsetSpec:
     chunk_size: int = 40
     description: str = ""
     source: str | None = None
+    appearance: float = 0.0
+    lighting_jitter: LightingJitter = LightingJitter()
 
     @property
     def frames(self) -> int:
@@ -103,12 +109,27 @@ def parse_trainset(doc, source: str) -> TrainsetSpec:
         except UserError as e:
             raise SceneFormatError(source, f"lightings[{i}]", str(e)) from None
     size = fields.frame_size(source, doc.get("size", [160, 120]), "size")
+    appearance = fields.number(source, doc.get("appearance", 0.0), "appearance", lo=0.0)
+    if appearance > 1.0:
+        raise SceneFormatError(source, "appearance", f"expected a probability in [0, 1], got {appearance}")
+    lj = doc.get("lighting_jitter") or {}
+    if not isinstance(lj, dict):
+        raise SceneFormatError(source, "lighting_jitter", "expected a mapping of LightingJitter fields")
+    known = LightingJitter.__dataclass_fields__
+    for k, v in lj.items():
+        if k not in known:
+            raise SceneFormatError(source, f"lighting_jitter.{k}", f"unknown key; allowed: {', '.join(sorted(known))}")
+        if k in ("lamps_extra", "lamps_fewer"):
+            integer(source, v, f"lighting_jitter.{k}", lo=0)
+        else:
+            fields.number(source, v, f"lighting_jitter.{k}", lo=0.0)
     return TrainsetSpec(
         name=fields.string(source, doc["name"], "name"), out=fields.out_folder(source, doc["out"]), seeds=tuple(seeds),
         variants=integer(source, doc.get("variants", 1), "variants", lo=0), lightings=tuple(lightings), jitter=integer(source, doc.get("jitter", 2), "jitter", lo=1),
         views=integer(source, doc.get("views", 40), "views", lo=1), size=(size[0], size[1]), quality=fields.text(source, doc.get("quality", "preview"), "quality"),
         seed=integer(source, doc.get("seed", 0), "seed", lo=0), chunk_size=integer(source, doc.get("chunk_size", 40), "chunk_size", lo=1),
-        description=fields.text(source, doc.get("description", ""), "description"), source=source)
+        description=fields.text(source, doc.get("description", ""), "description"), source=source,
+        appearance=float(appearance), lighting_jitter=LightingJitter(**lj))
 
 
 def load_trainset(path) -> TrainsetSpec:
@@ -157,13 +178,16 @@ def prepare(spec: TrainsetSpec, out: Path | None = None, progress: bool = True) 
                 layouts.append(make_variant(base, VariantSpec(f"train_{s}_v{k + 1}", s * 10 + k + 1, plan)))
             except NoVariantFound as e:
                 raise UserError(f"seed {s}: no rearranged variant {k + 1} within the paper's ranges ({e})") from None
+        if spec.appearance > 0:
+            layouts = [randomize_appearance(lay, spec.seed * 1_000_003 + s * 1009 + 7 + k, spec.appearance)
+                       for k, lay in enumerate(layouts)]
         for lay in layouts:
             lay_file = scenes / "layouts" / f"{lay.name}.yaml"
             _write_if_changed(lay_file, dump_yaml(layout_to_dict(lay)))
             for li, preset in enumerate(presets):
                 for j in range(spec.jitter):
                     jseed = spec.seed * 1_000_003 + s * 1009 + li * 101 + j
-                    lit = jitter_preset(preset, jseed)
+                    lit = jitter_preset(preset, jseed, spec.lighting_jitter)
                     tag = f"{preset.name}_j{j}"  # tour: <layout>__<preset>_j<k>__views_<preset>_j<k>
                     lit_file = scenes / "lighting" / lay.name / f"{tag}.yaml"
                     doc = preset_document(lit)

@@ -129,12 +129,49 @@ def wall_pieces(stage: Stage, wall_index: int) -> list[tuple[np.ndarray, np.ndar
     return [(np.array(lo), np.array(hi)) for lo, hi in pieces]
 
 
+FINISH_MATERIALS = {"floor_material": ("floor_wood", "floor_tile")}
+
+
+def stage_finishes(layout: Layout) -> dict:
+    """The layout's ``meta.finishes`` (training layouts, ``synth.datasets.appearance``): optional
+    ``wall_color``, ``ceiling_color``, ``floor_color`` (linear RGB in [0, 1]) and ``floor_material``
+    (floor_wood | floor_tile) for a procedural stage; {} when absent. A bad value is a
+    SceneFormatError naming the layout and the key."""
+    fin = (layout.meta or {}).get("finishes")
+    if fin is None:
+        return {}
+    where = f"layout {layout.name}"
+    if not isinstance(fin, dict):
+        raise SceneFormatError(where, "meta.finishes", "expected a mapping")
+    out = {}
+    for key, val in fin.items():
+        if key in FINISH_MATERIALS:
+            if val not in FINISH_MATERIALS[key]:
+                raise SceneFormatError(where, f"meta.finishes.{key}", f"expected one of {', '.join(FINISH_MATERIALS[key])}, got {val!r}")
+            out[key] = val
+        elif key in ("wall_color", "ceiling_color", "floor_color"):
+            ok = isinstance(val, (list, tuple)) and len(val) == 3 and all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and 0.0 <= v <= 1.0 for v in val)
+            if not ok:
+                raise SceneFormatError(where, f"meta.finishes.{key}", f"expected three numbers in [0, 1], got {val!r}")
+            out[key] = tuple(float(v) for v in val)
+        else:
+            raise SceneFormatError(where, f"meta.finishes.{key}",
+                                   "unknown key; allowed: ceiling_color, floor_color, floor_material, wall_color")
+    return out
+
+
 def stage_parts(layout: Layout) -> list[RenderPart]:
     st = layout.stage
     ct = class_table()
     parts: list[RenderPart] = []
     if st.asset is not None:  # a stage mesh (ReplicaCAD): its own triangles only, no boxes
         return _mesh_stage_parts(layout)
+    fin = stage_finishes(layout)
+    wall_c, ceil_c, floor_c = fin.get("wall_color"), fin.get("ceiling_color"), fin.get("floor_color")
+
+    def floor_mat(room_type: str) -> str:
+        return fin.get("floor_material") or ROOM_FLOOR_MATERIAL.get(room_type, "floor_wood")
     z0 = st.floor_z
     for k, w in enumerate(st.walls):
         yaw = math.atan2(w.end[1] - w.start[1], w.end[0] - w.start[0])
@@ -142,16 +179,18 @@ def stage_parts(layout: Layout) -> list[RenderPart]:
         T[:3, :3] = geo.rot_z(yaw)
         T[:3, 3] = (w.start[0], w.start[1], z0)
         for j, (lo, hi) in enumerate(wall_pieces(st, k)):
-            parts.append(RenderPart(f"{w.id}/{j}", WALL_ID_BASE + k, ct.id_of("wall"), "wall_paint", _box_mesh(lo, hi), T, seed=k))
+            parts.append(RenderPart(f"{w.id}/{j}", WALL_ID_BASE + k, ct.id_of("wall"), "wall_paint", _box_mesh(lo, hi), T,
+                                    color=wall_c, seed=k))
     room_index = {r.name: k for k, r in enumerate(st.rooms)}
     for k, r in enumerate(st.rooms):
         xmin, ymin, xmax, ymax = r.rect
-        mat = ROOM_FLOOR_MATERIAL.get(r.type, "floor_wood")
-        parts.append(RenderPart(f"floor/{r.name}", FLOOR_ID_BASE + k, ct.id_of("floor"), mat,
-                                _box_mesh((xmin, ymin, z0 - STRUCT_SLAB), (xmax, ymax, z0)), np.eye(4), seed=k))
+        parts.append(RenderPart(f"floor/{r.name}", FLOOR_ID_BASE + k, ct.id_of("floor"), floor_mat(r.type),
+                                _box_mesh((xmin, ymin, z0 - STRUCT_SLAB), (xmax, ymax, z0)), np.eye(4),
+                                color=floor_c, seed=k))
         top = z0 + st.ceiling_height
         parts.append(RenderPart(f"ceiling/{r.name}", CEILING_ID_BASE + k, ct.id_of("ceiling"), "ceiling_paint",
-                                _box_mesh((xmin, ymin, top), (xmax, ymax, top + STRUCT_SLAB)), np.eye(4), seed=k))
+                                _box_mesh((xmin, ymin, top), (xmax, ymax, top + STRUCT_SLAB)), np.eye(4),
+                                color=ceil_c, seed=k))
     # thresholds: the floor inside each door opening belongs to the first room the door opens to
     for op in st.openings:
         if op.kind != "door" or not op.rooms:
@@ -167,7 +206,7 @@ def stage_parts(layout: Layout) -> list[RenderPart]:
         lo = (op.offset - op.width / 2, -w.thickness / 2, -STRUCT_SLAB)
         hi = (op.offset + op.width / 2, w.thickness / 2, 0.0)
         parts.append(RenderPart(f"threshold/{op.id}", FLOOR_ID_BASE + k, ct.id_of("floor"),
-                                ROOM_FLOOR_MATERIAL.get(r.type, "floor_wood"), _box_mesh(lo, hi), T, seed=k))
+                                floor_mat(r.type), _box_mesh(lo, hi), T, color=floor_c, seed=k))
     return parts
 
 

@@ -161,7 +161,8 @@ class LightingJitter:
     strength_log2: float = 0.7  # sun, sky and fixture power times 2**U(-x, x)
     sky_tint: float = 0.15  # each sky colour channel times 1 + U(-x, x)
     temperature_k: float = 500.0  # colour temperatures +- uniform, kept within [1800, 9000] K
-    lamps_extra: int = 2  # a preset keeping N lamps keeps N + U{0..x}
+    lamps_extra: int = 2  # a preset keeping N lamps keeps N + U{-lamps_fewer..x} (at least one)
+    lamps_fewer: int = 0
 
 
 def jitter_preset(preset: LightingPreset, seed: int, jitter: LightingJitter = LightingJitter()) -> LightingPreset:
@@ -187,7 +188,7 @@ def jitter_preset(preset: LightingPreset, seed: int, jitter: LightingJitter = Li
     sky_color = tuple(round(float(c * (1.0 + rng.uniform(-jitter.sky_tint, jitter.sky_tint))), 4) for c in preset.sky_color)
 
     def fixture(f: FixtureSetting) -> FixtureSetting:
-        count = f.count if f.count is None else f.count + int(rng.integers(0, jitter.lamps_extra + 1))
+        count = f.count if f.count is None else max(1, f.count + int(rng.integers(-jitter.lamps_fewer, jitter.lamps_extra + 1)))
         return FixtureSetting(f.on, temp(f.color_temperature), round(f.power * gain(), 3), count)
 
     return LightingPreset(
