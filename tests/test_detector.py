@@ -224,3 +224,41 @@ def test_checkpoints_are_read_as_weights_only(tiny, tmp_path, capsys):
     torch.save({"weights": torch.zeros(2)}, tmp_path / "other.pt")
     with pytest.raises(UserError, match="no model and log in it"):
         load_checkpoint(tmp_path / "other.pt")
+
+
+def test_map_rule_benchmark_variants_name_real_settings():
+    """reloc.map.bench_rules relaxes rules by name: each must be a MapBuildSettings field or a
+    LearnedDetector keyword, and its table puts the defaults first."""
+    import inspect
+    from dataclasses import fields as dc_fields
+
+    from reloc.map.bench_rules import VARIANTS, format_rows
+    from reloc.map.settings import MapBuildSettings
+
+    names = {f.name for f in dc_fields(MapBuildSettings)}
+    det = set(inspect.signature(LearnedDetector.__init__).parameters)
+    assert VARIANTS[0] == ("defaults", {}, {})
+    for label, det_kw, map_kw in VARIANTS:
+        assert set(map_kw) <= names and set(det_kw) <= det, label
+        for k, v in map_kw.items():
+            assert v != getattr(MapBuildSettings(), k), label  # a variant changes something
+    rows = [{"variant": "defaults", "built": 10, "gt": 12, "matched": 8, "missing": 4, "extra": 2,
+             "missing_classes": {"book": 3, "bowl": 1}},
+            {"variant": "x", "built": 14, "gt": 12, "matched": 9, "missing": 3, "extra": 5, "missing_classes": {}}]
+    text = format_rows(rows)
+    assert "book 3, bowl 1" in text and "| x | 14 | 9 / 12 | 3 | 5 | +1 | +3 |" in text
+
+
+def test_held_out_intervals_bracket_the_estimate_and_vanish_for_identical_frames():
+    from reloc.detector.evaluate import _miou, bootstrap_intervals
+
+    good = np.diag([100, 50, 50])
+    bad = np.array([[100, 0, 0], [0, 10, 40], [0, 40, 10]])
+    same = bootstrap_intervals(np.stack([good] * 20), np.full(20, 4.0), np.full(20, 3.0))
+    assert same["miou_ci"] == [1.0, 1.0] and same["instance_recall_ci"] == [0.75, 0.75]
+    mixed = np.stack([good] * 10 + [bad] * 10)
+    gt, found = np.full(20, 4.0), np.array([4.0] * 10 + [0.0] * 10)
+    ci = bootstrap_intervals(mixed, gt, found)
+    point = _miou(mixed.sum(0))
+    assert ci["miou_ci"][0] < point < ci["miou_ci"][1] and ci["instance_recall_ci"][0] < 0.5 < ci["instance_recall_ci"][1]
+    assert ci == bootstrap_intervals(mixed, gt, found)  # seeded

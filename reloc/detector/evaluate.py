@@ -7,7 +7,9 @@ For every RGB frame (every ``every``-th) of the tours, against the frame's rende
   of its class overlaps it with mask IoU >= 0.5 (one-to-one, best IoU first); recall = found /
   ground truth, precision = matched detections / detections;
 * the most frequent confusions (ground-truth class -> predicted class, in pixels);
-* milliseconds per frame of ``detect`` (network and instance cutting) on this machine, median.
+* milliseconds per frame of ``detect`` (network and instance cutting) on this machine, median;
+* 95 % intervals of mIoU and instance recall per lighting: percentiles of ``BOOTSTRAP_DRAWS``
+  bootstrap resamples of the lighting's frames (seeded, so the same tours give the same interval).
 
 Needs onnxruntime only (no PyTorch): it runs the exported model through
 ``reloc.detection.learned.LearnedDetector``.
@@ -26,6 +28,33 @@ from formats.tour import Tour
 from ..detection.learned import LearnedDetector
 
 IOU_MATCH = 0.5
+BOOTSTRAP_DRAWS = 1000
+
+
+def _miou(conf: np.ndarray) -> float:
+    tp = np.diag(conf).astype(float)
+    union = conf.sum(0) + conf.sum(1) - np.diag(conf)
+    present = conf.sum(1) > 0
+    present[0] = False  # background is not in the mean
+    return float(np.mean(tp[present] / union[present])) if present.any() else 0.0
+
+
+def bootstrap_intervals(frame_conf: np.ndarray, gt: np.ndarray, found: np.ndarray, draws: int = BOOTSTRAP_DRAWS,
+                        seed: int = 0) -> dict:
+    """95 % percentile intervals of mIoU and instance recall over frames resampled with replacement:
+    ``frame_conf`` (N, n, n) per-frame confusion counts, ``gt`` / ``found`` (N,) instances."""
+    rng = np.random.default_rng(seed)
+    N = len(frame_conf)
+    flat = frame_conf.reshape(N, -1).astype(np.float64)
+    mi, rec = [], []
+    for _ in range(draws):
+        w = np.bincount(rng.integers(0, N, N), minlength=N).astype(np.float64)
+        mi.append(_miou((w @ flat).reshape(frame_conf.shape[1:])))
+        g = float(w @ gt)
+        if g > 0:
+            rec.append(float(w @ found) / g)
+    pct = lambda v: [round(float(x), 3) for x in np.percentile(v, [2.5, 97.5])] if v else None  # noqa: E731
+    return {"miou_ci": pct(mi), "instance_recall_ci": pct(rec)}
 
 
 def preset_of(lighting: str | None) -> str:
@@ -61,7 +90,7 @@ def evaluate(model, tour_dirs, every: int = 1, min_pixels: int = 20, progress: b
     index = {c: k for k, c in enumerate(det.classes)}
     n = len(det.classes)
     acc = defaultdict(lambda: {"conf": np.zeros((n, n), np.int64), "gt": 0, "found": 0, "dets": 0, "matched": 0,
-                               "frames": 0})
+                               "frames": 0, "per_frame": []})
     times = []
     for d in tour_dirs:
         tour = Tour(d)
@@ -81,7 +110,8 @@ def evaluate(model, tour_dirs, every: int = 1, min_pixels: int = 20, progress: b
             times.append(time.perf_counter() - t0)
             cls = pred[0]
             gt_cls = sem_map[np.minimum(f.semantic, 65535).astype(np.int64)]
-            a["conf"] += np.bincount(gt_cls.ravel() * n + cls.ravel(), minlength=n * n).reshape(n, n)
+            fconf = np.bincount(gt_cls.ravel() * n + cls.ravel(), minlength=n * n).reshape(n, n)
+            a["conf"] += fconf
             gt_masks = {}
             for iid in np.unique(f.instance):
                 if iid == 0:
@@ -96,6 +126,7 @@ def evaluate(model, tour_dirs, every: int = 1, min_pixels: int = 20, progress: b
             a["dets"] += len(dets)
             a["matched"] += matched
             a["frames"] += 1
+            a["per_frame"].append((fconf, len(gt_masks), found))
         if progress:
             print(f"evaluated {tour.name}", file=sys.stderr)
     rep = {"model": str(model), "ms_per_frame": round(1000 * float(np.median(times)), 1) if times else None,
@@ -109,8 +140,11 @@ def evaluate(model, tour_dirs, every: int = 1, min_pixels: int = 20, progress: b
         off = conf.copy()
         np.fill_diagonal(off, 0)
         top = Counter({(det.classes[g], det.classes[p]): int(off[g, p]) for g, p in zip(*np.nonzero(off))})
+        pf = a["per_frame"]
+        ci = bootstrap_intervals(np.stack([c for c, _, _ in pf]), np.array([g for _, g, _ in pf], float),
+                                 np.array([f for _, _, f in pf], float))
         rep["lightings"][lighting] = {
-            "frames": a["frames"],
+            "frames": a["frames"], **ci,
             "miou": round(float(np.mean(list(iou.values()))), 3) if iou else 0.0,
             "pixel_acc": round(float(tp.sum() / max(conf.sum(), 1)), 3),
             "instance_recall": round(a["found"] / a["gt"], 3) if a["gt"] else None,
@@ -123,10 +157,15 @@ def evaluate(model, tour_dirs, every: int = 1, min_pixels: int = 20, progress: b
 
 
 def format_report(rep: dict) -> str:
-    lines = [f"{'lighting':<10} {'frames':>6} {'mIoU':>6} {'pix acc':>8} {'inst R':>7} {'inst P':>7}"]
+    def ci(v):
+        return f"[{v[0]:.3f}, {v[1]:.3f}]" if v else "-"
+
+    lines = [f"{'lighting':<10} {'frames':>6} {'mIoU':>6} {'95% interval':>16} {'pix acc':>8} {'inst R':>7} "
+             f"{'95% interval':>16} {'inst P':>7}"]
     for name, r in rep["lightings"].items():
-        lines.append(f"{name:<10} {r['frames']:>6} {r['miou']:>6.3f} {r['pixel_acc']:>8.3f} "
-                     f"{(r['instance_recall'] or 0):>7.3f} {(r['instance_precision'] or 0):>7.3f}")
+        lines.append(f"{name:<10} {r['frames']:>6} {r['miou']:>6.3f} {ci(r.get('miou_ci')):>16} {r['pixel_acc']:>8.3f} "
+                     f"{(r['instance_recall'] or 0):>7.3f} {ci(r.get('instance_recall_ci')):>16} "
+                     f"{(r['instance_precision'] or 0):>7.3f}")
         conf = ", ".join(f"{c['true']}->{c['predicted']} {c['pixels']}" for c in r["confusions"][:4])
         lines.append(f"  top confusions: {conf or 'none'}")
     lines.append(f"detect: {rep['ms_per_frame']} ms/frame (median, this machine)")
