@@ -123,3 +123,20 @@ def test_camera_augment_off_returns_the_frame_and_on_is_seeded():
     assert torch.equal(a, b) and not torch.equal(a, c)
     assert a.shape == (2, 3, 48, 64) and a.min() >= 0 and a.max() <= 1
     assert (torch.round(a * 255) - a * 255).abs().max() < 1e-3  # 8-bit steps, as the camera delivers
+
+
+def test_the_darkest_simulated_scene_still_shows_the_scene():
+    """Brightness is floored at min_p97: a frame dimmed a millionfold goes through the colour camera
+    at that floor, noisy but still correlated with the clean frame (not noise alone)."""
+    rng = np.random.default_rng(2)
+    img = (rng.gamma(1.5, 1.0, (48, 64, 1)) * np.ones((1, 1, 3)) * 0.01).astype(np.float32)
+    img[:, :32] *= 4.0  # structure: a bright half
+    s, sc = tonemap(img)
+    X = torch.from_numpy(np.round(s * 255).astype(np.uint8))[None].permute(0, 3, 1, 2)
+    cfg = replace(AugmentConfig(), brightness_log2=(20.0, -20.0), white_balance_log2=0.0, blur_prob=0.0,
+                  sensor_prob=1.0, jpeg_prob=0.0).with_sensor()
+    y = A.camera_augment(X, torch.tensor([sc], dtype=torch.float32), cfg, torch.Generator().manual_seed(0))
+    a = y[0].mean(0).numpy()
+    assert a[:, :32].mean() > a[:, 32:].mean() + 0.1  # the bright half is still brighter
+    clean = X[0].float().mean(0).numpy()
+    assert np.corrcoef(a.ravel(), clean.ravel())[0, 1] > 0.3

@@ -6,8 +6,9 @@ the linear scene radiance is recovered as ``srgb_decode(x) / scale`` (up to the 
 ~3 % of highlights the tonemap clipped). On it, per image and with random strengths
 (``reloc.detector.settings.AugmentConfig``), in the order a camera applies them:
 
-1. scene brightness ``x 2^U(-a, b)`` (a darker room, a brighter one) and a white-balance error
-   (red and blue gains ``2^U(-w, w)``);
+1. scene brightness ``x 2^U(-a, b)`` (a darker room, a brighter one), raised where needed so that
+   the 97th luminance percentile stays at or above ``min_p97`` (the camera must see something),
+   and a white-balance error (red and blue gains ``2^U(-w, w)``);
 2. motion blur from a random camera motion during the exposure: the frame averaged over
    ``blur_samples`` affine warps (a shift of up to ``blur_px`` pixels along a random direction and a
    roll of up to ``blur_roll_deg``), rotation-only flow as ``formats.sensors.motion_blur`` draws it
@@ -155,6 +156,8 @@ def camera_augment(x8: torch.Tensor, scale: torch.Tensor, cfg, g: torch.Generato
     lin = srgb_decode(x8.float() / 255.0) / scale.view(-1, 1, 1, 1).clamp_min(1e-12)
     bright = 2.0 ** uniform(B, -cfg.brightness_log2[0], cfg.brightness_log2[1], g, dev)
     wb = 2.0 ** uniform(B * 2, -cfg.white_balance_log2, cfg.white_balance_log2, g, dev).view(B, 2)
+    p97 = percentile(luminance(lin), 97.0).clamp_min(1e-12)
+    bright = torch.maximum(bright, cfg.min_p97 / p97)
     gains = torch.stack([wb[:, 0], torch.ones(B, device=dev), wb[:, 1]], 1) * bright.view(-1, 1)
     lin = lin * gains.view(B, 3, 1, 1)
     blur = torch.rand(B, generator=g, device=dev) < cfg.blur_prob
