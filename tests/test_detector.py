@@ -262,3 +262,22 @@ def test_held_out_intervals_bracket_the_estimate_and_vanish_for_identical_frames
     point = _miou(mixed.sum(0))
     assert ci["miou_ci"][0] < point < ci["miou_ci"][1] and ci["instance_recall_ci"][0] < 0.5 < ci["instance_recall_ci"][1]
     assert ci == bootstrap_intervals(mixed, gt, found)  # seeded
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_detector_eval_reports_intervals_and_reads_through_a_sensor(tiny, capsys):
+    args = ["detector", "eval", str(tiny / "renders"), "--model", str(tiny / "run" / "model.onnx"), "--json", "--quiet"]
+    assert reloc_main(args) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["sensor"] == "ideal" and set(rep["lightings"]) == {"day", "night"}
+    for r in rep["lightings"].values():
+        lo, hi = r["miou_ci"]
+        assert lo <= r["miou"] <= hi and r["frames"] == 3
+    assert reloc_main(args + ["--sensor", "structured_light"]) == 0
+    noisy = json.loads(capsys.readouterr().out)
+    assert noisy["sensor"] == "structured_light"
+    assert noisy["lightings"]["night"]["pixel_acc"] != rep["lightings"]["night"]["pixel_acc"]  # other frames seen
+    assert reloc_main(args + ["--sensor", "kinect9"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "kinect9" in err and len(err.splitlines()) == 1

@@ -158,12 +158,10 @@ class LearnedDetector:
         ph, pw = (-h) % self.stride, (-w) % self.stride
         x = np.pad(x, ((0, ph), (0, pw), (0, 0)), mode="edge").transpose(2, 0, 1)[None].astype(np.float32)
         sem, bnd = self.session.run(None, {self._input: x})
-        logits = sem[0, :, :h, :w]
-        logits = logits - logits.max(axis=0, keepdims=True)
-        p = np.exp(logits)
-        p /= p.sum(axis=0, keepdims=True)
-        cls = p.argmax(axis=0)
-        conf = np.take_along_axis(p, cls[None], axis=0)[0]
+        logits = np.ascontiguousarray(sem[0, :, :h, :w])
+        cls = logits.argmax(axis=0)
+        # the winning class's softmax probability, exp(0) / sum(exp(l - max)), without the others'
+        conf = 1.0 / np.exp(logits - logits.max(axis=0, keepdims=True)).sum(axis=0)
         return cls, conf, 1.0 / (1.0 + np.exp(-bnd[0, 0, :h, :w]))
 
     # -- instances ---------------------------------------------------------------------------------

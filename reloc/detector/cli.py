@@ -80,7 +80,7 @@ def cmd_export(args) -> int:
 def cmd_eval(args) -> int:
     from .evaluate import evaluate, format_report
 
-    rep = evaluate(args.model, _tours(args.tours), every=args.every, progress=not args.quiet)
+    rep = evaluate(args.model, _tours(args.tours), every=args.every, progress=not args.quiet, sensor=args.sensor)
     print(json.dumps(rep, indent=1) if args.json else format_report(rep))
     return 0
 
@@ -122,6 +122,8 @@ def register_cli(subparsers) -> None:
     a.add_argument("tours", nargs="+", help="tour folders, or design folders holding tours")
     a.add_argument("--model", required=True, help="ONNX model (reloc detector export)")
     a.add_argument("--every", type=int, default=1)
+    a.add_argument("--sensor", help="read the frames through a sensor preset or file (formats/sensor_presets: "
+                                    "structured_light, tof; default: the renders as they are)")
     add_json(a, "the report")
     add_quiet(a)
     a.set_defaults(fn=cmd_eval)

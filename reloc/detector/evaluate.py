@@ -85,7 +85,13 @@ def _match(dets, gt_masks: dict[int, tuple[str, np.ndarray]]) -> tuple[int, int]
     return len(used_g), len(used_d)
 
 
-def evaluate(model, tour_dirs, every: int = 1, min_pixels: int = 20, progress: bool = True) -> dict:
+def evaluate(model, tour_dirs, every: int = 1, min_pixels: int = 20, progress: bool = True,
+             sensor: str | None = None) -> dict:
+    """The report (see the module docstring); ``sensor``: a sensor preset or file
+    (``formats.sensors``) the frames are read through, as the experiments' ``sensors:`` do."""
+    from formats.sensors import load_sensor
+
+    sens = load_sensor(sensor) if sensor else None
     det = LearnedDetector(model)
     index = {c: k for k, c in enumerate(det.classes)}
     n = len(det.classes)
@@ -93,7 +99,7 @@ def evaluate(model, tour_dirs, every: int = 1, min_pixels: int = 20, progress: b
                                "frames": 0, "per_frame": []})
     times = []
     for d in tour_dirs:
-        tour = Tour(d)
+        tour = Tour(d, sensor=sens)
         lighting = preset_of(tour.meta.get("lighting"))
         names = tour.class_names()  # semantic id -> name
         sem_map = np.zeros(65536, np.int64)
@@ -129,7 +135,7 @@ def evaluate(model, tour_dirs, every: int = 1, min_pixels: int = 20, progress: b
             a["per_frame"].append((fconf, len(gt_masks), found))
         if progress:
             print(f"evaluated {tour.name}", file=sys.stderr)
-    rep = {"model": str(model), "ms_per_frame": round(1000 * float(np.median(times)), 1) if times else None,
+    rep = {"model": str(model), "sensor": sens.name if sens else "ideal", "ms_per_frame": round(1000 * float(np.median(times)), 1) if times else None,
            "lightings": {}}
     for lighting, a in sorted(acc.items()):
         conf = a["conf"]
@@ -168,5 +174,5 @@ def format_report(rep: dict) -> str:
                      f"{(r['instance_precision'] or 0):>7.3f}")
         conf = ", ".join(f"{c['true']}->{c['predicted']} {c['pixels']}" for c in r["confusions"][:4])
         lines.append(f"  top confusions: {conf or 'none'}")
-    lines.append(f"detect: {rep['ms_per_frame']} ms/frame (median, this machine)")
+    lines.append(f"detect: {rep['ms_per_frame']} ms/frame (median, this machine); sensor: {rep.get('sensor', 'ideal')}")
     return "\n".join(lines)
