@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import functools
 import glob
+import os
 import re
 import shlex
 import subprocess
@@ -384,6 +385,13 @@ def check_command(cmd: Command) -> list[str]:
             for e in (m.group(1).split(",") if m else []):
                 if e not in extras:
                     problems.append(f"pyproject.toml has no extra [{e}] (it has: {', '.join(sorted(extras))})")
+        return problems
+    if prog.startswith("tools/") and prog.endswith(".sh"):  # the repository's own scripts: there and runnable
+        f = ROOT / prog
+        if not f.is_file() or not os.access(f, os.X_OK):
+            problems.append(f"{prog}: no such executable script in the repository")
+        elif f.read_text().count("Usage:") and len(rest) < 1:
+            problems.append(f"{prog}: called without its arguments (see its Usage line)")
         return problems
     if prog in FOREIGN:
         return problems
