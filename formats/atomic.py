@@ -45,6 +45,12 @@ def write_text_atomic(path, text: str) -> Path:
     return Path(path)
 
 
+def write_bytes_atomic(path, data: bytes) -> Path:
+    with replacing(path) as tmp:
+        tmp.write_bytes(data)
+    return Path(path)
+
+
 def write_json_atomic(path, data, indent: int | None = 2) -> Path:
     return write_text_atomic(path, json.dumps(data, indent=indent) + "\n")
 

@@ -125,7 +125,7 @@ from __future__ import annotations
 import hashlib
 import math
 import re
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -313,6 +313,20 @@ def parse_sensor(doc, source: str) -> Sensor:
     document came from, named by every error together with the offending key."""
     if not isinstance(doc, dict):
         raise SceneFormatError(source, None, f"expected a mapping with name, source, depth, color; got {type(doc).__name__}")
+    if "base" in doc:  # a preset with its noise scaled: {name: ..., base: structured_light, noise_scale: 2}
+        extra = sorted(map(str, set(doc) - {"name", "base", "noise_scale"}))
+        if extra:
+            raise SceneFormatError(source, extra[0], "a scaled sensor holds name, base and noise_scale only")
+        name = doc.get("name", Path(str(source)).stem)
+        if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9_-]+", name):
+            raise SceneFormatError(source, "name", f"expected a name of letters, digits, _ and -, got {name!r}")
+        base = doc["base"]
+        if not isinstance(base, str) or base == Path(str(source)).stem:
+            raise SceneFormatError(source, "base", f"expected the name of another sensor preset, got {base!r}")
+        try:
+            return scale_noise(load_sensor(base), doc.get("noise_scale", 1.0), name)
+        except ValueError as e:
+            raise SceneFormatError(source, "noise_scale", str(e).split(": ", 1)[1]) from None
     allowed = {"name", "source", "depth", "color", "resolution"}
     for k in doc:
         if k not in allowed:
@@ -332,6 +346,29 @@ def parse_sensor(doc, source: str) -> Sensor:
         res = (int(res[0]), int(res[1]))
     return Sensor(name, _section(doc.get("depth"), DepthModel, source, "depth"),
                   _section(doc.get("color"), ColorModel, source, "color"), cite.strip(), res, str(source))
+
+
+def scale_noise(sensor: Sensor, scale: float, name: str | None = None) -> Sensor:
+    """``sensor`` with every noise multiplied by ``scale`` (issue 29's graded sensor factor): 0 is the
+    ideal sensor, 1 the sensor itself, 2-3 worse. Depth: the axial noise terms, the lateral noise
+    and the disparity step times ``scale``; the edge probabilities (flying pixels, dropouts) times
+    ``scale``, at most 1. Colour: the electrons per ms and the full well divided by ``scale^2`` and
+    the read noise by ``scale``: the auto exposure picks the same time and gain, and shot and read
+    noise relative to the signal both grow by ``scale``, in bright and dark frames alike. What is not noise stays: ranges, grazing and brightness dropouts, motion
+    blur, resolution."""
+    if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not math.isfinite(scale) or scale < 0:
+        raise ValueError(f"noise_scale: expected a number >= 0 (0 ideal, 1 the preset, 2-3 worse), got {scale!r}")
+    label = name or f"{sensor.name}_x{scale:g}".replace(".", "p")
+    if scale == 0:
+        return Sensor(label, DepthModel(), ColorModel(), f"{sensor.source} (noise x 0: ideal)", sensor.resolution, sensor.file)
+    d, c = sensor.depth, sensor.color
+    depth = replace(d, sigma_a=d.sigma_a * scale, sigma_b=d.sigma_b * scale, sigma_c=d.sigma_c * scale,
+                    sigma_theta=d.sigma_theta * scale, lateral_px=d.lateral_px * scale,
+                    edge_flying=min(1.0, d.edge_flying * scale), edge_dropout=min(1.0, d.edge_dropout * scale),
+                    disparity_step_px=d.disparity_step_px * scale)
+    color = c if c.is_ideal else replace(c, electrons_per_ms=c.electrons_per_ms / scale**2,
+                                         full_well_e=c.full_well_e / scale**2, read_noise_e=c.read_noise_e / scale)
+    return Sensor(label, depth, color, f"{sensor.source} (noise x {scale:g})", sensor.resolution, sensor.file)
 
 
 def list_sensors() -> list[str]:

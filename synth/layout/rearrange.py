@@ -462,20 +462,28 @@ def _wall_moves(placer: Placer, plan: RearrangePlan, pinned: set[int], note=None
     for k in rng.permutation(len(hung)):
         if done >= plan.wall_moves or (reached is not None and reached()):
             break
-        obj = hung[k]
-        size, tmpl = _shape(obj)
-        saved = placer.boxes.pop(obj.id)
-        room = _pick_room(placer, placer.stage.room_at(_xy(obj)), plan.other_room, obj.cls)
-        zc = obj.position[2] + obj.size[2] / 2 if tmpl is None else object_box(obj).center[2] - placer.stage.floor_z
-        cand = None if room is None else placer.on_wall(obj.id, obj.cls, size, obj.params, room, z_center=zc, template=tmpl)
+        cand = _rehang(placer, hung[k], plan.other_room)
         if cand is None:
-            placer.boxes[obj.id] = saved
             continue
-        _replace(lay, [cand])
-        placer.boxes[obj.id] = object_box(cand)
         if note is not None:
             note([cand])
         done += 1
+
+
+def _rehang(placer: Placer, obj: ObjectInstance, other_room: float) -> ObjectInstance | None:
+    """A wall object onto another wall at its height (another room with probability ``other_room``):
+    the moved object, or None (nothing changed)."""
+    size, tmpl = _shape(obj)
+    saved = placer.boxes.pop(obj.id)
+    room = _pick_room(placer, placer.stage.room_at(_xy(obj)), other_room, obj.cls)
+    zc = obj.position[2] + obj.size[2] / 2 if tmpl is None else object_box(obj).center[2] - placer.stage.floor_z
+    cand = None if room is None else placer.on_wall(obj.id, obj.cls, size, obj.params, room, z_center=zc, template=tmpl)
+    if cand is None:
+        placer.boxes[obj.id] = saved
+        return None
+    _replace(placer.layout, [cand])
+    placer.boxes[obj.id] = object_box(cand)
+    return cand
 
 
 def _nudge_on_surface(placer: Placer, obj: ObjectInstance, tries: int = 12) -> ObjectInstance | None:
@@ -702,11 +710,20 @@ def rearrange(ref: Layout, name: str, seed: int, plan: RearrangePlan = Rearrange
         _surface_moves(placer, plan, pinned, rests)
         _wall_moves(placer, plan, pinned)
 
-    # add new instances: procedural classes in a procedural flat, copies of its own templates in an imported one
+    _add_objects(placer, ref, plan.added, imported)
+    lay.objects.sort(key=lambda o: o.id)
+    lay.fixtures = layout_fixtures(lay, previous=ref)
+    return lay
+
+
+def _add_objects(placer: Placer, ref: Layout, n: int, imported: bool) -> int:
+    """Add up to ``n`` new instances: procedural classes in a procedural flat, copies of its own
+    templates in an imported one; returns how many were placed."""
+    lay, rng = placer.layout, placer.rng
     added = 0
     attempts = 0
     pool = template_pool(ref) if imported else []
-    while added < plan.added and attempts < 20 * plan.added:
+    while added < n and attempts < 20 * n:
         attempts += 1
         if imported:
             if not pool:
@@ -733,10 +750,7 @@ def rearrange(ref: Layout, name: str, seed: int, plan: RearrangePlan = Rearrange
         if cand is not None:
             placer.add(cand)
             added += 1
-
-    lay.objects.sort(key=lambda o: o.id)
-    lay.fixtures = layout_fixtures(lay, previous=ref)
-    return lay
+    return added
 
 
 def _round_half_up(x: float) -> int:

@@ -1,4 +1,4 @@
-"""``synth scene list|show|check|stats|preview|export-boxes|generate|build|rearrange|import-replicacad``:
+"""``synth scene list|show|check|stats|preview|export-boxes|generate|build|rearrange|grade|import-replicacad``:
 layouts from the command line (docs/layouts.md, docs/replicacad.md)."""
 
 from __future__ import annotations
@@ -6,6 +6,8 @@ from __future__ import annotations
 import json
 from collections import Counter
 from pathlib import Path
+
+import numpy as np
 
 from formats.atomic import write_json_atomic
 from formats.cli import add_json, add_quiet
@@ -266,6 +268,76 @@ def cmd_rearrange(args) -> int:
     return 0 if (rep.ok or (not ref_rep.ok and not new_problems(ref_rep, rep))) else 1
 
 
+def cmd_grade(args) -> int:
+    """Nested variants of BASE at graded strengths (synth.layout.graded), one file per level."""
+    from formats.atomic import write_bytes_atomic
+
+    from ..layout.graded import BEYOND, check_strengths, graded_variants, level_name, moved_ids
+    from ..layout.rearrange import target_ranges
+    from ..layout.validity import check_layout
+    from .model import resolve_layout_path, save_layout
+    from .stats import change_stats
+
+    levels = check_strengths(args.levels, "--levels")
+    if len(levels) + bool(args.beyond) < 2:
+        raise UserError("--levels: a graded set needs at least two levels (e.g. --levels 0 0.5 1)")
+    if args.seed < 0:
+        raise UserError(f"--seed must be >= 0, got {args.seed}")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise UserError(f"--out: {out} exists and is not a folder")
+    from ..paths.files import load_path
+
+    base_file = resolve_layout_path(args.base)
+    ref = _load(args.base)
+    path = load_path(args.path)
+    # the levels keep out of the camera path they will be rendered with (as apt_1..apt_5 keep out of
+    # apt_0's walkway), so that the experiments' shared path stays valid in every level
+    walkway = np.asarray(path.poses)[::3, :2, 3].copy()
+    variants = graded_variants(ref, levels, args.seed, walkway=walkway, beyond=args.beyond)
+    rows, files = [], []
+    prev: set = set()
+    for level, var in variants:
+        moved = moved_ids(ref, var)
+        if not prev <= moved:  # cannot happen by construction; a layout that broke it must not be written
+            raise RuntimeError(f"level {level}: the moved objects are not a superset of the level below's")
+        prev = moved
+        rows.append((var, check_layout(var), change_stats(ref, var) if var is not ref else None))
+    out.mkdir(parents=True, exist_ok=True)
+    for (level, var), _ in zip(variants, rows):
+        f = out / f"{level_name(ref.name, level) if var is not ref else ref.name}.yaml"
+        if var is ref:  # level 0 is the base itself, byte for byte
+            write_bytes_atomic(f, base_file.read_bytes())
+        else:
+            save_layout(var, f)
+        files.append(f)
+    # the camera path every level is rendered with must keep its clearance in every level
+    from ..paths.clearance import clearance_report
+    from ..paths.files import save_path
+
+    reps = [clearance_report(path, var) for _, var in variants]
+    path_note = f"path {path.name}: clear of every level (min {min(r['min_clearance_m'] for r in reps):.2f} m)"
+    if not all(r["ok"] for r in reps):
+        from ..paths.query import plan_query_path
+
+        bad = [r["layout"] for r in reps if not r["ok"]]
+        new = plan_query_path([var for _, var in variants], frames=len(path.poses), seed=args.seed,
+                              name=f"{path.name}_{ref.name}_graded")
+        pf = save_path(new, out / "paths" / f"{new.name}.txt")
+        path_note = (f"path {path.name} comes too close to objects in {', '.join(bad)}: replanned on every level "
+                     f"-> {pf} (render the levels with it)")
+    _print_stats_table(rows, target_ranges(ref))
+    print()
+    print(f"{'level':>7} {'layout':<16} {'units moved':>12} {'fixed moved':>12}")
+    for (level, var), (_, rep, st) in zip(variants, rows):
+        um = var.meta.get("units_moved", 0) if var is not ref else 0
+        print(f"{level if level == BEYOND else format(level, '.2f'):>7} {var.name:<16} "
+              f"{f'{um}/' + str(var.meta.get('units', '-')):>12} {var.meta.get('fixed_moved', 0):>12}")
+    print(path_note)
+    print(f"wrote {len(files)} layouts to {out}")
+    return 0 if all(rep.ok for _, rep, _ in rows) else 1
+
+
 def cmd_import_replicacad(args) -> int:
     from ..replicacad.importer import load_replicacad
     from .model import save_layout
@@ -321,6 +393,17 @@ def register_cli(subparsers) -> None:
     a.add_argument("--name", help="layout name (default: the output file's stem)")
     a.add_argument("--attempts", type=int, default=40, help="sub-seeds to try before giving up (default 40)")
     a.set_defaults(fn=cmd_rearrange)
+    a = ss.add_parser("grade", help="nested variants of BASE at graded strengths 0..1 (each level adds moves and nothing else)")
+    a.add_argument("base", help="layout to rearrange (name or file), e.g. apt_0")
+    a.add_argument("--levels", type=float, nargs="+", required=True,
+                   help="strengths in [0, 1]: the fraction of movable objects moved (0 = the base itself)")
+    a.add_argument("--beyond", action="store_true",
+                   help="one more level: every movable object and the fixed fittings moved, objects removed and added")
+    a.add_argument("--seed", type=int, default=0, help="the move sequence's seed (default 0)")
+    a.add_argument("--path", default="query", help="camera path the levels must keep clear of (default query); "
+                                                   "replanned on every level, into OUT/paths/, if they do not")
+    a.add_argument("--out", required=True, help="folder for the level layouts (<base>_g<percent>.yaml)")
+    a.set_defaults(fn=cmd_grade)
     a = ss.add_parser("import-replicacad", help="convert a ReplicaCAD scene instance to a layout file")
     a.add_argument("root", help="ReplicaCAD dataset folder (holds configs/)")
     a.add_argument("scene", help="scene instance name, e.g. apt_0")

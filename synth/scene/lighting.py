@@ -13,13 +13,13 @@ same lamps stay on in every variant of a layout as long as they exist.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from formats import fields
-from formats.errors import SceneFormatError, UnknownNameError
+from formats.errors import SceneFormatError, UnknownNameError, UserError
 from formats.fields import number
 from formats.yamlfile import read_yaml
 
@@ -73,9 +73,80 @@ class LightingPreset:
     source: str = ""
 
 
+# ---------------------------------------------------------------------------------------------
+# the dimmer (issue 29): one dial from day through evening to night and below
+
+DIMMER_MAX = 1.5
+DIMMER_BELOW_NIGHT_LOG2 = 6.0  # below night, the lamps lose 2^-6 of their power per unit of level
+
+
+def _lerp(a: float, b: float, u: float) -> float:
+    return round(float(a + (b - a) * u), 4)
+
+
+def _fade(a: FixtureSetting, b: FixtureSetting, u: float) -> FixtureSetting:
+    """Fixtures crossfaded: a render is linear in its lights, so power fades linearly; an off
+    fixture counts as power 0; colour temperature is the lit one's (or interpolated if both are);
+    the lamp count switches at the middle."""
+    pa, pb = a.power * a.on, b.power * b.on
+    if a.on and b.on:
+        temp = _lerp(a.color_temperature, b.color_temperature, u)
+    else:
+        temp = a.color_temperature if a.on else b.color_temperature
+    return FixtureSetting(a.on or b.on, temp, _lerp(pa, pb, u), a.count if u < 0.5 else b.count)
+
+
+def dimmed_preset(level: float, name: str | None = None) -> LightingPreset:
+    """The lighting at dimmer ``level`` in [0, ``DIMMER_MAX``]: 0 is the day preset, 0.5 evening,
+    1 night (the shipped presets themselves), values between crossfade the neighbouring presets'
+    lights (sun, sky and fixture power linearly, since a render is linear in its lights; the lamp
+    count switches at the middle), and values above 1 dim night's lamps by ``2^-6`` per unit of
+    level and leave a single lamp from 1.25 on, under night's sky: darker than the night preset."""
+    if isinstance(level, bool) or not isinstance(level, (int, float)) or not math.isfinite(level) \
+            or not 0.0 <= level <= DIMMER_MAX:
+        raise UserError(f"dimmer: expected a level in [0, {DIMMER_MAX}] (0 day, 0.5 evening, 1 night, above 1 darker), "
+                        f"got {level!r}")
+    level = float(level)
+    day, evening, night = (load_lighting(n) for n in ("day", "evening", "night"))
+    if level in (0.0, 0.5, 1.0):  # the shipped presets themselves
+        base = {0.0: day, 0.5: evening, 1.0: night}[level]
+    elif level > 1.0:
+        k = 2.0 ** (-DIMMER_BELOW_NIGHT_LOG2 * (level - 1.0))
+        lamp = FixtureSetting(night.lamp.on, night.lamp.color_temperature, round(night.lamp.power * k, 4),
+                              1 if level >= 1.25 else night.lamp.count)
+        base = replace(night, lamp=lamp)
+    else:
+        a, b, u = (day, evening, level / 0.5) if level <= 0.5 else (evening, night, (level - 0.5) / 0.5)
+        sun = None
+        if a.sun is not None or b.sun is not None:
+            src = a.sun if a.sun is not None else b.sun
+            sa = a.sun["strength"] if a.sun is not None else 0.0
+            sb = b.sun["strength"] if b.sun is not None else 0.0
+            sun = {**src, "strength": _lerp(sa, sb, u)}
+            if sun["strength"] <= 0:
+                sun = None
+        base = LightingPreset(
+            name="", description="", sky_color=tuple(_lerp(x, y, u) for x, y in zip(a.sky_color, b.sky_color)),
+            sky_strength=_lerp(a.sky_strength, b.sky_strength, u), sun=sun,
+            window_portals=(a.window_portals and u < 1) or (b.window_portals and u > 0),
+            ceiling=_fade(a.ceiling, b.ceiling, u), lamp=_fade(a.lamp, b.lamp, u))
+    tag = f"dimmer_{level:g}"
+    return replace(base, name=name or tag, description=f"dimmer level {level:g} (0 day, 0.5 evening, 1 night)",
+                   source=f"<{tag}>")
+
+
 def parse_preset(doc, source: str) -> LightingPreset:
     if not isinstance(doc, dict):
         raise SceneFormatError(source, None, "expected a mapping")
+    if "dimmer" in doc:  # a dimmer level instead of lights: {name: ..., dimmer: 0.75}
+        extra = sorted(set(doc) - {"name", "description", "dimmer"})
+        if extra:
+            raise SceneFormatError(source, extra[0], "a dimmer preset holds name, description and dimmer only")
+        try:
+            p = dimmed_preset(doc["dimmer"], name=doc.get("name") or Path(source).stem)
+        except UserError as e:
+            raise SceneFormatError(source, "dimmer", str(e).split(": ", 1)[1]) from None
+        return replace(p, source=source)
     allowed = {"name", "description", "sky", "sun", "window_portals", "fixtures"}
     unknown = set(doc) - allowed
     if unknown:
