@@ -26,6 +26,10 @@ Metric names (values are fractions, as in ``results.json``):
   odometry_failure_fraction (of all clip ends), no_usable_depth;
 * ``METHOD[.MODE].KEY.spread`` (an experiment with ``replicates: N``): the highest minus the lowest
   value of a pooled figure or factor across the replicates;
+* a sweep (an experiment with ``sweep:``, :mod:`reloc.experiments.sweep`):
+  ``METHOD[.MODE].breaking_point.FACTOR``, the lowest level whose recall falls below the sweep's
+  fraction of level 0's (infinity when the method holds at every level), and
+  ``METHOD[.MODE].sweep.LEVEL``, the recall at 1 m/10 deg at that level;
 * ``METHOD.map_bytes``;
 * ``map.KEY`` (the box map built with the experiment's detector) and ``map_oracle.KEY`` (built
   from oracle detections), against the mapping layout's ground truth: built, gt, matched, missing,
@@ -146,6 +150,9 @@ def metric_table(results: dict) -> dict[str, float | None]:
         vals[f"sensor.{s}.odometry_failures"] = ends.get("odometry failure")
         vals[f"sensor.{s}.no_usable_depth"] = ends.get("no usable depth")
         vals[f"sensor.{s}.odometry_failure_fraction"] = ends.get("odometry failure", 0) / n if n else None
+    from .sweep import breaking_metrics
+
+    vals.update(breaking_metrics(results))
     for key, name in (("boxes", "map"), ("boxes_oracle", "map_oracle")):
         q = (results.get("maps") or {}).get(key)
         if q is None:

@@ -459,4 +459,9 @@ def plot_experiment(results_dir) -> list[Path]:
         title = f"{tname}" + (f"  ({', '.join(bits)}; {len(gt)} frames)" if bits else f"  ({len(gt)} frames)")
         written.append(tour_figure(bmap, gt, estimates, plots / tour_png_name(tname), title=title))
     written.append(recall_bars(results, plots / "recall_bars.png"))
+    if results.get("sweep"):
+        from .sweep import plot_sweep
+
+        plot_sweep(results, plots / "sweep.png")
+        written.append(plots / "sweep.png")
     return written

@@ -92,6 +92,13 @@ def design_tours(spec: ExperimentSpec) -> tuple[dict, dict]:
         raise UserError(f"{root}: {len(missing)} tour(s) not rendered: {', '.join(missing[:4])}"
                         f"{' ...' if len(missing) > 4 else ''}; run: synth render {spec.render} --resume")
     read = {reading_name(n, s): {**t, "tour": n, "sensor": s} for s in spec.sensor_names for n, t in out.items()}
+    if spec.sweep is not None:
+        from .sweep import missing_levels
+
+        miss = missing_levels(read, spec.sweep, spec.reference_sensor)
+        if miss:
+            raise SceneFormatError(spec.source, miss[0].split(" ")[0],
+                                   f"no query tour of {spec.sweep.field} {miss[0].split(' ', 1)[1][1:-1]} in {where}")
     return read, {**mapping, "tour": mname}
 
 

@@ -31,6 +31,9 @@ the optional tables::
                                        # of every figure across them beside its interval
     intervals: {level: 0.95, resamples: 2000, segment_frames: 100, seed: 0}
                                        # the figures' intervals (reloc.experiments.intervals): the defaults
+    sweep: {factor: rearrangement, levels: {0: apt_0, 0.5: apt_0_g050, 1.0: apt_0_g100}, fraction: 0.8}
+                                       # optional: one graded factor, its levels' recall, ratios and breaking
+                                       # points (reloc.experiments.sweep; tables/sweep.md, plots/sweep.png)
     workers: 2
 
 Methods and the rows they give (``key`` = method.mode, used by ``reloc check``):
@@ -80,7 +83,7 @@ from .intervals import IntervalSettings
 
 SPEC_KEYS = {"name", "description", "render", "tours", "out", "mapping", "query", "unchanged", "map", "methods",
              "tables", "one_frame_stride", "detector", "config", "appearance", "fpfh_icp", "workers", "seed",
-             "sensors", "map_sensor", "intervals", "replicates"}
+             "sensors", "map_sensor", "intervals", "replicates", "sweep"}
 METHODS = ("videoreloc", "videoreloc_oracle", "fpfh_icp", "appearance", "one_frame")
 DETECTORS = ("learned", "oracle", "onnx")
 ORACLE = {"kind": "oracle", "model": None, "corruption": {}}  # a spec's detector: the rendered labels
@@ -114,6 +117,7 @@ class ExperimentSpec:
     map_sensor: dict | None = None  # None: the query's own sensor (map_sensor: same)
     intervals: IntervalSettings = IntervalSettings()  # how the figures' intervals are computed
     replicates: int = 1  # the experiment run this many times, its stochastic parts reseeded (replicate_spec)
+    sweep: object = None  # reloc.experiments.sweep.Sweep: one graded factor (dose-response, breaking points)
 
     def __post_init__(self):
         if not self.sensors:
@@ -310,8 +314,20 @@ def load_experiment(path) -> ExperimentSpec:
         detector=det, config=cfg, appearance=app, fpfh_icp=fp, workers=int(doc.get("workers", 2)),
         seed=seed, description=fields.text(src, doc.get("description", ""), "description"), externals=tuple(externals),
         sensors=sensors, map_sensor=map_sensor, intervals=IntervalSettings.from_spec(src, doc.get("intervals")),
-        replicates=int(doc.get("replicates", 1)),
+        replicates=int(doc.get("replicates", 1)), sweep=_sweep_of(doc, src, sensors),
     )
+
+
+def _sweep_of(doc: dict, src, sensors) -> object:
+    from .sweep import parse_sweep
+
+    sw = parse_sweep(doc.get("sweep"), src)
+    if sw is not None and sw.factor == "sensor":
+        names = [s["name"] for s in sensors]
+        for lv, name in sw.levels:
+            if name not in names:
+                _fail(src, f"sweep.levels.{lv:g}", f"sensor {name!r} is not one of the experiment's sensors ({', '.join(names)})")
+    return sw
 
 
 def replicate_spec(spec: ExperimentSpec, k: int) -> ExperimentSpec:

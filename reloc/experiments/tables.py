@@ -52,6 +52,7 @@ FACTOR_KEYS = ("day", "evening", "night", "delta_L", "unchanged", "rearranged", 
 # ReplicaCAD): these tables are computed on a rendered design, which the title line names instead.
 EXTRA_TABLES = {  # tables the paper does not have: key -> (None, title)
     "sensors": (None, "Sensor factor: recall and VideoReloc's odometry per RGB-D sensor model"),
+    "sweep": (None, "Dose-response: recall per level of one graded factor, and breaking points"),
 }
 PAPER_TABLES = {
     "main": ("I", "Comparison of recall and pose errors across relocalization methods and evaluation variants"),
@@ -250,6 +251,10 @@ def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: li
     if variants:
         res["ablation"] = _ablation(res, variants)
     add_table_intervals(res)
+    if getattr(spec, "sweep", None) is not None:
+        from .sweep import compute_sweep
+
+        res["sweep"] = compute_sweep(res, spec.sweep)
     return res
 
 
@@ -759,6 +764,10 @@ def make_tables(res: dict) -> dict[str, tuple[str, list]]:
         t["ablation"] = ablation_table(res)
     if len(res.get("sensors") or []) > 1:
         t["sensors"] = sensor_table(res)
+    if res.get("sweep"):
+        from .sweep import sweep_table
+
+        t["sweep"] = sweep_table(res)
     failed = res.get("failed") or {}
     if failed:  # a failed run has no poses: its tour counts as failures, which the reader must know
         warn = (f"**Incomplete: {len(failed)} run(s) failed** ({', '.join(sorted(failed)[:3])}"

@@ -1,0 +1,102 @@
+"""Dose-response sweeps in experiments (reloc.experiments.sweep).
+
+The figures are checked on a results dict built here, whose per-segment counts are known by
+construction (a method that gets every frame at level 0 and fewer at each level), so each level's
+recall, its ratio to level 0 and the breaking point can be written down by hand; the spec's
+``sweep`` section is checked for its one-line errors.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from formats.errors import SceneFormatError
+from reloc.experiments.checks import metric_table
+from reloc.experiments.sweep import breaking_metrics, compute_sweep, parse_sweep, plot_sweep, sweep_table
+
+LEVELS = {0: "L0", 0.5: "L50", 1.0: "L100"}
+
+
+def _results(rates: dict) -> dict:
+    """Two methods on three layouts (one tour each, 10 segments of 100 frames): at each level
+    ``rates[method][level]`` of every segment's frames are within 1 m / 10 deg."""
+    tours = {f"{v}__day__query": {"layout": v, "lighting": "day", "path": "query", "sensor": "ideal"}
+             for v in LEVELS.values()}
+    methods = {}
+    for m, by_level in rates.items():
+        units = {}
+        for lv, v in LEVELS.items():
+            ok = int(round(100 * by_level[lv]))
+            units[f"{v}__day__query"] = [[100, ok, ok, 100]] * 10
+        methods[m] = {"label": m, "primary": "closure", "modes": {"closure": {"units": units, "all": {}, "factors": {}}}}
+    return {"tours": tours, "methods": methods, "reference_sensor": "ideal",
+            "intervals": {"settings": {"resamples": 200}},
+            "rows": [{"key": f"{m}.closure", "label": m.upper(), "method": m, "mode": "closure"} for m in rates]}
+
+
+def test_levels_ratios_and_breaking_points_from_known_counts(tmp_path):
+    sweep = parse_sweep({"factor": "rearrangement", "levels": LEVELS, "fraction": 0.8}, "s.yaml")
+    res = _results({"strong": {0: 0.9, 0.5: 0.85, 1.0: 0.8}, "weak": {0: 0.9, 0.5: 0.6, 1.0: 0.3}})
+    res["sweep"] = compute_sweep(res, sweep)
+    strong, weak = res["sweep"]["runs"]["strong.closure"], res["sweep"]["runs"]["weak.closure"]
+    assert [r["recall"] for r in weak["levels"]] == pytest.approx([0.9, 0.6, 0.3])
+    assert [r["ratio"] for r in weak["levels"]] == pytest.approx([1.0, 2 / 3, 1 / 3])
+    assert weak["breaking_point"] == 0.5 and strong["breaking_point"] is None  # 0.8/0.9 = 0.89 holds
+    assert weak["levels"][1]["ci"] == pytest.approx([0.6, 0.6])  # every segment alike: no spread
+    m = metric_table(res)
+    assert m["weak.breaking_point.rearrangement"] == 0.5 and m["strong.breaking_point.rearrangement"] == math.inf
+    assert m["weak.closure.sweep.1"] == pytest.approx(0.3) and breaking_metrics(res)["weak.sweep.0.5"] == pytest.approx(0.6)
+    md, rows = sweep_table(res)
+    assert "| WEAK | 90.0 [90.0, 90.0] | 60.0 [60.0, 60.0] | 30.0 [30.0, 30.0] | 0.5 |" in md
+    assert "| STRONG |" in md and "none (holds)" in md and len(rows) == 2
+    plot_sweep(res, tmp_path / "sweep.png")
+    assert (tmp_path / "sweep.png").stat().st_size > 5000
+
+
+def test_a_noisy_level_has_an_interval_that_holds_its_recall():
+    sweep = parse_sweep({"factor": "rearrangement", "levels": LEVELS}, "s.yaml")
+    res = _results({"m": {0: 0.9, 0.5: 0.6, 1.0: 0.3}})
+    rng = np.random.default_rng(0)
+    res["methods"]["m"]["modes"]["closure"]["units"]["L50__day__query"] = [
+        [100, int(k), int(k), 100] for k in rng.integers(20, 100, 10)]
+    out = compute_sweep(res, sweep)["runs"]["m.closure"]["levels"][1]
+    assert out["ci"][0] < out["recall"] < out["ci"][1] and out["ratio_ci"][0] < out["ratio"] < out["ratio_ci"][1]
+
+
+@pytest.mark.parametrize("doc, field", [
+    ({"factor": "furniture", "levels": LEVELS}, "sweep.factor"),
+    ({"factor": "rearrangement", "levels": {0: "L0"}}, "sweep.levels"),
+    ({"factor": "rearrangement", "levels": {0: "L0", -1: "L50"}}, "sweep.levels.-1"),
+    ({"factor": "rearrangement", "levels": {0: "L0", 0.5: "L0"}}, "sweep.levels"),
+    ({"factor": "rearrangement", "levels": LEVELS, "fraction": 1.2}, "sweep.fraction"),
+    ({"factor": "rearrangement", "levels": LEVELS, "step": 1}, "sweep.step"),
+    ([1, 2], "sweep"),
+])
+def test_bad_sweeps_name_the_file_and_key(doc, field):
+    with pytest.raises(SceneFormatError) as e:
+        parse_sweep(doc, "exp.yaml")
+    assert e.value.field == field and str(e.value).startswith("exp.yaml: ")
+
+
+def test_an_experiment_spec_with_a_sweep_is_refused_in_one_line_before_anything_runs(tmp_path, capsys):
+    """A sweep level whose tours the design lacks, and a sensor level that is not one of the
+    experiment's sensors: exit 2, one line naming the key, no output folder."""
+    import yaml
+
+    from reloc.cli import main as reloc_main
+    from reloc.resources import experiment_spec
+
+    doc = yaml.safe_load(experiment_spec("sweep_rearrangement_experiment").read_text())
+    doc["out"] = str(tmp_path / "exp")
+    doc["render"] = str(experiment_spec("sweep_rearrangement_experiment").parents[1].parent / "synth" / "specs" /
+                        "sweep_rearrangement.yaml")
+    doc["sweep"] = {"factor": "sensor", "levels": {0: "ideal", 1: "structured_light"}}
+    f = tmp_path / "e.yaml"
+    f.write_text(yaml.safe_dump(doc))
+    assert reloc_main(["experiment", str(f)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "sweep.levels.1" in err and "structured_light" in err and len(err.splitlines()) == 1
+    assert not (tmp_path / "exp").exists()
