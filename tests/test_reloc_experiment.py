@@ -1066,3 +1066,31 @@ def test_experiment_with_the_learned_detector_and_the_oracle_row(tiny_design, ca
         == "learned"
     assert json.loads((runs / "videoreloc_oracle" / "apt_1__night__query" / "run.json").read_text())["detector"][
         "name"] == "oracle"
+
+
+@pytest.mark.slow
+def test_a_sensor_sweep_end_to_end_with_its_table_plot_and_check(tiny_design, capsys):
+    """sweep: over the experiment's sensors (ideal and structured light with its noise doubled) on the
+    tiny design: results.json carries each level's recall and interval, tables/sweep.md and
+    plots/sweep.png are written, and reloc check reads the breaking point."""
+    (tiny_design / "sl_x2.yaml").write_text(yaml.safe_dump({"name": "sl_x2", "base": "structured_light",
+                                                             "noise_scale": 2}))
+    spec = yaml.safe_load((tiny_design / "exp.yaml").read_text())
+    spec.update({"out": str(tiny_design / "exp_sweep"), "methods": ["videoreloc"], "sensors": ["ideal", "sl_x2.yaml"],
+                 "sweep": {"factor": "sensor", "levels": {0: "ideal", 2: "sl_x2"}, "fraction": 0.5}})
+    (tiny_design / "exp_sweep.yaml").write_text(yaml.safe_dump(spec))
+    assert reloc_main(["experiment", str(tiny_design / "exp_sweep.yaml"), "--quiet"]) == 0
+    capsys.readouterr()
+    exp = tiny_design / "exp_sweep"
+    res = json.loads((exp / "results.json").read_text())
+    run = res["sweep"]["runs"]["videoreloc.closure"]
+    assert [r["level"] for r in run["levels"]] == [0, 2] and all(r["tours"] == 4 for r in run["levels"])
+    for r in run["levels"]:
+        assert r["ci"][0] - 1e-9 <= r["recall"] <= r["ci"][1] + 1e-9
+    assert run["levels"][0]["recall"] == pytest.approx(res["methods"]["videoreloc"]["modes"]["closure"]["factors"]
+                                                       ["sensor.ideal"])
+    assert "Dose-response: sensor" in (exp / "tables" / "sweep.md").read_text()
+    assert (exp / "plots" / "sweep.png").stat().st_size > 5000
+    checks = tiny_design / "sweep_checks.yaml"
+    checks.write_text(yaml.safe_dump({"checks": ["videoreloc.breaking_point.sensor >= 0", "videoreloc.sweep.0 >= 0"]}))
+    assert reloc_main(["check", str(checks), str(exp)]) == 0
