@@ -50,7 +50,8 @@ def test_levels_ratios_and_breaking_points_from_known_counts(tmp_path):
     assert m["weak.breaking_point.rearrangement"] == 0.5 and m["strong.breaking_point.rearrangement"] == math.inf
     assert m["weak.closure.sweep.1"] == pytest.approx(0.3) and breaking_metrics(res)["weak.sweep.0.5"] == pytest.approx(0.6)
     md, rows = sweep_table(res)
-    assert "| WEAK | 90.0 [90.0, 90.0] | 60.0 [60.0, 60.0] | 30.0 [30.0, 30.0] | 0.5 |" in md
+    assert "| WEAK | 90.0 [90.0, 90.0] | 60.0 [60.0, 60.0] | 30.0 [30.0, 30.0] | 0.5 [0.5, 0.5] |" in md
+    assert m["weak.breaking_point.rearrangement.lo"] == 0.5 and m["strong.breaking_point.rearrangement.hi"] == math.inf
     assert "| STRONG |" in md and "none (holds)" in md and len(rows) == 2
     plot_sweep(res, tmp_path / "sweep.png")
     assert (tmp_path / "sweep.png").stat().st_size > 5000
@@ -62,8 +63,15 @@ def test_a_noisy_level_has_an_interval_that_holds_its_recall():
     rng = np.random.default_rng(0)
     res["methods"]["m"]["modes"]["closure"]["units"]["L50__day__query"] = [
         [100, int(k), int(k), 100] for k in rng.integers(20, 100, 10)]
-    out = compute_sweep(res, sweep)["runs"]["m.closure"]["levels"][1]
+    run = compute_sweep(res, sweep)["runs"]["m.closure"]
+    out = run["levels"][1]
     assert out["ci"][0] < out["recall"] < out["ci"][1] and out["ratio_ci"][0] < out["ratio"] < out["ratio_ci"][1]
+    # the breaking point's bounds: the first level whose ratio interval reaches below 80 %, and the
+    # first whose whole interval is below it
+    lo = next(r["level"] for r in run["levels"] if r["ratio_ci"][0] < 0.8)
+    hi = next(r["level"] for r in run["levels"] if r["ratio_ci"][1] < 0.8)
+    assert (run["breaking_point_lo"], run["breaking_point"], run["breaking_point_hi"]) == (lo, 0.5, hi)
+    assert lo <= 0.5 <= hi
 
 
 @pytest.mark.parametrize("doc, field", [
@@ -100,3 +108,40 @@ def test_an_experiment_spec_with_a_sweep_is_refused_in_one_line_before_anything_
     err = capsys.readouterr().err.strip()
     assert "sweep.levels.1" in err and "structured_light" in err and len(err.splitlines()) == 1
     assert not (tmp_path / "exp").exists()
+
+
+def test_every_shipped_sweep_check_can_fail(tmp_path, capsys):
+    """reloc/specs/sweep_checks.yaml on constructed results: all pass where VideoReloc holds and the
+    baselines break early, and every one fails in the opposite world, so none is a check that no
+    result could fail."""
+    import json
+
+    from reloc.cli import main as reloc_main
+    from reloc.resources import check_spec
+
+    levels = {0: "L0", 0.25: "L25", 0.5: "L50", 0.75: "L75", 1.0: "L100", 1.25: "LB"}
+    holds = {lv: 0.9 for lv in levels}
+    breaks = {lv: (0.9 if lv == 0 else 0.2) for lv in levels}
+
+    def world(vr, base) -> dict:
+        tours = {f"{v}__day__query": {"layout": v, "lighting": "day", "path": "query", "sensor": "ideal"}
+                 for v in levels.values()}
+        methods = {}
+        for m, primary, rates in (("videoreloc", "closure", vr), ("videoreloc_oracle", "closure", vr),
+                                  ("fpfh_icp", "closure", base), ("appearance", "causal", base)):
+            units = {f"{v}__day__query": [[100, int(100 * rates[lv]), 0, 100]] * 10 for lv, v in levels.items()}
+            methods[m] = {"label": m, "primary": primary, "modes": {primary: {"units": units, "all": {}, "factors": {}}}}
+        res = {"format": "videoreloc-experiment/1", "tours": tours, "methods": methods, "reference_sensor": "ideal",
+               "intervals": {"settings": {"resamples": 200}}, "rows": []}
+        res["sweep"] = compute_sweep(res, parse_sweep({"factor": "rearrangement", "levels": levels}, "s.yaml"))
+        return res
+
+    checks = check_spec("sweep_checks")
+    n = len(__import__("yaml").safe_load(checks.read_text())["checks"])
+    for name, res, want in (("good", world(holds, breaks), 0), ("bad", world(breaks, holds), 1)):
+        d = tmp_path / name
+        d.mkdir()
+        (d / "results.json").write_text(json.dumps(res))
+        assert reloc_main(["check", str(checks), str(d)]) == want
+        out = capsys.readouterr().out
+        assert (f"{n} passed, 0 failed" if want == 0 else f"0 passed, {n} failed") in out, out

@@ -18,7 +18,10 @@ bootstrap (``reloc.experiments.intervals``: the same resampled path segments as 
 figure, so levels are paired), and its ratio to the lowest level, with an interval. The *breaking
 point* is the lowest level whose ratio falls below ``fraction``; a method that holds at every level
 has none (``reloc check`` reads it as infinity: ``videoreloc.breaking_point.rearrangement >= 0.5``
-passes). ``tables/sweep.md`` holds the table, ``plots/sweep.png`` the dose-response plot.
+passes). The breaking point has an interval too: ``.lo``, the first level whose ratio's interval
+reaches below the fraction (where the method may break), and ``.hi``, the first whose whole interval
+lies below it (where it surely breaks); checks should use ``.lo``. ``tables/sweep.md`` holds the
+table, ``plots/sweep.png`` the dose-response plot.
 """
 
 from __future__ import annotations
@@ -125,14 +128,25 @@ def compute_sweep(res: dict, sweep: Sweep) -> dict:
                 q, rr = figure_values(boot, key, ("ratio", OK_COARSE, (sel[lv], sel[lv0]))) if sel[lv0] else (None, None)
                 rows.append({"level": lv, "value": value, "tours": len(sel[lv]), "recall": p, "ci": boot.interval(r),
                              "ratio": q, "ratio_ci": boot.interval(rr) if rr is not None else None})
-            broken = [row["level"] for row in rows if row["ratio"] is not None and row["ratio"] < sweep.fraction]
-            runs[key] = {"levels": rows, "breaking_point": broken[0] if broken else None}
+            def first(pred):
+                hit = [row["level"] for row in rows if pred(row)]
+                return hit[0] if hit else None
+
+            f = sweep.fraction
+            runs[key] = {"levels": rows,
+                         "breaking_point": first(lambda r: r["ratio"] is not None and r["ratio"] < f),
+                         # the interval of the breaking point: the first level whose ratio may be below the
+                         # fraction (its interval's lower bound is) and the first where it surely is (upper bound)
+                         "breaking_point_lo": first(lambda r: r["ratio_ci"] is not None and r["ratio_ci"][0] < f),
+                         "breaking_point_hi": first(lambda r: r["ratio_ci"] is not None and r["ratio_ci"][1] < f)}
     return {**sweep.as_dict(), "runs": runs}
 
 
 def breaking_metrics(results: dict) -> dict:
     """``reloc check`` names of the sweep: ``METHOD[.MODE].breaking_point.FACTOR`` (infinity when the
-    method holds at every level) and ``METHOD[.MODE].sweep.LEVEL`` (recall at that level)."""
+    method holds at every level), its bounds ``.lo`` (the first level whose ratio's interval reaches
+    below the fraction: where it may break) and ``.hi`` (the first whose whole interval is below: where
+    it surely breaks), and ``METHOD[.MODE].sweep.LEVEL`` (recall at that level)."""
     sw = results.get("sweep")
     if not sw:
         return {}
@@ -140,8 +154,10 @@ def breaking_metrics(results: dict) -> dict:
     for key, run in sw["runs"].items():
         m, mode = key.split(".", 1)
         primary = results["methods"].get(m, {}).get("primary") == mode
-        bp = run["breaking_point"]
-        figs = {f"breaking_point.{sw['factor']}": math.inf if bp is None else bp}
+        inf = lambda v: math.inf if v is None else v  # noqa: E731
+        bp = f"breaking_point.{sw['factor']}"
+        figs = {bp: inf(run["breaking_point"]), f"{bp}.lo": inf(run.get("breaking_point_lo")),
+                f"{bp}.hi": inf(run.get("breaking_point_hi"))}
         figs.update({f"sweep.{row['level']:g}": row["recall"] for row in run["levels"]})
         for k, v in figs.items():
             vals[f"{key}.{k}"] = v
@@ -163,14 +179,20 @@ def sweep_table(res: dict) -> tuple[str, list[dict]]:
     sw = res["sweep"]
     labels = {r["key"]: r["label"] + (" †" if r.get("dagger") else "") for r in res.get("rows", [])}
     levels = [lv for lv, _ in sw["levels"]]
-    head = ["method"] + [f"{lv:g} ({v})" for lv, v in sw["levels"]] + [f"breaking point (< {100 * sw['fraction']:.0f} % of level {levels[0]:g})"]
+    head = ["method"] + [f"{lv:g} ({v})" for lv, v in sw["levels"]] + [
+        f"breaking point (< {100 * sw['fraction']:.0f} % of level {levels[0]:g}) [may, surely]"]
     lines = [f"**Dose-response: {sw['factor']}** (recall at 1 m/10 deg, % [95 % interval], mean over each level's "
              "query tours)", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     rows = []
     for key, run in sw["runs"].items():
+        def lv(v) -> str:
+            return "none" if v is None else f"{v:g}"
+
         bp = run["breaking_point"]
         cells = [f"{_pct(r['recall'])}{_ci(r['ci'])}" for r in run["levels"]]
-        lines.append("| " + " | ".join([labels.get(key, key)] + cells + ["none (holds)" if bp is None else f"{bp:g}"]) + " |")
+        span = f" [{lv(run.get('breaking_point_lo'))}, {lv(run.get('breaking_point_hi'))}]"
+        lines.append("| " + " | ".join([labels.get(key, key)] + cells + [("none (holds)" if bp is None else f"{bp:g}") + span])
+                     + " |")
         rows.append({"key": key, "breaking_point": bp, "levels": run["levels"]})
     lines += ["", "Ratio to level " + f"{levels[0]:g}" + " (% [95 % interval], paired: the same resampled path segments):", "",
               "| method | " + " | ".join(f"{lv:g}" for lv in levels) + " |", "|" + "---|" * (len(levels) + 1)]
@@ -201,6 +223,7 @@ def plot_sweep(res: dict, path) -> None:
         hi = [100 * (r["ci"][1] - r["recall"]) if r["ci"] else 0 for r in pts]
         line = ax.errorbar(x, y, yerr=[lo, hi], marker="o", capsize=3, label=labels.get(key, key))
         ax.axhline(100 * sw["fraction"] * pts[0]["recall"], color=line[0].get_color(), ls=":", lw=0.8)
+    ax.set_xticks([lv for lv, _ in sw["levels"]], [f"{lv:g}\n{v}" for lv, v in sw["levels"]], fontsize=7)
     ax.set_xlabel(f"{sw['factor']} level")
     ax.set_ylabel("recall at 1 m / 10 deg (%)")
     ax.set_ylim(0, 105)
