@@ -101,3 +101,31 @@ def test_change_table_rows(apt0, variant):
     row = next(r for r in lines if "moved > 0.1 m" in r).split()
     assert row[4:] == [str(st["moved_over_0.1m"]), "75-85", "ok", "68-76"]  # "moved > 0.1 m" is 4 words
     assert all(" ok " in r for r in lines[1:])
+
+
+@pytest.mark.slow
+def test_graded_levels_of_the_real_format_apt_0_are_nested_and_valid(apt0, walkway):
+    """synth.layout.graded on the real-format ReplicaCAD apt_0: nested levels, no check problem the
+    reference lacks, ``free`` objects resting on a moved holder move along, and the beyond level's
+    removals and additions scaled to the flat (scaled_plan), as make_variant scales them."""
+    from synth.layout.graded import graded_variants, moved_ids
+    from synth.layout.rearrange import scaled_plan
+
+    levels = graded_variants(apt0, [0, 0.5, 1.0], seed=SEED, walkway=walkway, beyond=True)
+    assert levels[0][1] is apt0
+    ref_rep = check_layout(apt0)
+    prev = set()
+    for lv, var in levels[1:]:
+        moved = moved_ids(apt0, var)
+        assert prev <= moved and len(moved) > len(prev), lv
+        assert not new_problems(ref_rep, check_layout(var)), lv
+        prev = moved
+    rests, _ = free_rests(apt0)
+    full = levels[2][1]
+    for holder, fids in rests.items():
+        if holder in moved_ids(apt0, full):
+            assert set(fids) <= moved_ids(apt0, full)  # carried along
+    beyond = levels[-1][1]
+    plan = scaled_plan(apt0)
+    added = {o.id for o in beyond.objects} - {o.id for o in apt0.objects}
+    assert 0 < len(added) <= plan.added

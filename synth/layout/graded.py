@@ -11,12 +11,15 @@ strength ``s`` is the layout after the first ``round(s * N)`` moves of that one 
 * level 0 is the reference itself, unchanged;
 * the objects moved at strength ``s`` are a subset of those moved at any ``s' > s``, and each level
   adds change and nothing else (same seed, same sequence);
-* every level is valid, because every move was checked against the layout it is applied to.
+* every level is valid, because every move was checked against the layout it is applied to: by
+  the placer, and in an imported flat also by ``check_layout`` (a move that adds a problem the
+  reference lacks, such as a picture hung into the flat's mesh wall, is undone and its unit stays).
 
 A unit whose move finds no valid place stays (the step still counts, and the level's ``meta``
 says how many units moved). ``beyond``: one more level past strength 1, which also moves the fixed
 fittings the operator keeps (non-movable floor objects: counters, wardrobes, bathtubs), removes
-objects and adds new ones (``RearrangePlan``'s counts): change beyond the paper's range.
+objects and adds new ones (``RearrangePlan``'s counts; scaled to the flat's size for an imported
+one, ``scaled_plan``): change beyond the paper's range.
 """
 
 from __future__ import annotations
@@ -31,7 +34,9 @@ from ..scene.fixtures import layout_fixtures
 from ..scene.model import Layout
 from .placement import Placer
 from ..scene.stats import is_imported
-from .rearrange import RearrangePlan, _add_objects, _holds, _put_elsewhere, _rehang, _relocate_floor, free_rests
+from .rearrange import (_VARIANT_META, RearrangePlan, _add_objects, _holds, _put_elsewhere, _rehang, _relocate_floor,
+                        free_rests, new_problems)
+from .validity import check_layout
 
 BEYOND = "beyond"
 
@@ -59,7 +64,20 @@ def _units(placer: Placer, pinned: set[int]) -> list:
             and (o.support == "floor" or o.support.startswith("object:") or o.support.startswith("wall:"))]
 
 
-def _move(placer: Placer, oid: int, rests, other_room: float) -> bool:
+def _move(placer: Placer, oid: int, rests, other_room: float, ref_report=None) -> bool:
+    """Move unit ``oid``; with ``ref_report`` (the reference's ``check_layout``), a move after which
+    the layout has a check problem the reference lacks (an imported flat's walls are meshes the
+    placer's boxes do not see) is undone, and the unit stays."""
+    lay = placer.layout
+    saved_objects, saved_boxes = list(lay.objects), dict(placer.boxes)
+    ok = _try_move(placer, oid, rests, other_room)
+    if ok and ref_report is not None and new_problems(ref_report, check_layout(lay)):
+        lay.objects, placer.boxes = saved_objects, saved_boxes
+        return False
+    return ok
+
+
+def _try_move(placer: Placer, oid: int, rests, other_room: float) -> bool:
     obj = placer.layout.object(oid)
     if obj.support == "floor":
         return _relocate_floor(placer, obj, other_room, rests) is not None
@@ -84,6 +102,9 @@ def graded_variants(ref: Layout, strengths, seed: int, walkway: np.ndarray | Non
     placer = Placer(lay, rng, keepout=None if walkway is None else (walkway, WALKWAY_CLEARANCE),
                     used_ids=max([o.id for o in ref.objects] + [0]) if is_imported(ref) else 0)
     rests, pinned = free_rests(lay)
+    # an imported flat's walls are meshes the placer's boxes do not see: each move is checked there
+    # (a procedural flat's placer applies the check's own rules; its levels are checked by the tests)
+    ref_report = check_layout(ref) if is_imported(ref) else None
     units = _units(placer, pinned)
     order = [units[k].id for k in rng.permutation(len(units))]
     want = {int(round(s * len(order))): s for s in levels}
@@ -94,7 +115,7 @@ def graded_variants(ref: Layout, strengths, seed: int, walkway: np.ndarray | Non
         lay.fixtures = layout_fixtures(lay, previous=ref)  # lamps' lights follow their lamps; removed ones go
         v = lay.copy()
         v.name, v.reference, v.seed = level_name(ref.name, level), ref.name, int(seed)
-        v.meta = {**{k: x for k, x in ref.meta.items() if k in ("source", "root", "scene")},
+        v.meta = {**{k: x for k, x in ref.meta.items() if k not in _VARIANT_META},  # an import record stays
                   "generator": "synth.graded", "strength": level, "units": len(order), "steps": steps,
                   "units_moved": moved, "fixed_moved": fixed_moved, "graded_seed": int(seed)}
         if walkway is not None:
@@ -108,15 +129,24 @@ def graded_variants(ref: Layout, strengths, seed: int, walkway: np.ndarray | Non
         if (k + 1) > max(want):
             break
         if any(o.id == oid for o in lay.objects):
-            moved += _move(placer, oid, rests, other_room)
+            moved += _move(placer, oid, rests, other_room, ref_report)
         if (k + 1) in want:
             out.append((want[k + 1], snapshot(want[k + 1], k + 1)))
     if beyond:
+        if is_imported(ref):  # counts for a flat of another size, as make_variant scales them
+            from .rearrange import scaled_plan
+
+            plan = scaled_plan(ref, plan)
         for k in range(max(want), len(order)):  # the rest of the sequence, if the last level was below 1
-            moved += _move(placer, order[k], rests, other_room)
+            moved += _move(placer, order[k], rests, other_room, ref_report)
         fixed = [o.id for o in sorted(lay.objects, key=lambda o: o.id) if not o.movable and o.support == "floor"]
         for k in rng.permutation(len(fixed)):
-            fixed_moved += _relocate_floor(placer, lay.object(fixed[k]), other_room, rests) is not None
+            saved_objects, saved_boxes = list(lay.objects), dict(placer.boxes)
+            if _relocate_floor(placer, lay.object(fixed[k]), other_room, rests) is not None:
+                if ref_report is not None and new_problems(ref_report, check_layout(lay)):
+                    lay.objects, placer.boxes = saved_objects, saved_boxes
+                else:
+                    fixed_moved += 1
         leaves = [o for o in lay.objects if o.movable and not _holds(placer, o.id, rests) and o.id not in pinned]
         for k in rng.permutation(len(leaves))[: plan.removed]:
             placer.remove(leaves[k].id)
