@@ -15,7 +15,13 @@ import pytest
 
 from formats.errors import SceneFormatError
 from reloc.experiments.checks import metric_table
-from reloc.experiments.sweep import breaking_metrics, compute_sweep, parse_sweep, plot_sweep, sweep_table
+from reloc.experiments.sweep import breaking_metrics, parse_sweep, plot_sweep, sweep_table
+from reloc.experiments.sweep import compute_sweep as _compute
+from reloc.experiments.tables import bootstrap_of
+
+
+def compute_sweep(res, sweep):
+    return _compute(res, sweep, bootstrap_of(res))
 
 LEVELS = {0: "L0", 0.5: "L50", 1.0: "L100"}
 

@@ -103,13 +103,10 @@ def missing_levels(tours: dict, sweep: Sweep, reference_sensor: str = "ideal") -
             if not sel]
 
 
-def compute_sweep(res: dict, sweep: Sweep) -> dict:
+def compute_sweep(res: dict, sweep: Sweep, boot) -> dict:
     """The sweep's figures for every run of ``res`` (results.json before it is written): per run
     ``METHOD.MODE``, per level its recall and interval, its ratio to the lowest level and interval,
-    and the breaking point."""
-    from .tables import bootstrap_of
-
-    boot = bootstrap_of(res)
+    and the breaking point. ``boot``: the experiment's resamples (``tables.bootstrap_of(res)``)."""
     sel = level_tours(res["tours"], sweep, res.get("reference_sensor", "ideal"))
     lv0 = sweep.levels[0][0]
     runs = {}

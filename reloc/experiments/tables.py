@@ -254,7 +254,7 @@ def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: li
     if getattr(spec, "sweep", None) is not None:
         from .sweep import compute_sweep
 
-        res["sweep"] = compute_sweep(res, spec.sweep)
+        res["sweep"] = compute_sweep(res, spec.sweep, bootstrap_of(res))
     return res
 
 
