@@ -33,6 +33,18 @@ def _block(cin: int, cout: int, stride: int = 1) -> nn.Sequential:
     )
 
 
+def _unet(m: nn.Module, x: torch.Tensor) -> torch.Tensor:
+    """The encoder-decoder both networks share (stages e1..e4, d3..d1, skip connections): the last
+    decoder stage's features."""
+    x1 = m.e1(x)
+    x2 = m.e2(x1)
+    x3 = m.e3(x2)
+    x4 = m.e4(x3)
+    y = m.d3(torch.cat([m.up(x4), x3], 1))
+    y = m.d2(torch.cat([m.up(y), x2], 1))
+    return m.d1(torch.cat([m.up(y), x1], 1))
+
+
 class SegNet(nn.Module):
     def __init__(self, n_classes: int, width: int = 24):
         super().__init__()
@@ -51,13 +63,7 @@ class SegNet(nn.Module):
         self.boundary = nn.Conv2d(w1, 1, 1)
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        x1 = self.e1(x)
-        x2 = self.e2(x1)
-        x3 = self.e3(x2)
-        x4 = self.e4(x3)
-        y = self.d3(torch.cat([self.up(x4), x3], 1))
-        y = self.d2(torch.cat([self.up(y), x2], 1))
-        y = self.d1(torch.cat([self.up(y), x1], 1))
+        y = _unet(self, x)
         return self.semantic(y), self.boundary(y)
 
 
@@ -89,13 +95,7 @@ class FastSeg(nn.Module):
         self.full = nn.Upsample(scale_factor=2, mode="bilinear", align_corners=False)
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        x1 = self.e1(x)
-        x2 = self.e2(x1)
-        x3 = self.e3(x2)
-        x4 = self.e4(x3)
-        y = self.d3(torch.cat([self.up(x4), x3], 1))
-        y = self.d2(torch.cat([self.up(y), x2], 1))
-        y = self.d1(torch.cat([self.up(y), x1], 1))
+        y = _unet(self, x)
         return self.full(self.semantic(y)), self.full(self.boundary(y))
 
 

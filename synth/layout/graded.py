@@ -68,10 +68,12 @@ def _move(placer: Placer, oid: int, rests, other_room: float, ref_report=None) -
     """Move unit ``oid``; with ``ref_report`` (the reference's ``check_layout``), a move after which
     the layout has a check problem the reference lacks (an imported flat's walls are meshes the
     placer's boxes do not see) is undone, and the unit stays."""
+    if ref_report is None:
+        return _try_move(placer, oid, rests, other_room)
     lay = placer.layout
-    saved_objects, saved_boxes = list(lay.objects), dict(placer.boxes)
+    saved_objects, saved_boxes = list(lay.objects), dict(placer.boxes)  # to undo a refused move
     ok = _try_move(placer, oid, rests, other_room)
-    if ok and ref_report is not None and new_problems(ref_report, check_layout(lay)):
+    if ok and new_problems(ref_report, check_layout(lay)):
         lay.objects, placer.boxes = saved_objects, saved_boxes
         return False
     return ok
