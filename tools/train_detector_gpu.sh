@@ -3,23 +3,32 @@
 # python3 with PyTorch; nothing of the toolkit installed: the checkout is on PYTHONPATH).
 # Usage: tools/train_detector_gpu.sh PACK.npz OUT EPOCHS [DEVICE] [SECONDS]
 # Trains two candidates side by side on the one GPU, fastseg at widths 32 and 40 with the camera
-# augmentation, each stopped after SECONDS at the latest (default 430; then the last finished
-# epoch's checkpoint is what comes back, and its log says how many epochs ran). For each run:
-# OUT/<run>.onnx, OUT/<run>.pt (the weights and training log without the optimiser: `reloc detector
-# export` reads it) and OUT/<run>.json (the training log); OUT/train.log holds both runs' output.
+# augmentation. Each run first times two epochs (the second one warm), then trains for as many
+# epochs as fit in SECONDS (default 430; at most EPOCHS), so that the one-cycle learning-rate
+# schedule runs to its end rather than being cut off; `timeout SECONDS` stays as a guard (then the
+# last finished epoch's checkpoint is what comes back, and its log says how many epochs ran). For
+# each run: OUT/<run>.onnx, OUT/<run>.pt (the weights and training log without the optimiser:
+# `reloc detector export` reads it) and OUT/<run>.json (the training log); OUT/train.log holds both
+# runs' output.
 set -u
 data=$1; out=$2; epochs=$3; device=${4:-cuda}; limit=${5:-430}
 export PYTHONPATH=$PWD PYTHONUNBUFFERED=1
 mkdir -p "$out"
 { nvidia-smi -L; python3 -c "import torch; print('torch', torch.__version__, 'cuda', torch.cuda.is_available())"; } 2>&1 | tee "$out/train.log"
 run() {  # name arch width
-    timeout "$limit" python3 - "$data" "/tmp/work_$1" "$2" "$3" "$epochs" "$device" <<'PY' > "/tmp/$1.log" 2>&1
-import sys
+    timeout "$limit" python3 - "$data" "/tmp/work_$1" "$2" "$3" "$epochs" "$device" "$limit" <<'PY' > "/tmp/$1.log" 2>&1
+import sys, time
+t0 = time.perf_counter()
 from reloc.detector.settings import TrainConfig
 from reloc.detector.train import train
-data, work, arch, width, epochs, device = sys.argv[1:]
-cfg = TrainConfig(epochs=int(epochs), batch=32, lr=2e-3, width=int(width), arch=arch, augment="camera", seed=0)
-log = train(data, work, cfg, device=device, resume=True)
+data, work, arch, width, epochs, device, limit = sys.argv[1:]
+def cfg(n):
+    return TrainConfig(epochs=n, batch=32, lr=2e-3, width=int(width), arch=arch, augment="camera", seed=0)
+sec = train(data, work + "_timing", cfg(2), device=device)["epochs"][-1]["seconds"]
+left = float(limit) - (time.perf_counter() - t0) - 60  # the export and a margin
+n = max(1, min(int(epochs), int(left / (1.1 * sec))))
+print(f"timing: {sec} s per epoch, {left:.0f} s left: training {n} epochs", flush=True)
+log = train(data, work, cfg(n), device=device, resume=True)
 print("trained", log["wall_time_s"])
 PY
     echo "training exit $?" >> "/tmp/$1.log"
