@@ -2,28 +2,29 @@
 # The detector trainings of issue 28 as they ran on the device machine (one NVIDIA H200, its image's
 # python3 with PyTorch; nothing of the toolkit installed: the checkout is on PYTHONPATH).
 # Usage: tools/train_detector_gpu.sh PACK.npz OUT EPOCHS [DEVICE] [SECONDS]
-# Trains two candidates side by side on the one GPU, fastseg at widths 32 and 40 with the camera
-# augmentation. Each run first times two epochs (the second one warm), then trains for as many
+# Trains three runs side by side on the one GPU: the candidates, fastseg at widths 32 and 40 with
+# the camera augmentation, and an ablation, fastseg 32 with the first model's exposure jitter only
+# (what the camera augmentation buys under sensor noise). Each run first times two epochs (the second one warm), then trains for as many
 # epochs as fit in SECONDS (default 430; at most EPOCHS), so that the one-cycle learning-rate
 # schedule runs to its end rather than being cut off; `timeout SECONDS` stays as a guard (then the
 # last finished epoch's checkpoint is what comes back, and its log says how many epochs ran). For
 # each run: OUT/<run>.onnx, OUT/<run>.pt (the weights and training log without the optimiser:
-# `reloc detector export` reads it) and OUT/<run>.json (the training log); OUT/train.log holds both
-# runs' output.
+# `reloc detector export` reads it; `python -c` can print its "log"); OUT/train.log holds every
+# run's output. Three runs x two files and the log stay within the device tool's 8 files.
 set -u
 data=$1; out=$2; epochs=$3; device=${4:-cuda}; limit=${5:-430}
 export PYTHONPATH=$PWD PYTHONUNBUFFERED=1
 mkdir -p "$out"
 { nvidia-smi -L; python3 -c "import torch; print('torch', torch.__version__, 'cuda', torch.cuda.is_available())"; } 2>&1 | tee "$out/train.log"
-run() {  # name arch width
-    timeout "$limit" python3 - "$data" "/tmp/work_$1" "$2" "$3" "$epochs" "$device" "$limit" <<'PY' > "/tmp/$1.log" 2>&1
+run() {  # name arch width augment
+    timeout "$limit" python3 - "$data" "/tmp/work_$1" "$2" "$3" "$epochs" "$device" "$limit" "$4" <<'PY' > "/tmp/$1.log" 2>&1
 import sys, time
 t0 = time.perf_counter()
 from reloc.detector.settings import TrainConfig
 from reloc.detector.train import train
-data, work, arch, width, epochs, device, limit = sys.argv[1:]
+data, work, arch, width, epochs, device, limit, augment = sys.argv[1:]
 def cfg(n):
-    return TrainConfig(epochs=n, batch=32, lr=2e-3, width=int(width), arch=arch, augment="camera", seed=0)
+    return TrainConfig(epochs=n, batch=32, lr=2e-3, width=int(width), arch=arch, augment=augment, seed=0)
 sec = train(data, work + "_timing", cfg(2), device=device)["epochs"][-1]["seconds"]
 left = float(limit) - (time.perf_counter() - t0) - 60  # the export and a margin
 n = max(1, min(int(epochs), int(left / (1.1 * sec))))
@@ -38,12 +39,11 @@ from reloc.detector.train import export_onnx, load_checkpoint
 work, dest = sys.argv[1:]
 state = load_checkpoint(f"{work}/checkpoint.pt")
 torch.save({"model": state["model"], "log": state["log"]}, dest + ".pt")
-json.dump(state["log"], open(dest + ".json", "w"), indent=1)
 export_onnx(dest + ".pt", dest + ".onnx")
 print("exported after", len(state["log"]["epochs"]), "epochs:", json.dumps(state["log"]["epochs"][-1]))
 PY
 }
-run fastseg32 fastseg 32 & run fastseg40 fastseg 40 &
+run fastseg32 fastseg 32 camera & run fastseg40 fastseg 40 camera & run fastseg32_exposure fastseg 32 exposure &
 wait
-for r in fastseg32 fastseg40; do echo "== $r"; cat "/tmp/$r.log"; done >> "$out/train.log"
+for r in fastseg32 fastseg40 fastseg32_exposure; do echo "== $r"; cat "/tmp/$r.log"; done >> "$out/train.log"
 tail -n 12 "$out/train.log"
