@@ -2,7 +2,8 @@
 wheel finds them as a checkout does.
 
 - ``reloc/models/``: the learned detector the experiments use by default
-  (``detector_160x120.onnx``, :data:`SHIPPED_MODEL`) and its model card (``detector_160x120.md``).
+  (``detector_v2_160x120.onnx``, :data:`SHIPPED_MODEL`) and its model card (``detector_v2_160x120.md``);
+  the first model, ``detector_160x120.onnx``, stays beside it, loadable by path.
 - ``reloc/specs/``: the shipped experiment and check specs; ``reloc experiment demo_experiment`` is
   ``reloc experiment reloc/specs/demo_experiment.yaml`` (:func:`experiment_spec`, :func:`check_spec`).
 
@@ -21,7 +22,7 @@ from formats.shipped import is_bare_name, package_dir, resolve_spec, shipped_fil
 PACKAGE_DIR = package_dir("reloc")
 MODELS_DIR = PACKAGE_DIR / "models"
 SPECS_DIR = PACKAGE_DIR / "specs"  # experiment and check specs
-SHIPPED_MODEL = MODELS_DIR / "detector_160x120.onnx"  # the learned detector's default model
+SHIPPED_MODEL = MODELS_DIR / "detector_v2_160x120.onnx"  # the learned detector's default model
 MODEL_CARD = SHIPPED_MODEL.with_suffix(".md")
 
 

@@ -258,7 +258,7 @@ def test_shipped_experiment_spec_validates():
     s = load_experiment(REPO / "reloc" / "specs" / "demo_experiment.yaml")
     assert s.methods == ("videoreloc", "videoreloc_oracle", "fpfh_icp", "appearance", "one_frame")
     assert s.unchanged == "apt_0" and s.detector["kind"] == "learned"
-    assert s.detector["model"] == str(REPO / "reloc" / "models" / "detector_160x120.onnx")
+    assert s.detector["model"] == str(REPO / "reloc" / "models" / "detector_v2_160x120.onnx")
     assert s.render == (REPO / "synth" / "specs" / "demo.yaml").resolve()  # render: demo, a shipped name
 
 
@@ -1013,7 +1013,7 @@ def test_learned_detector_needs_rgb_where_it_looks(tiny_design, tmp_path, capsys
     assert reloc_main(["run", "--map", str(gt_map), "--tour", str(tour), "--out", str(out), "--detector", "learned",
                        "--config", str(cfg), "--frames", "160", "--quiet"]) == 0
     run = json.loads((out / "run.json").read_text())
-    assert run["detector"]["name"] == "learned" and run["detector"]["model"].endswith("detector_160x120.onnx")
+    assert run["detector"]["name"] == "learned" and run["detector"]["model"].endswith("detector_v2_160x120.onnx")
 
 
 def test_geometry_only_tour_has_nothing_for_the_learned_detector(fast_design, tmp_path, capsys):
@@ -1054,7 +1054,7 @@ def test_experiment_with_the_learned_detector_and_the_oracle_row(tiny_design, ca
     assert reloc_main(["experiment", str(tiny_design / "exp_learned.yaml"), "--quiet", "--no-plots"]) == 0
     text = capsys.readouterr().out
     res = json.loads((tiny_design / "exp_learned" / "results.json").read_text())
-    assert res["detector"] == "learned (detector_160x120.onnx)" and "detections: learned" in text
+    assert res["detector"] == "learned (detector_v2_160x120.onnx)" and "detections: learned" in text
     keys = [r["key"] for r in res["rows"]]
     assert {"videoreloc.closure", "videoreloc_oracle.closure", "one_frame.causal"} <= set(keys)
     assert "VideoReloc (oracle detections), with clip closure" in text

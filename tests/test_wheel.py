@@ -29,6 +29,7 @@ REPO = Path(__file__).resolve().parents[1]
 PACKAGES = ("formats", "synth", "reloc")
 # the shipped files that must be in the wheel (besides every file under synth/data)
 SHIPPED = ("synth/specs/demo.yaml", "synth/specs/smoke.yaml", "synth/specs/detector_train.yaml", "synth/specs/README.md",
+           "reloc/models/detector_v2_160x120.onnx", "reloc/models/detector_v2_160x120.md",
            "reloc/models/detector_160x120.onnx", "reloc/models/detector_160x120.md", "reloc/specs/demo_experiment.yaml",
            "reloc/specs/demo_checks.yaml", "reloc/specs/README.md", "formats/sensor_presets/tof.yaml")
 
@@ -102,7 +103,7 @@ def test_the_wheel_ships_the_data_and_specs(installed):
     assert not any(n.startswith(("synth/data/", "synth/specs/", "reloc/models/", "reloc/specs/")) and n.endswith(".py")
                    for n in names)
     _say(log, f"{wheel.name}: {len(names)} files, {len(data)} under synth/data, {len(specs)} specs, "
-              f"reloc/models/detector_160x120.onnx {zipfile.ZipFile(wheel).getinfo('reloc/models/detector_160x120.onnx').file_size} bytes")
+              f"reloc/models/detector_v2_160x120.onnx {zipfile.ZipFile(wheel).getinfo('reloc/models/detector_v2_160x120.onnx').file_size} bytes")
 
 
 def test_installed_commands_find_the_shipped_data_outside_the_checkout(installed, tmp_path):

@@ -73,7 +73,7 @@ def add_detector_arguments(p) -> None:
                    help="oracle: the tour's rendered labels (default); onnx: a YOLO-style segmentation model; "
                         "learned: the toolkit's own model (reloc detector train)")
     g.add_argument("--model", help="ONNX model file (with --detector onnx; with learned, default: the shipped "
-                                   "reloc/models/detector_160x120.onnx)")
+                                   "reloc/models/detector_v2_160x120.onnx)")
     g.add_argument("--class-map", help="YAML/JSON mapping model class -> toolkit class (with --detector onnx)")
     g.add_argument("--miss-rate", type=float, default=0.0, help="oracle corruption: probability of missing an instance")
     g.add_argument("--confusion-rate", type=float, default=0.0, help="oracle corruption: probability of a wrong map class")

@@ -35,7 +35,7 @@ from .base import Detection, FrameData
 from .onnx_yolo import open_session
 
 MODEL_FORMAT = "videoreloc-segnet/1"
-# the model the toolkit ships (reloc/models/detector_160x120.md: its data, training and metrics); the
+# the model the toolkit ships (reloc/models/detector_v2_160x120.md: its data, training and metrics); the
 # experiments' default detector
 SHIPPED_MODEL = resources.SHIPPED_MODEL
 REGROW_PX = 3.0  # cut pixels this close to an instance rejoin it (predicted boundaries are 2-4 px wide)

@@ -15,7 +15,7 @@ the optional tables::
     methods: [videoreloc, videoreloc_oracle, fpfh_icp, appearance, one_frame]
     tables: [units, ablation]          # optional: Tables III and IV (Tables I and II, main and factors, always)
     one_frame_stride: 15               # one-frame units on every k-th frame (one registration each)
-    detector: learned                  # the default: the shipped model (reloc/models/detector_160x120.onnx)
+    detector: learned                  # the default: the shipped model (reloc/models/detector_v2_160x120.onnx)
     # detector: {kind: learned, model: ../models/mine.onnx}   (a path relative to this file)
     # detector: {kind: oracle, miss_rate: 0.1}   (the rendered labels, optionally corrupted:
     #                                             reloc.detection.oracle.Corruption)
@@ -147,7 +147,7 @@ class ExperimentSpec:
 
     @property
     def detector_label(self) -> str:
-        """How tables name the detector: ``learned (detector_160x120.onnx)``, ``oracle``, ..."""
+        """How tables name the detector: ``learned (detector_v2_160x120.onnx)``, ``oracle``, ..."""
         d = self.detector
         if d.get("model"):
             return f"{d['kind']} ({Path(d['model']).name})"
