@@ -452,8 +452,9 @@ def tiny_design(tmp_path_factory):
     from synth.jobs import load_spec, run_job
 
     root = tmp_path_factory.mktemp("design")
+    # 160x120: the shipped learned detector's resolution (it refuses tours of another size)
     render = {"name": "tiny", "out": str(root / "tours"), "renderer": "blender", "geometry": "fast",
-              "quality": "preview", "size": [128, 96], "chunk_size": 600, "designs": [
+              "quality": "preview", "size": [160, 120], "chunk_size": 600, "designs": [
                   {"layouts": ["apt_0", "apt_1"], "lightings": ["day", "night"], "path": {"name": "query", "frames": 450},
                    "rgb_every": 150},
                   {"layouts": ["apt_0"], "lightings": ["day"], "path": {"name": "mapping", "frames": 1800},
