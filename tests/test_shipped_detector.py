@@ -18,14 +18,14 @@ import pytest
 from formats.tour import Tour
 from reloc.detection.base import FrameData
 from reloc.detection.learned import LearnedDetector
-from reloc.resources import SHIPPED_MODEL
+from reloc.resources import MODELS_DIR, SHIPPED_MODEL
 from synth.paths.files import save_path
 from synth.paths.views import plan_views
 from synth.scene.model import load_layout
 from synth.render.render_tour import TourSpec, render_tour
 
 MODEL = SHIPPED_MODEL
-FIRST_MODEL = Path(__file__).resolve().parents[1] / "reloc" / "models" / "detector_160x120.onnx"
+FIRST_MODEL = MODELS_DIR / "detector_160x120.onnx"
 # (pixel accuracy, mean best mask IoU of instances of at least 200 pixels) floors per model and lighting
 FLOORS = {
     # measured on view seeds 0, 1, 2: day accuracy 0.91-0.93, IoU 0.63-0.67; night 0.85-0.87, 0.54-0.56

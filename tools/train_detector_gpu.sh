@@ -4,8 +4,9 @@
 # Usage: tools/train_detector_gpu.sh PACK.npz OUT EPOCHS [DEVICE] [SECONDS]
 # Trains three runs side by side on the one GPU: the candidates, fastseg at widths 32 and 40 with
 # the camera augmentation, and an ablation, fastseg 32 with the first model's exposure jitter only
-# (what the camera augmentation buys under sensor noise). Each run first times two epochs (the second one warm), then trains for as many
-# epochs as fit in SECONDS (default 430; at most EPOCHS), so that the one-cycle learning-rate
+# (what the camera augmentation buys under sensor noise); RUNS="fastseg40" trains a subset (the
+# shipped model was fastseg40 alone). Each run first times two epochs (the second one warm), then
+# trains for as many epochs as fit in SECONDS (default 430; at most EPOCHS), so that the one-cycle learning-rate
 # schedule runs to its end rather than being cut off; `timeout SECONDS` stays as a guard (then the
 # last finished epoch's checkpoint is what comes back, and its log says how many epochs ran). For
 # each run: OUT/<run>.onnx, OUT/<run>.pt (the weights and training log without the optimiser:
@@ -43,7 +44,15 @@ export_onnx(dest + ".pt", dest + ".onnx")
 print("exported after", len(state["log"]["epochs"]), "epochs:", json.dumps(state["log"]["epochs"][-1]))
 PY
 }
-run fastseg32 fastseg 32 camera & run fastseg40 fastseg 40 camera & run fastseg32_exposure fastseg 32 exposure &
+runs=${RUNS:-fastseg32 fastseg40 fastseg32_exposure}
+for r in $runs; do
+    case $r in
+        fastseg32) run fastseg32 fastseg 32 camera & ;;
+        fastseg40) run fastseg40 fastseg 40 camera & ;;
+        fastseg32_exposure) run fastseg32_exposure fastseg 32 exposure & ;;
+        *) echo "RUNS: unknown run $r (fastseg32, fastseg40, fastseg32_exposure)" >&2; exit 2 ;;
+    esac
+done
 wait
-for r in fastseg32 fastseg40 fastseg32_exposure; do echo "== $r"; cat "/tmp/$r.log"; done >> "$out/train.log"
+for r in $runs; do echo "== $r"; cat "/tmp/$r.log"; done >> "$out/train.log"
 tail -n 12 "$out/train.log"
