@@ -69,4 +69,4 @@ def render_spec(arg) -> Path:
 
 def trainset_spec(arg) -> Path:
     """``synth trainset render``'s argument: a file, or the name of a shipped trainset spec."""
-    return resolve_spec(arg, SPECS_DIR, "trainset spec", "seeds")
+    return resolve_spec(arg, SPECS_DIR, "trainset spec", "views")  # every trainset spec has views; render specs never

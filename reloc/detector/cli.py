@@ -58,9 +58,16 @@ def cmd_train(args) -> int:
     check_output_folder(args.out)
     if not Path(args.data).is_file():
         raise UserError(f"{args.data}: training set not found (make one with reloc detector pack)")
-    cfg = TrainConfig(epochs=args.epochs, batch=args.batch, lr=args.lr, width=args.width, seed=args.seed,
-                      arch=args.arch, augment=args.augment, val_layouts=args.val_layouts)
-    log = train(args.data, args.out, cfg, device=args.device, resume=args.resume, progress=not args.quiet)
+    arch, width = args.arch, args.width
+    if args.init:  # the network is the model's own
+        from .train import onnx_init
+
+        ini = onnx_init(args.init)
+        arch, width = ini["arch"], ini["width"]
+    cfg = TrainConfig(epochs=args.epochs, batch=args.batch, lr=args.lr, width=width, seed=args.seed,
+                      arch=arch, augment=args.augment, val_layouts=args.val_layouts)
+    log = train(args.data, args.out, cfg, device=args.device, resume=args.resume, progress=not args.quiet,
+                init=args.init)
     onnx_path = export_onnx(Path(args.out) / "checkpoint.pt", Path(args.out) / "model.onnx")
     last = log["epochs"][-1]
     print(f"trained {len(log['epochs'])} epochs in {log['wall_time_s']} s; validation mIoU {last['val_miou']}, "
@@ -110,6 +117,8 @@ def register_cli(subparsers) -> None:
     a.add_argument("--val-layouts", nargs="*", default=[], help="layouts held out for validation (default: the last)")
     a.add_argument("--device", default="cpu", help="cpu or cuda")
     a.add_argument("--resume", action="store_true", help="continue from the folder's checkpoint")
+    a.add_argument("--init", metavar="MODEL.onnx", help="fine-tune: start from an exported model's weights (its "
+                   "architecture and width; classes matched by name, new ones added); e.g. reloc/models/detector_v2_160x120.onnx")
     add_quiet(a)
     a.set_defaults(fn=cmd_train)
     a = ds.add_parser("export", help="a checkpoint as ONNX (needs PyTorch)")

@@ -68,8 +68,99 @@ def forward(model, x: torch.Tensor):
     return ls[..., :h, :w], lb[..., :h, :w]
 
 
+def onnx_init(path) -> dict:
+    """What ``--init MODEL.onnx`` takes from an exported model: its classes, architecture, width and
+    the (weight, bias) of each convolution in graph order (batch norm folded in by the export)."""
+    import onnx
+    from onnx import numpy_helper
+
+    path = Path(path)
+    if not path.is_file():
+        raise UserError(f"{path}: model not found")
+    try:
+        m = onnx.load(str(path))
+    except Exception as e:  # noqa: BLE001 - a truncated or foreign file
+        raise UserError(f"{path}: not an ONNX model ({one_line(e, limit=120)})") from None
+    meta = {p.key: p.value for p in m.metadata_props}
+    if meta.get("format") != MODEL_FORMAT:
+        raise UserError(f"{path}: not a model of reloc detector export (format {meta.get('format')!r})")
+    cfg = json.loads(meta.get("train", "{}")).get("config", {})
+    inits = {t.name: numpy_helper.to_array(t) for t in m.graph.initializer}
+    convs = []
+    for node in m.graph.node:
+        if node.op_type == "Conv":
+            w = inits.get(node.input[1])
+            b = inits.get(node.input[2]) if len(node.input) > 2 else None
+            if w is None:
+                raise UserError(f"{path}: convolution {node.name} has no stored weights")
+            convs.append((np.array(w, np.float32), np.array(b, np.float32) if b is not None else np.zeros(w.shape[0], np.float32)))
+    return {"classes": json.loads(meta["classes"]), "arch": cfg.get("arch", "segnet"), "width": cfg.get("width"),
+            "convs": convs, "path": str(path)}
+
+
+@torch.no_grad()
+def init_from_onnx(model, init: dict, classes: list[str], calib: torch.Tensor) -> dict:
+    """Load an exported model's weights into ``model`` (same architecture and width) to fine-tune it.
+
+    The export folded each batch norm into the convolution before it, so a body convolution gets the
+    folded weight and its batch norm is set so that it changes nothing in eval mode, whatever the
+    statistics: ``gamma = sigma``, ``beta = mu + b``, running mean ``mu``, running variance
+    ``sigma^2 - eps``. ``mu`` and ``sigma`` are the channel's mean and spread on ``calib`` (a batch
+    of training frames), so that in training mode, where batch norm uses the batch's own
+    statistics, the network starts close to the exported one. The class head keeps the rows of the
+    classes both lists share (by name); a new class starts with zero weights and the lowest
+    exported bias, so that it is rarely predicted until trained. Returns what was carried over."""
+    from torch import nn
+
+    convs = [m for m in model.modules() if isinstance(m, nn.Conv2d)]
+    if len(convs) != len(init["convs"]) or any(c.weight.shape[1:] != torch.Size(w.shape[1:]) for c, (w, _) in
+                                              zip(convs[:-2], init["convs"][:-2])):
+        raise UserError(f"{init['path']}: its network ({init['arch']}, width {init['width']}) is not the one being "
+                        f"trained; pass --arch {init['arch']} --width {init['width']}")
+    bns = [m for m in model.modules() if isinstance(m, nn.BatchNorm2d)]
+    body = convs[:-2]
+    if len(bns) != len(body):
+        raise UserError(f"{init['path']}: expected a batch norm after each of {len(body)} convolutions")
+    for conv, bn, (w, b) in zip(body, bns, init["convs"]):
+        conv.weight.copy_(torch.from_numpy(w))
+        bn.weight.fill_(1.0)
+        bn.bias.copy_(torch.from_numpy(b))
+        bn.running_mean.zero_()
+        bn.running_var.fill_(1.0 - bn.eps)
+    # the statistics of each body convolution's output, in eval mode (which the settings above keep exact)
+    stats = {}
+    hooks = [bn.register_forward_hook(lambda m, i, o, k=k: stats.__setitem__(k, (i[0].mean((0, 2, 3)), i[0].std((0, 2, 3)))))
+             for k, bn in enumerate(bns)]
+    model.eval()
+    model(calib)
+    for h in hooks:
+        h.remove()
+    for k, bn in enumerate(bns):
+        mu, sd = stats[k]
+        sd = sd.clamp_min(1e-3)
+        b = bn.bias.clone()
+        bn.weight.copy_(sd)
+        bn.bias.copy_(mu + b)
+        bn.running_mean.copy_(mu)
+        bn.running_var.copy_(sd * sd - bn.eps)
+    old = {c: i for i, c in enumerate(init["classes"])}
+    (ws, bs), (wb, bb) = init["convs"][-2], init["convs"][-1]
+    sem, bnd = convs[-2], convs[-1]
+    sem.weight.zero_()
+    sem.bias.fill_(float(bs.min()))
+    kept = []
+    for i, c in enumerate(classes):
+        if c in old:
+            sem.weight[i] = torch.from_numpy(ws[old[c]])
+            sem.bias[i] = float(bs[old[c]])
+            kept.append(c)
+    bnd.weight.copy_(torch.from_numpy(wb))
+    bnd.bias.copy_(torch.from_numpy(bb))
+    return {"model": init["path"], "kept_classes": kept, "new_classes": [c for c in classes if c not in old]}
+
+
 def train(data_path, out, cfg: TrainConfig, device: str = "cpu", resume: bool = False, progress: bool = True,
-          augment: AugmentConfig | None = None) -> dict:
+          augment: AugmentConfig | None = None, init: str | None = None) -> dict:
     """Train on a packed set; writes ``out/checkpoint.pt``, ``out/train_log.json`` and returns the log."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -114,6 +205,14 @@ def train(data_path, out, cfg: TrainConfig, device: str = "cpu", resume: bool = 
            "augment_config": asdict(aug) if aug is not None else None, "epochs": []}
     start = 0
     ck = out / "checkpoint.pt"
+    if init is not None and not (resume and ck.is_file()):
+        ini = onnx_init(init)
+        calib = X[torch.from_numpy(tr_idx[:: max(1, len(tr_idx) // 64)][:64])].to(device).float() / 255.0
+        log["init"] = init_from_onnx(model, ini, ds.classes, calib)
+        if progress:
+            i = log["init"]
+            print(f"initialised from {init}: {len(i['kept_classes'])} classes kept, {len(i['new_classes'])} new "
+                  f"({', '.join(i['new_classes'][:12])}{', ...' if len(i['new_classes']) > 12 else ''})", file=sys.stderr)
     if resume and ck.is_file():
         state = load_checkpoint(ck, device)
         was = (state["log"].get("config") or {}).get("epochs")

@@ -18,6 +18,19 @@ random views per (layout, lighting)::
                                 # colours and materials are redrawn (synth.datasets.appearance)
     lighting_jitter: {}         # optional: LightingJitter fields to override (strength_log2: 1.0, ...)
 
+A trainset from a ReplicaCAD folder names scenes instead of seeds (``synth/specs/detector_train_replicacad.yaml``)::
+
+    replicacad:
+      root: null                # the dataset folder; null: --replicacad-root, else $REPLICACAD_ROOT
+      scenes: ["v3_sc*_staging_*"]   # scene names or fnmatch patterns: the layouts to train on
+      templates: [apt_0, apt_1, apt_2, apt_3, apt_4, apt_5]   # scenes whose movable objects' *templates*
+                                # (mesh, scale, class, support kind) clutter the layouts; their poses are never used
+      clutter: [20, 40]         # objects added per layout (synth.layout.rearrange.clutter), drawn in this range
+      lamps: 3                  # of them at least this many lamps (night needs a light source), on open tops
+    lightings_per_layout: 1     # each layout gets this many of the lightings, in turn (default: all)
+
+The experiments' ReplicaCAD scenes (``HELD_OUT_SCENES``: apt_0..apt_5) are refused as training scenes.
+
 ``prepare`` writes, into ``OUT/scenes/``, the layouts (``train_<seed>`` and its variants
 ``train_<seed>_v<k>``), one jittered preset per (layout, preset, k) and one views path per
 (layout, preset, k) (``lighting/<layout>/<preset>_j<k>.yaml``, ``paths/<layout>/views_<preset>_j<k>``), then ``OUT/render.yaml``: an ordinary render job (Cycles RGB, fast
@@ -35,6 +48,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import yaml
 
 from formats.atomic import write_text_atomic
@@ -54,7 +68,10 @@ from ..resources import layouts_dir, trainset_spec
 from ..scene.model import dump_yaml, layout_to_dict, load_layout
 
 SPEC_KEYS = {"name", "description", "out", "seeds", "variants", "lightings", "jitter", "views", "size", "quality",
-             "seed", "chunk_size", "workers", "appearance", "lighting_jitter"}
+             "seed", "chunk_size", "workers", "appearance", "lighting_jitter", "replicacad", "lightings_per_layout"}
+RC_KEYS = {"root", "scenes", "templates", "clutter", "lamps", "allow_unknown"}
+# the ReplicaCAD scenes of the experiments (replicacad_demo, replicacad_apt_6x3): never training data
+HELD_OUT_SCENES = ("apt_0", "apt_1", "apt_2", "apt_3", "apt_4", "apt_5")
 # rearranged variants of a training apartment: the paper's ranges, like apt_1..apt_5's plans
 VARIANT_PLANS = (RearrangePlan(removed=4, added=9), RearrangePlan(removed=7, added=9, other_room=0.25))
 
@@ -76,10 +93,22 @@ class TrainsetSpec:
     source: str | None = None
     appearance: float = 0.0
     lighting_jitter: LightingJitter = LightingJitter()
+    replicacad: dict | None = None  # scenes of a ReplicaCAD folder instead of generator seeds
+    lightings_per_layout: int | None = None  # None: every lighting on every layout
+
+    @property
+    def layouts(self) -> int:
+        """Layouts named by the spec (ReplicaCAD: patterns count once each until resolved)."""
+        if self.replicacad is not None:
+            return len(self.replicacad["scenes"])
+        return len(self.seeds) * (1 + self.variants)
+
+    def tours_per_layout(self) -> int:
+        return min(self.lightings_per_layout or len(self.lightings), len(self.lightings)) * self.jitter
 
     @property
     def frames(self) -> int:
-        return len(self.seeds) * (1 + self.variants) * len(self.lightings) * self.jitter * self.views
+        return self.layouts * self.tours_per_layout() * self.views
 
 
 def parse_trainset(doc, source: str) -> TrainsetSpec:
@@ -89,10 +118,13 @@ def parse_trainset(doc, source: str) -> TrainsetSpec:
     unknown = sorted(map(str, set(doc) - SPEC_KEYS))
     if unknown:
         raise SceneFormatError(source, unknown[0], f"unknown key; allowed: {', '.join(sorted(SPEC_KEYS))}")
-    for k in ("name", "out", "seeds"):
+    rc = _replicacad_section(doc.get("replicacad"), source) if "replicacad" in doc else None
+    for k in ("name", "out") + (() if rc else ("seeds",)):
         if doc.get(k) in (None, "", []):
-            raise SceneFormatError(source, k, "missing")
-    seeds = doc["seeds"]
+            raise SceneFormatError(source, k, "missing (or a replicacad: section)" if k == "seeds" else "missing")
+    if rc is not None and doc.get("seeds"):
+        raise SceneFormatError(source, "seeds", "a ReplicaCAD trainset names scenes (replicacad.scenes), not generator seeds")
+    seeds = doc.get("seeds") or []
     if not isinstance(seeds, list) or any(isinstance(s, bool) or not isinstance(s, int) or s < 0 for s in seeds):
         raise SceneFormatError(source, "seeds", f"expected a list of non-negative integers, got {seeds!r}")
     if len(set(seeds)) != len(seeds):
@@ -112,6 +144,9 @@ def parse_trainset(doc, source: str) -> TrainsetSpec:
     appearance = fields.number(source, doc.get("appearance", 0.0), "appearance", lo=0.0)
     if appearance > 1.0:
         raise SceneFormatError(source, "appearance", f"expected a probability in [0, 1], got {appearance}")
+    if rc is not None and appearance > 0:
+        raise SceneFormatError(source, "appearance", "redraws procedural colours and materials only; a ReplicaCAD "
+                               "layout renders with its own glTF materials (use 0)")
     lj = doc.get("lighting_jitter") or {}
     if not isinstance(lj, dict):
         raise SceneFormatError(source, "lighting_jitter", "expected a mapping of LightingJitter fields")
@@ -129,7 +164,49 @@ def parse_trainset(doc, source: str) -> TrainsetSpec:
         views=integer(source, doc.get("views", 40), "views", lo=1), size=(size[0], size[1]), quality=fields.text(source, doc.get("quality", "preview"), "quality"),
         seed=integer(source, doc.get("seed", 0), "seed", lo=0), chunk_size=integer(source, doc.get("chunk_size", 40), "chunk_size", lo=1),
         description=fields.text(source, doc.get("description", ""), "description"), source=source,
-        appearance=float(appearance), lighting_jitter=LightingJitter(**lj))
+        appearance=float(appearance), lighting_jitter=LightingJitter(**lj), replicacad=rc,
+        lightings_per_layout=(None if doc.get("lightings_per_layout") is None else
+                              integer(source, doc["lightings_per_layout"], "lightings_per_layout", lo=1)))
+
+
+def _replicacad_section(doc, source: str) -> dict:
+    """The ``replicacad:`` mapping of a trainset spec, checked; errors name the file and the key."""
+    from fnmatch import fnmatch
+
+    d = fields.mapping(source, doc, "replicacad")
+    unknown = sorted(map(str, set(d) - RC_KEYS))
+    if unknown:
+        raise SceneFormatError(source, f"replicacad.{unknown[0]}", f"unknown key; allowed: {', '.join(sorted(RC_KEYS))}")
+    root = d.get("root")
+    if root is not None:
+        root = fields.string(source, root, "replicacad.root")
+    scenes = fields.names(source, d.get("scenes"), "replicacad.scenes")
+    if not scenes:
+        raise SceneFormatError(source, "replicacad.scenes", "missing: scene names or patterns (v3_sc*_staging_*)")
+    for i, pat in enumerate(scenes):
+        held = [h for h in HELD_OUT_SCENES if fnmatch(h, pat)]
+        if held:
+            raise SceneFormatError(source, f"replicacad.scenes[{i}]",
+                                   f"'{pat}' names {held[0]}, a scene of the experiments: training data must come from other scenes")
+    templates = fields.names(source, d["templates"], "replicacad.templates") if d.get("templates") else []
+    clutter = d.get("clutter", 0)
+    if isinstance(clutter, list):
+        if len(clutter) != 2:
+            raise SceneFormatError(source, "replicacad.clutter", f"expected a count or [lo, hi], got {clutter!r}")
+        lo, hi = (integer(source, v, f"replicacad.clutter[{k}]", lo=0) for k, v in enumerate(clutter))
+        if lo > hi:
+            raise SceneFormatError(source, "replicacad.clutter", f"expected lo <= hi, got {clutter!r}")
+    else:
+        lo = hi = integer(source, clutter, "replicacad.clutter", lo=0)
+    if hi > 500:
+        raise SceneFormatError(source, "replicacad.clutter", f"at most 500 objects per layout, got {hi}")
+    if hi and not templates:
+        raise SceneFormatError(source, "replicacad.templates", "clutter needs scenes to draw object templates from")
+    lamps = integer(source, d.get("lamps", 0), "replicacad.lamps", lo=0)
+    if lamps > lo and hi:
+        raise SceneFormatError(source, "replicacad.lamps", f"{lamps} lamps do not fit in a clutter of {lo}")
+    return {"root": root, "scenes": scenes, "templates": templates, "clutter": [lo, hi], "lamps": lamps,
+            "allow_unknown": fields.boolean(source, d.get("allow_unknown", False), "replicacad.allow_unknown")}
 
 
 def load_trainset(path) -> TrainsetSpec:
@@ -156,14 +233,9 @@ def _shipped_shells() -> dict:
     return out
 
 
-def prepare(spec: TrainsetSpec, out: Path | None = None, progress: bool = True) -> Path:
-    """Write the layouts, jittered presets, views paths and ``render.yaml`` of the trainset into
-    ``out`` (default ``spec.out``); returns the render spec's path. Deterministic."""
-    out = Path(out or spec.out)
-    scenes = out / "scenes"
+def _seed_layouts(spec: TrainsetSpec, progress: bool):
+    """(key, layouts) per generator seed: the apartment and its rearranged variants."""
     shells = _shipped_shells()
-    presets = [load_lighting(name) for name in spec.lightings]
-    designs = []
     for s in spec.seeds:
         base = generate_apartment(seed=s, name=f"train_{s}")
         rooms = [r.rect for r in base.stage.rooms]
@@ -181,10 +253,81 @@ def prepare(spec: TrainsetSpec, out: Path | None = None, progress: bool = True) 
         if spec.appearance > 0:
             layouts = [randomize_appearance(lay, spec.seed * 1_000_003 + s * 1009 + 7 + k, spec.appearance)
                        for k, lay in enumerate(layouts)]
+        yield s, layouts
+        if progress:
+            print(f"prepared train_{s}: {len(layouts)} layout(s)", file=sys.stderr)
+
+
+def replicacad_scenes(spec: TrainsetSpec, root: Path) -> list[str]:
+    """The dataset's scenes that ``replicacad.scenes`` names, in name order; a pattern that matches
+    nothing is an error naming it."""
+    from fnmatch import fnmatch
+
+    from ..replicacad.importer import list_scenes
+
+    known = list_scenes(root)
+    out = []
+    for i, pat in enumerate(spec.replicacad["scenes"]):
+        hit = [n for n in known if fnmatch(n, pat)]
+        if not hit:
+            raise SceneFormatError(spec.source or "<trainset>", f"replicacad.scenes[{i}]", f"no scene of {root} matches '{pat}'")
+        out += [n for n in hit if n not in out]
+    held = [n for n in out if n in HELD_OUT_SCENES]
+    if held:
+        raise SceneFormatError(spec.source or "<trainset>", "replicacad.scenes", f"{held[0]} is a scene of the experiments")
+    return sorted(out)
+
+
+def _replicacad_layouts(spec: TrainsetSpec, root: Path, progress: bool):
+    """(key, [layout]) per ReplicaCAD scene: imported, then cluttered with the templates' objects."""
+    from ..layout.rearrange import clutter, template_pool
+    from ..replicacad.importer import list_scenes, load_replicacad
+
+    rc = spec.replicacad
+    src = spec.source or "<trainset>"
+    known = set(list_scenes(root))
+    pool = []
+    for i, name in enumerate(rc["templates"]):
+        if name not in known:
+            raise SceneFormatError(src, f"replicacad.templates[{i}]", f"no scene '{name}' in {root}")
+        pool += template_pool(load_replicacad(root, name, allow_unknown=rc["allow_unknown"]), distinct=False)
+    lo, hi = rc["clutter"]
+    for k, name in enumerate(replicacad_scenes(spec, root)):
+        lay = load_replicacad(root, name, allow_unknown=rc["allow_unknown"])
+        if hi:
+            rng = np.random.default_rng([spec.seed, k, 5])
+            n = int(rng.integers(lo, hi + 1))
+            lay = clutter(lay, pool, n, seed=spec.seed * 1_000_003 + k, lamps=rc["lamps"], name=name)
+        if progress:
+            print(f"prepared {name}: {len(lay.objects)} objects ({lay.meta.get('clutter', {}).get('added', 0)} added), "
+                  f"{sum(f.kind == 'lamp' for f in lay.fixtures)} lamps", file=sys.stderr)
+        yield k, [lay]
+
+
+def prepare(spec: TrainsetSpec, out: Path | None = None, progress: bool = True, replicacad_root: str | None = None) -> Path:
+    """Write the layouts, jittered presets, views paths and ``render.yaml`` of the trainset into
+    ``out`` (default ``spec.out``); returns the render spec's path. Deterministic."""
+    out = Path(out or spec.out)
+    scenes = out / "scenes"
+    presets = [load_lighting(name) for name in spec.lightings]
+    designs = []
+    if spec.replicacad is not None:
+        from ..replicacad.job import resolve_root
+
+        root = resolve_root(spec.replicacad, spec.source or "<trainset>", replicacad_root)
+        groups = _replicacad_layouts(spec, root, progress)
+    else:
+        groups = _seed_layouts(spec, progress)
+    n_lit = min(spec.lightings_per_layout or len(presets), len(presets))
+    n = 0
+    for s, layouts in groups:
         for lay in layouts:
             lay_file = scenes / "layouts" / f"{lay.name}.yaml"
             _write_if_changed(lay_file, dump_yaml(layout_to_dict(lay)))
-            for li, preset in enumerate(presets):
+            chosen = sorted((n + i) % len(presets) for i in range(n_lit))  # every lighting in turn
+            n += 1
+            for li in chosen:
+                preset = presets[li]
                 for j in range(spec.jitter):
                     jseed = spec.seed * 1_000_003 + s * 1009 + li * 101 + j
                     lit = jitter_preset(preset, jseed, spec.lighting_jitter)
@@ -198,8 +341,6 @@ def prepare(spec: TrainsetSpec, out: Path | None = None, progress: bool = True) 
                     path_file = save_path(path, scenes / "paths" / lay.name / f"views_{tag}.txt")  # atomic, deterministic
                     designs.append({"layouts": [str(lay_file.resolve())], "lightings": [str(lit_file.resolve())],
                                     "path": str(path_file.resolve()), "rgb_every": 1})
-        if progress:
-            print(f"prepared train_{s}: {len(layouts)} layout(s)", file=sys.stderr)
     job = {"name": spec.name, "description": spec.description or f"detector training data from {spec.source}",
            "out": str(out.resolve()), "renderer": "blender", "geometry": "fast", "quality": spec.quality,
            "size": list(spec.size), "seed": spec.seed, "chunk_size": spec.chunk_size, "retries": 2, "designs": designs}
@@ -213,10 +354,12 @@ def cmd_render(args) -> int:
 
     spec = load_trainset(args.spec)
     out = Path(args.out) if args.out else Path(spec.out)
-    render = prepare(spec, out, progress=not args.quiet)
+    render = prepare(spec, out, progress=not args.quiet, replicacad_root=getattr(args, "replicacad_root", None))
     job = load_spec(render)
-    print(f"{spec.name}: {len(spec.seeds) * (1 + spec.variants)} layouts, {len(job.designs)} tours, "
-          f"{spec.frames} frames at {spec.size[0]}x{spec.size[1]} -> {out}", file=sys.stderr)
+    frames = sum(len(d.layouts) * len(d.lightings) * spec.views for d in job.designs)
+    n_layouts = len({lay for d in job.designs for lay in d.layouts})
+    print(f"{spec.name}: {n_layouts} layouts, {len(job.designs)} tours, "
+          f"{frames} frames at {spec.size[0]}x{spec.size[1]} -> {out}", file=sys.stderr)
     if args.prepare_only:
         print(render)
         return 0
@@ -234,5 +377,7 @@ def register_cli(subparsers) -> None:
     a.add_argument("--out", help="output folder (default: the spec's out)")
     add_workers(a, "chunk processes")
     a.add_argument("--prepare-only", action="store_true", help="write the scenes and render.yaml, render nothing")
+    a.add_argument("--replicacad-root", metavar="DIR", help="the ReplicaCAD folder of a spec with replicacad: "
+                   "(default: the spec's replicacad.root, else $REPLICACAD_ROOT)")
     add_quiet(a)
     a.set_defaults(fn=cmd_render)

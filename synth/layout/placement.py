@@ -34,6 +34,7 @@ from ..assets import registry as assets
 from ..replicacad.surfaces import mesh_surfaces
 from ..scene import geometry as geo
 from ..scene.classes import class_table
+from ..scene.fixtures import OPEN_TOP_TOLERANCE, is_light_source
 from ..scene.model import Layout, ObjectInstance, Room, Stage, Wall, object_box
 from ..scene.openings import door_zone, opening_box
 
@@ -399,7 +400,16 @@ class Placer:
         box = self._box(oid, cls, size, xy, z, yaw)
         if box.zmax > self.ceiling_z - CEILING_GAP or self.in_keepout(box) or self.collides(box, ignore | {parent.id}):
             return None
+        if is_light_source(cls) and not self.open_top(parent, box):
+            return None  # a lamp inside a cupboard or under a shelf lights nothing
         return self._make(oid, cls, size, params, (xy[0], xy[1], z), yaw, f"object:{parent.id}:{k}", template)
+
+    def open_top(self, parent: ObjectInstance, box: geo.OrientedBox) -> bool:
+        """True when ``box`` stands on ``parent``'s top, open to the room: nothing of the parent is
+        above it. Shelves and receptacles inside a piece of furniture (a closed cupboard's shelf, a
+        drawer, a bookshelf's middle board) are not, whether or not their doors are open."""
+        top = self.boxes[parent.id].zmax if parent.id in self.boxes else object_box(parent).zmax
+        return box.zmin >= top - OPEN_TOP_TOLERANCE
 
     def on_wall(self, oid, cls, size, params, room: Room, z_center: float | None = None, tries: int = 60,
                 side: str | None = None, along: float | None = None, ignore=frozenset(), template=None) -> ObjectInstance | None:

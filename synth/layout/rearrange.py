@@ -53,7 +53,7 @@ import numpy as np
 from formats.errors import UserError
 
 from ..scene import geometry as geo
-from ..scene.fixtures import layout_fixtures
+from ..scene.fixtures import is_light_source, layout_fixtures
 from .validity import CheckReport, check_layout
 from .placement import GAP, Placer
 from ..scene.model import Layout, ObjectInstance, Room, object_box
@@ -611,16 +611,18 @@ def _toward_targets(placer: Placer, ref: Layout, plan: RearrangePlan, floor, ord
             note([cand])
 
 
-def template_pool(ref: Layout) -> list[ObjectInstance]:
+def template_pool(ref: Layout, distinct: bool = True) -> list[ObjectInstance]:
     """The movable objects of ``ref`` whose copies an imported layout's variants may add: one per
     distinct (asset, scale, local box, template name), in order of first id; ``free`` and
-    ceiling-mounted objects are left out (where a copy of them could go is not known)."""
+    ceiling-mounted objects are left out (where a copy of them could go is not known). With
+    ``distinct=False`` every such object, so that a draw from the pool follows the layout's own mix
+    of classes (20 books, one sofa)."""
     seen, out = set(), []
     for o in sorted(ref.objects, key=lambda o: o.id):
         if not o.movable or o.support in ("free", "ceiling"):
             continue
         key = (o.asset, tuple(o.scale), tuple(o.size), tuple(o.box_offset), str(o.params.get("template", "")))
-        if key not in seen:
+        if not distinct or key not in seen:
             seen.add(key)
             out.append(o)
     return out
@@ -751,6 +753,34 @@ def _add_objects(placer: Placer, ref: Layout, n: int, imported: bool) -> int:
             placer.add(cand)
             added += 1
     return added
+
+
+def clutter(layout: Layout, pool: list[ObjectInstance], n: int, seed: int, lamps: int = 0, name: str | None = None) -> Layout:
+    """A copy of ``layout`` with up to ``n`` objects added: copies of the templates in ``pool``
+    (``template_pool`` of any layouts of the same dataset), each placed as its template's support
+    says, of which at least ``lamps`` (when the pool has any) are light sources, which go on open tops only.
+    For detector training data: the dataset's small objects on another arrangement's furniture,
+    as habitat-lab's rearrangement episodes put them into the staging scenes' receptacles.
+    Nothing already in ``layout`` moves; fixtures are derived again (the added lamps get lights)."""
+    lay = layout.copy()
+    lay.name = name or layout.name
+    lay.meta = {**layout.meta, "clutter": {"added": 0, "seed": seed, "pool": len(pool)}}
+    rng = np.random.default_rng([seed, 11])
+    placer = Placer(lay, rng, used_ids=max([o.id for o in layout.objects] + [0]))
+    lamp_pool = [t for t in pool if is_light_source(t.cls)]
+    added = attempts = 0
+    while added < n and attempts < 20 * max(n, 1) and pool:
+        attempts += 1
+        sub = lamp_pool if (added < lamps and lamp_pool) else pool
+        t = sub[rng.integers(len(sub))]
+        cand = _add_copy(placer, t, placer.next_id(), rng)
+        if cand is not None:
+            placer.add(cand)
+            added += 1
+    lay.objects.sort(key=lambda o: o.id)
+    lay.fixtures = layout_fixtures(lay, previous=layout)
+    lay.meta["clutter"]["added"] = added
+    return lay
 
 
 def _round_half_up(x: float) -> int:

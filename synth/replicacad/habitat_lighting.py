@@ -76,13 +76,13 @@ from formats.errors import SceneFormatError
 from formats.fields import number
 
 from ..scene.geometry import Y_UP_TO_Z_UP
+from ..scene.fixtures import LAMP_CLASSES
 from ..scene.model import Layout, LightFixture, object_box
 
 C = Y_UP_TO_Z_UP  # habitat (Y up) -> ours (Z up)
 
 LIGHT_TYPES = ("point", "directional", "spot")
 POSITION_MODELS = ("global", "camera", "object")
-LAMP_CLASSES = ("floor_lamp", "table_lamp")
 LAMP_REACH = 0.3  # m: a light this close to a lamp's box is the lamp's
 CEILING_BAND = 0.3  # the upper part of the room height where point lights are ceiling lights
 CEILING_DROP = 0.1  # m below the ceiling: placed ceiling fixtures, and the highest a config one sits

@@ -10,6 +10,14 @@ import numpy as np
 
 from .model import Layout, LightFixture, object_box
 
+LAMP_CLASSES = ("floor_lamp", "table_lamp")  # objects that carry a light source of their own
+# a light source stands on a parent's open top: its bottom no lower than this under the parent's box top (m)
+OPEN_TOP_TOLERANCE = 0.03
+
+
+def is_light_source(cls: str) -> bool:
+    return cls in LAMP_CLASSES
+
 
 def layout_fixtures(layout: Layout, previous: Layout | None = None) -> list[LightFixture]:
     """Light fixtures: every lamp's shade, every ceiling light, every window, and the fixtures of an
@@ -33,7 +41,7 @@ def layout_fixtures(layout: Layout, previous: Layout | None = None) -> list[Ligh
     fx = []
     for o in layout.objects:
         proc = o.asset.startswith("proc:")
-        if o.cls in ("floor_lamp", "table_lamp"):
+        if is_light_source(o.cls):
             old, was = prev_lamps.get(o.id), prev_objs.get(o.id)
             if not proc and old is not None and was is not None:
                 if was.position == o.position and was.rotation == o.rotation:

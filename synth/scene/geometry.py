@@ -87,6 +87,14 @@ class OrientedBox:
     def zmax(self) -> float:
         return self.center[2] + self.size[2] / 2.0
 
+    def contains(self, p, margin: float = 0.0) -> bool:
+        """True when the point ``p`` lies inside the box (grown by ``margin`` on every side)."""
+        c, sn = math.cos(self.yaw), math.sin(self.yaw)
+        dx, dy = p[0] - self.center[0], p[1] - self.center[1]
+        lx, ly = c * dx + sn * dy, -sn * dx + c * dy
+        return (abs(lx) <= self.size[0] / 2 + margin and abs(ly) <= self.size[1] / 2 + margin
+                and abs(p[2] - self.center[2]) <= self.size[2] / 2 + margin)
+
     def to_dict(self) -> dict:
         return {
             "id": self.id,

@@ -294,8 +294,23 @@ LAMP_EMISSION = 6.0  # emission strength of a lit lamp shade (the light itself i
 CEILING_EMISSION = 8.0
 
 
+def enclosed_lamps(layout: Layout) -> set[str]:
+    """Lamp fixtures whose light lies inside another object's box (a lamp shut in a cupboard, under
+    a shelf board): their light reaches no camera."""
+    from .model import object_box
+
+    boxes = [(o.id, object_box(o)) for o in layout.objects]
+    return {f.id for f in layout.fixtures if f.kind == "lamp"
+            and any(oid != f.object and b.contains(f.position, margin=-0.01) for oid, b in boxes)}
+
+
 def chosen_lamps(layout: Layout, count: int | None) -> list[str]:
-    lamps = sorted((f for f in layout.fixtures if f.kind == "lamp"), key=lambda f: (f.object or 0, f.id))
+    """The lamps a preset keeping ``count`` lamps lights: the lowest-id lamp of each room first (rooms
+    in the order of those ids), then the next ones, so that the same lamps stay on in every variant
+    of a layout as long as they exist; a lamp shut inside another object (``enclosed_lamps``) comes
+    after every other, since its light would reach no camera."""
+    shut = enclosed_lamps(layout) if count is not None else set()
+    lamps = sorted((f for f in layout.fixtures if f.kind == "lamp"), key=lambda f: (f.id in shut, f.object or 0, f.id))
     if count is None:
         return [f.id for f in lamps]
     first_per_room, rest, seen = [], [], set()
