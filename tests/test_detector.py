@@ -281,3 +281,49 @@ def test_detector_eval_reports_intervals_and_reads_through_a_sensor(tiny, capsys
     assert reloc_main(args + ["--sensor", "kinect9"]) == 2
     err = capsys.readouterr().err.strip()
     assert "kinect9" in err and len(err.splitlines()) == 1
+
+
+def test_init_from_the_shipped_model_is_exact_in_eval_mode():
+    """``--init``: the export folded batch norm into the convolutions; loading it back must give the
+    exported model's logits (onnxruntime) for every class it had, with new classes added."""
+    from reloc.detector.model import build
+    from reloc.detector.train import init_from_onnx, onnx_init
+    from reloc.resources import MODELS_DIR
+
+    path = MODELS_DIR / "detector_v2_160x120.onnx"
+    ini = onnx_init(path)
+    classes = ini["classes"][:5] + ["kitchen_utensil", "new_thing"] + ini["classes"][5:]
+    model = build(ini["arch"], len(classes), ini["width"])
+    g = torch.Generator().manual_seed(0)
+    info = init_from_onnx(model, ini, classes, torch.rand(6, 3, 48, 64, generator=g))
+    assert info["new_classes"] == [c for c in ("kitchen_utensil", "new_thing") if c not in ini["classes"]]
+    assert info["kept_classes"] == ini["classes"]
+    x = torch.rand(2, 3, 128, 160, generator=g)
+    model.eval()
+    with torch.no_grad():
+        ts, tb = (t.numpy() for t in model(x))
+    os_, ob = LearnedDetector(path).session.run(None, {"image": x.numpy()})
+    idx = [classes.index(c) for c in ini["classes"]]
+    assert np.abs(ts[:, idx] - os_).max() < 1e-3 and np.abs(tb - ob).max() < 1e-3
+    new = [classes.index(c) for c in info["new_classes"]]
+    assert (ts[:, new].max(1) > ts[:, idx].max(1)).mean() < 0.01  # a new class starts rarely winning
+    with pytest.raises(UserError, match="is not the one being trained; pass --arch fastseg --width 40"):
+        init_from_onnx(build("fastseg", len(classes), 8), ini, classes, torch.rand(1, 3, 48, 64))
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_fine_tuning_starts_from_the_given_model(tiny, capsys):
+    """A fine-tune run from the tiny fastseg model: the network is the model's own (its width, not
+    the option's default), its first epoch's validation is close to the model it started from."""
+    out = tiny / "tuned"
+    assert reloc_main(["detector", "train", str(tiny / "set.npz"), "--out", str(out), "--epochs", "2", "--batch", "2",
+                       "--lr", "0.001", "--augment", "camera", "--init", str(tiny / "fast" / "model.onnx")]) == 0
+    log = json.loads((out / "train_log.json").read_text())
+    assert log["config"]["arch"] == "fastseg" and log["config"]["width"] == 8
+    assert log["init"]["model"] == str(tiny / "fast" / "model.onnx") and log["init"]["new_classes"] == []
+    base = json.loads((tiny / "fast" / "train_log.json").read_text())["epochs"][-1]["val_miou"]
+    assert log["epochs"][0]["val_miou"] >= base - 0.15
+    assert "initialised from" in capsys.readouterr().err
+    assert reloc_main(["detector", "train", str(tiny / "set.npz"), "--out", str(tiny / "t2"), "--init", str(tiny / "nope.onnx")]) == 2
+    assert "nope.onnx: model not found" in capsys.readouterr().err

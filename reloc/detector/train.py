@@ -36,6 +36,7 @@ from .settings import AugmentConfig, TrainConfig
 from .model import build, parameter_count
 
 MODEL_FORMAT = "videoreloc-segnet/1"
+NEW_CLASS_BIAS_MARGIN = 2.0  # --init: a class the model did not have starts this far under its lowest bias
 
 
 def _weights(sem: np.ndarray, n: int) -> torch.Tensor:
@@ -108,8 +109,8 @@ def init_from_onnx(model, init: dict, classes: list[str], calib: torch.Tensor) -
     ``sigma^2 - eps``. ``mu`` and ``sigma`` are the channel's mean and spread on ``calib`` (a batch
     of training frames), so that in training mode, where batch norm uses the batch's own
     statistics, the network starts close to the exported one. The class head keeps the rows of the
-    classes both lists share (by name); a new class starts with zero weights and the lowest
-    exported bias, so that it is rarely predicted until trained. Returns what was carried over."""
+    classes both lists share (by name); a new class starts with zero weights and a bias
+    ``NEW_CLASS_BIAS_MARGIN`` under the lowest exported one, so that it is rarely predicted until trained. Returns what was carried over."""
     from torch import nn
 
     convs = [m for m in model.modules() if isinstance(m, nn.Conv2d)]
@@ -147,7 +148,7 @@ def init_from_onnx(model, init: dict, classes: list[str], calib: torch.Tensor) -
     (ws, bs), (wb, bb) = init["convs"][-2], init["convs"][-1]
     sem, bnd = convs[-2], convs[-1]
     sem.weight.zero_()
-    sem.bias.fill_(float(bs.min()))
+    sem.bias.fill_(float(bs.min()) - NEW_CLASS_BIAS_MARGIN)
     kept = []
     for i, c in enumerate(classes):
         if c in old:

@@ -81,9 +81,10 @@ def _dry_run(args, spec: JobSpec, clusters: list) -> int:
 
             spec = prepare_replicacad(spec, Path(tmp), args.replicacad_root, progress=lambda m: print(m, file=sys.stderr))
         if store is None:
-            plan = expand(spec, out, check_clearance=not args.allow_clearance_breach)
+            plan = expand(spec, out, check_clearance=not args.allow_clearance_breach, check_light=not args.allow_dark_tours)
         else:  # what is still to render is read from the storage
-            plan = expand(spec, Path(tmp).resolve() / "job", check_clearance=not args.allow_clearance_breach)
+            plan = expand(spec, Path(tmp).resolve() / "job", check_clearance=not args.allow_clearance_breach,
+                          check_light=not args.allow_dark_tours)
             plan.use_storage(store)
         work = ce.plan_work(plan)
         if cal is not None:
@@ -101,10 +102,18 @@ def _dry_run(args, spec: JobSpec, clusters: list) -> int:
           + f" [{where}: {cal['cpu_count']} CPUs, {cal['device']}]")
     if args.save_calibration:
         print(f"  calibration saved to {args.save_calibration}")
-    if where == "measured here":
-        eta = estimate(plan, per, args.workers)
+    here = os.cpu_count() or 1
+    if where != "measured here" and str(cal.get("device", "cpu")).lower() != "cpu":
+        print(f"  no estimate for this machine: the calibration was measured on {cal.get('device')} (measure one "
+              "here without --calibration)")
+    else:
+        # a calibration from a file is one process on its machine's cores: scaled to this machine's
+        # cores (rendering scales about linearly with them), and said so
+        scale = 1.0 if where == "measured here" else float(cal.get("cpu_count") or here) / here
+        eta = estimate(plan, {k: v * scale for k, v in per.items()}, args.workers)
+        how = "" if scale == 1.0 else f", the file's {cal.get('cpu_count')}-CPU figures x {scale:g} for {here} CPUs"
         print(f"  estimate with {args.workers} worker(s): {fmt_duration(eta)} on this machine "
-              f"({os.cpu_count()} CPUs); on a Ray cluster: --nodes N --cpus-per-node C")
+              f"({here} CPUs{how}); on a Ray cluster: --nodes N --cpus-per-node C")
     if clusters:
         link = float(args.link_gbps) if args.link_gbps is not None else ce.DEFAULT_LINK_GBPS
         best = [ce.estimate_cluster(work, cal, c, "longest", link_gbps=link) for c in clusters]
@@ -125,7 +134,8 @@ def cmd_render(args) -> int:
         return _dry_run(args, spec, cluster)
     s = run_job(spec, args.out, workers=args.workers, backend=args.backend,
                 ray_address=args.ray_address, ray_runtime_env=args.ray_runtime_env, resume=args.resume, progress=not args.quiet,
-                allow_clearance_breach=args.allow_clearance_breach, replicacad_root=args.replicacad_root)
+                allow_clearance_breach=args.allow_clearance_breach, replicacad_root=args.replicacad_root,
+                check_light=not args.allow_dark_tours)
     failed = (f", {s['frames_failed']} frames failed in {s['chunks_failed']} chunk(s)" if s["chunks_failed"] else "")
     print(f"{s['job']}: {s['tours']} tours, {s['frames_rendered_now']} frames rendered{failed} in {s['wall_time_s']:.1f} s "
           f"({s['frames_per_s']} frames/s), chunks {s['chunks']} -> {s['out']}")
@@ -163,6 +173,9 @@ def register_cli(subparsers) -> None:
     a.add_argument("--allow-clearance-breach", action="store_true",
                    help="render even where a path comes closer to an object than its declared clearance "
                         "(checked for layouts the path was not planned on)")
+    a.add_argument("--allow-dark-tours", action="store_true",
+                   help="render even a tour lit by lamps alone where none is in sight of the camera (synth.scene.lighting."
+                        "dark_tour_problem: it would come out nearly black)")
     a.add_argument("--replicacad-root", metavar="DIR",
                    help="ReplicaCAD folder for a spec with a replicacad: section (default: its root, else $REPLICACAD_ROOT)")
     add_quiet(a)

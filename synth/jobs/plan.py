@@ -77,15 +77,17 @@ def out_error(spec: JobSpec, from_cli: bool, e: UserError):
     raise SceneFormatError(spec.source or "<spec>", "out", str(e)) from None
 
 
-def validate_names(spec: JobSpec, check_clearance: bool = False) -> None:
+def validate_names(spec: JobSpec, check_clearance: bool = False, check_light: bool = False) -> None:
     """Every layout, lighting and path of the spec exists and loads, and every path has the frames
     asked for; a UserError names the spec file and the field (``designs[0].layouts[1]``).
 
     With ``check_clearance``, a path rendered through a layout it was not planned on must keep its
-    declared clearance there (``synth.paths.clearance.render_clearance_problem``)."""
+    declared clearance there (``synth.paths.clearance.render_clearance_problem``). With
+    ``check_light``, a tour lit by lamps alone must have one in sight (``synth.scene.lighting.dark_tour_problem``):
+    a night tour that would render black is refused before anything renders."""
     from ..paths.clearance import render_clearance_problem
     from ..paths.files import load_path
-    from ..scene.lighting import load_lighting
+    from ..scene.lighting import dark_tour_problem, load_lighting
     from ..scene.model import load_layout, resolve_layout_path
 
     src = spec.source or "<spec>"
@@ -101,8 +103,7 @@ def validate_names(spec: JobSpec, check_clearance: bool = False) -> None:
 
     for i, d in enumerate(spec.designs):
         f = f"designs[{i}]"
-        for k, name in enumerate(d.lightings or []):
-            named(f"{f}.lightings[{k}]", load_lighting, name)
+        presets = [named(f"{f}.lightings[{k}]", load_lighting, name) for k, name in enumerate(d.lightings or [])]
         if d.path not in paths:
             paths[d.path] = named(f"{f}.path", load_path, d.path)
         cpath = paths[d.path]
@@ -122,9 +123,16 @@ def validate_names(spec: JobSpec, check_clearance: bool = False) -> None:
                 why = render_clearance_problem(cpath, lay, lfile, name, d.frames)
                 if why:
                     fail(src, field, why)
+            if check_light:
+                poses = cpath.poses[: d.frames] if d.frames else cpath.poses
+                for k2, preset in enumerate(presets):
+                    why = dark_tour_problem(preset, lay, poses)
+                    if why:
+                        fail(src, f"{f}.lightings[{k2}]", f"{why} in {name} on path '{cpath.name}' "
+                             "(--allow-dark-tours renders it anyway)")
 
 
-def expand(spec: JobSpec, out: Path | None = None, check_clearance: bool = False) -> Plan:
+def expand(spec: JobSpec, out: Path | None = None, check_clearance: bool = False, check_light: bool = False) -> Plan:
     """Validate every name and expand the spec into tours and chunks. Writes nothing.
 
     ``check_clearance`` (what ``synth render`` does unless ``--allow-clearance-breach``): refuse a
@@ -136,7 +144,7 @@ def expand(spec: JobSpec, out: Path | None = None, check_clearance: bool = False
         check_output_folder(out)
     except UserError as e:
         out_error(spec, from_cli, e)
-    validate_names(spec, check_clearance)
+    validate_names(spec, check_clearance, check_light)
     plan = Plan(spec, out, {})
     seen_geo: dict[str, list[Chunk]] = {}
     for d in spec.designs:

@@ -35,7 +35,7 @@ def run_ray(plan: Plan, state: JobState, todo: list[Chunk], bar: ProgressBar, wo
 
 def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, backend: str = "local",
             ray_address: str | None = None, resume: bool = False, progress: bool = True,
-            allow_clearance_breach: bool = False, replicacad_root: str | None = None,
+            allow_clearance_breach: bool = False, replicacad_root: str | None = None, check_light: bool = False,
             ray_runtime_env: str = "auto") -> dict:
     """Render everything the spec asks for that is not on disk yet. Returns a summary.
 
@@ -71,7 +71,7 @@ def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, back
     lock = None
     try:
         if store is None:
-            plan = expand(spec, out, check_clearance=not allow_clearance_breach)
+            plan = expand(spec, out, check_clearance=not allow_clearance_breach, check_light=check_light)
             try:
                 check_output_folder(plan.out)
             except UserError as e:
@@ -92,7 +92,7 @@ def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, back
             import tempfile
 
             staging = Path(tempfile.mkdtemp(prefix="synth_stage_")).resolve()  # chunk jobs hold resolved paths
-            plan = expand(spec, staging / "job", check_clearance=not allow_clearance_breach)
+            plan = expand(spec, staging / "job", check_clearance=not allow_clearance_breach, check_light=check_light)
             plan.use_storage(store)
             old = load_stored_state(store)
             shown = store.url(STATE_FILE)

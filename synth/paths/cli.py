@@ -112,9 +112,12 @@ def _cmd_show(args) -> int:
         rooms = ", ".join(f"{r} ({n} frames)" for r, n in s["rooms_frames"].items())
         print(f"  rooms visited in {lay.name}: {rooms or 'none'}")
         c = declared_clearance(path)
-        note = (f" (below the path's {c:g} m clearance: see `synth path check {args.path} --layout {args.layout or lay.name}`)"
+        # the layout as given, else the file the path was planned on (an imported apt_0 is not the built-in one)
+        lay_arg = args.layout or str((path.meta.get("layouts") or [lay.name])[0])
+        note = (f" (below the path's {c:g} m clearance: see `synth path check {args.path} --layout {lay_arg}`)"
                 if c is not None and s["min_clearance_m"] is not None and s["min_clearance_m"] < c - CLEARANCE_TOL else "")
-        print(f"  min clearance in {lay.name}: {s['min_clearance_m']:.3f} m{note}")
+        rule = "" if s["obstacles"] == "all" else f", from {s['obstacles']} obstacles as planned"
+        print(f"  min clearance in {lay.name}: {s['min_clearance_m']:.3f} m{rule}{note}")
     else:
         print("  rooms visited: unknown (give --layout)")
     return 0

@@ -44,7 +44,10 @@ def path_summary(path: CameraPath, layout: Layout | None = None) -> dict:
                 rooms[r.name] = rooms.get(r.name, 0) + 1
         out["layout"] = layout.name
         out["rooms_frames"] = rooms
-        out["min_clearance_m"] = round(float(path_clearance(path, layout).min()), 4) if len(P) else None
+        # from what the path was planned to keep clear of (band: objects at the camera's height)
+        obstacles = str((path.meta.get("planner") or {}).get("obstacles", "all"))
+        out["obstacles"] = obstacles
+        out["min_clearance_m"] = round(float(path_clearance(path, layout, obstacles).min()), 4) if len(P) else None
     return out
 
 

@@ -320,6 +320,77 @@ def chosen_lamps(layout: Layout, count: int | None) -> list[str]:
     return [f.id for f in (first_per_room + rest)[:count]]
 
 
+DARK_MIN_VISIBLE = 0.1  # a lamp-lit tour needs a lit lamp in line of sight from this share of its poses
+# (the built-in night tours: 20-42 %; a lamp shut in a cupboard: 0 %)
+DARK_SAMPLES = 40  # poses sampled along a tour for that
+DARK_MIN_FRAMES = 100  # shorter tours are not checked: cheap to render, and a few frames may look away from every lamp
+
+
+def _segments_hit_box(a: np.ndarray, b: np.ndarray, box) -> np.ndarray:
+    """For segments a[i] -> b[i] (N x 3), whether each passes through the oriented ``box`` (slab test
+    in the box's frame)."""
+    c, sn = math.cos(box.yaw), math.sin(box.yaw)
+    R = np.array([[c, sn, 0.0], [-sn, c, 0.0], [0.0, 0.0, 1.0]])  # world -> box
+    pa = (a - np.asarray(box.center)) @ R.T
+    d = (b - a) @ R.T
+    half = np.asarray(box.size) / 2.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1 = (-half - pa) / d
+        t2 = (half - pa) / d
+    lo = np.where(np.isnan(t1), -np.inf, np.minimum(t1, t2))
+    hi = np.where(np.isnan(t2), np.inf, np.maximum(t1, t2))
+    inside_slab = np.abs(pa) <= half  # a segment parallel to a slab: inside it or never
+    lo = np.where(d == 0, np.where(inside_slab, -np.inf, np.inf), lo)
+    hi = np.where(d == 0, np.where(inside_slab, np.inf, -np.inf), hi)
+    t0, t_1 = lo.max(axis=1), hi.min(axis=1)
+    return (t0 <= t_1) & (t_1 >= 1e-6) & (t0 <= 1.0 - 1e-6)
+
+
+def lamp_visibility(layout: Layout, lamp_ids, positions: np.ndarray) -> np.ndarray:
+    """For each camera position (N x 3), whether some lamp of ``lamp_ids`` is in line of sight: no
+    object box (but the lamp's own) and no wall box between the camera and the lamp's light."""
+    from .model import object_box, structure_boxes
+
+    fx = {f.id: f for f in layout.fixtures}
+    boxes = [(o.id, object_box(o)) for o in layout.objects] + [(None, b) for b in structure_boxes(layout.stage)
+                                                               if b.kind == "wall"]
+    seen = np.zeros(len(positions), bool)
+    for lid in lamp_ids:
+        f = fx[lid]
+        light = np.broadcast_to(np.asarray(f.position, float), positions.shape)
+        blocked = np.zeros(len(positions), bool)
+        for oid, b in boxes:
+            if oid is not None and oid == f.object:
+                continue
+            blocked |= _segments_hit_box(positions, light, b)
+        seen |= ~blocked
+    return seen
+
+
+def dark_tour_problem(preset: LightingPreset, layout: Layout, poses: np.ndarray) -> str | None:
+    """Why a tour in ``preset`` would render (nearly) black, or None. Only a preset lit by lamps
+    alone is checked (no sun, no ceiling lights): it is dark when the layout has no lamp to light,
+    or when no lit lamp is in line of sight (``lamp_visibility``) from at least ``DARK_MIN_VISIBLE``
+    of ``DARK_SAMPLES`` poses spread over the tour. A lamp shut in a cupboard, or lamps all behind
+    walls the camera never passes, fail it. Tours under ``DARK_MIN_FRAMES`` frames are not checked.
+    Line of sight is stricter than light (a lamp lights the walls of its room for a camera that
+    cannot see it), so the bar is low: the built-in night tours see a lamp from 20-42 % of poses."""
+    if (preset.sun is not None and preset.sun.get("strength", 0) > 0) or preset.ceiling.on:
+        return None
+    if not preset.lamp.on or len(poses) < DARK_MIN_FRAMES:
+        return None  # a preset that means to be dark (no lamps at all) is what it says
+    on = chosen_lamps(layout, preset.lamp.count)
+    if not on:
+        return f"lighting '{preset.name}' lights only lamps, and layout '{layout.name}' has none"
+    idx = np.unique(np.linspace(0, len(poses) - 1, min(DARK_SAMPLES, len(poses))).astype(int))
+    pos = np.asarray(poses, float)[idx, :3, 3]
+    share = float(lamp_visibility(layout, on, pos).mean())
+    if share < DARK_MIN_VISIBLE:
+        return (f"lighting '{preset.name}' lights only lamps ({', '.join(on)}), and one is in sight from "
+                f"{share:.0%} of the tour's poses (at least {DARK_MIN_VISIBLE:.0%} needed): the tour would be nearly black")
+    return None
+
+
 def resolve_lighting(preset: LightingPreset, layout: Layout) -> ResolvedLighting:
     out = ResolvedLighting(preset.name, preset.sky_color, preset.sky_strength)
     if preset.sun is not None and preset.sun["strength"] > 0:
