@@ -160,3 +160,32 @@ def test_the_shipped_replicacad_trainset_parses():
     assert spec.replicacad["scenes"] == ["v3_sc*_staging_*"]
     assert not set(spec.replicacad["templates"]) - set(HELD_OUT_SCENES)  # shapes only: see the spec's comment
     assert spec.lightings_per_layout == 1 and spec.views * 84 == 2016
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_own_dataset_sequence_end_to_end(tmp_path, root, capsys):
+    """The documented sequence for a user's own scenes (docs/replicacad.md, "A detector for your
+    own scenes"): trainset render -> pack -> train --init (fine-tune the shipped model) -> eval on
+    held-out renders. Tiny: two scenes, 3 views each at 64x48, one epoch."""
+    torch = pytest.importorskip("torch")  # noqa: F841 - the [train] extra
+    from reloc.cli import main as reloc_main
+    from synth.cli import main as synth_main
+    from reloc.resources import MODELS_DIR
+
+    spec = tmp_path / "t.yaml"
+    doc = _spec(tmp_path, root, size=[64, 48], quality="preview")
+    spec.write_text(yaml.safe_dump(doc))
+    assert synth_main(["trainset", "render", str(spec), "--quiet"]) == 0
+    out = tmp_path / "out"
+    assert reloc_main(["detector", "pack", str(out), "--out", str(tmp_path / "set.npz"), "--quiet"]) == 0
+    assert reloc_main(["detector", "train", str(tmp_path / "set.npz"), "--out", str(tmp_path / "run"), "--epochs", "1",
+                       "--batch", "2", "--lr", "0.0005", "--augment", "camera", "--quiet",
+                       "--init", str(MODELS_DIR / "detector_v2_160x120.onnx")]) == 0
+    log = __import__("json").loads((tmp_path / "run" / "train_log.json").read_text())
+    assert log["config"]["arch"] == "fastseg" and log["config"]["width"] == 40  # the model's own network
+    assert set(log["init"]["new_classes"]) <= set(log["classes"])
+    capsys.readouterr()
+    assert reloc_main(["detector", "eval", str(out), "--model", str(tmp_path / "run" / "model.onnx"), "--json", "--quiet"]) == 0
+    rep = __import__("json").loads(capsys.readouterr().out)
+    assert set(rep["lightings"]) == {"day", "night"}
