@@ -42,8 +42,8 @@ def test_a_bare_name_is_a_shipped_spec_and_a_file_wins(tmp_path, monkeypatch, ca
     (tmp_path / "smoke").write_text(yaml.safe_dump({**doc, "name": "mine"}))
     assert load_spec("smoke").name == "mine"
     for argv, shipped in ((["render", "nosuch", "--dry-run"], "demo, detector_eval, reference, replicacad_6x3, "
-                                                             "replicacad_apt_6x3, smoke, sweep_rearrangement ("),
-                          (["trainset", "render", "nosuch"], "shipped: detector_train, detector_train_v2 (")):
+                                                             "replicacad_apt_6x3, replicacad_demo, smoke, sweep_rearrangement ("),
+                          (["trainset", "render", "nosuch"], "shipped: detector_train, detector_train_replicacad, detector_train_v2 (")):
         assert synth_main(argv) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and err.startswith("synth: error: nosuch: no such file") and shipped in err, err

@@ -400,14 +400,15 @@ class Placer:
         box = self._box(oid, cls, size, xy, z, yaw)
         if box.zmax > self.ceiling_z - CEILING_GAP or self.in_keepout(box) or self.collides(box, ignore | {parent.id}):
             return None
-        if is_light_source(cls) and not self.open_top(parent, box):
-            return None  # a lamp inside a cupboard or under a shelf lights nothing
+        if is_light_source(cls) and not parent.asset.startswith("proc:") and not self.open_top(parent, box):
+            return None  # a lamp inside a cupboard lights nothing (procedural furniture has no doors: all open)
         return self._make(oid, cls, size, params, (xy[0], xy[1], z), yaw, f"object:{parent.id}:{k}", template)
 
     def open_top(self, parent: ObjectInstance, box: geo.OrientedBox) -> bool:
         """True when ``box`` stands on ``parent``'s top, open to the room: nothing of the parent is
-        above it. Shelves and receptacles inside a piece of furniture (a closed cupboard's shelf, a
-        drawer, a bookshelf's middle board) are not, whether or not their doors are open."""
+        above it. Receptacles inside a mesh piece of furniture (a closed cupboard's shelf, a drawer,
+        but also an open bookshelf's middle board: a receptacle does not say whether doors close it)
+        are not. Procedural furniture has no doors, so the rule is applied to mesh parents only."""
         top = self.boxes[parent.id].zmax if parent.id in self.boxes else object_box(parent).zmax
         return box.zmin >= top - OPEN_TOP_TOLERANCE
 

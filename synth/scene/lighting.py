@@ -295,11 +295,12 @@ CEILING_EMISSION = 8.0
 
 
 def enclosed_lamps(layout: Layout) -> set[str]:
-    """Lamp fixtures whose light lies inside another object's box (a lamp shut in a cupboard, under
-    a shelf board): their light reaches no camera."""
+    """Lamp fixtures whose light lies inside another mesh object's box (a lamp shut in a cupboard):
+    their light reaches no camera. Procedural furniture has no doors (a lamp on a bookshelf's board
+    is inside its box but in the open), so only mesh objects enclose."""
     from .model import object_box
 
-    boxes = [(o.id, object_box(o)) for o in layout.objects]
+    boxes = [(o.id, object_box(o)) for o in layout.objects if not o.asset.startswith("proc:")]
     return {f.id for f in layout.fixtures if f.kind == "lamp"
             and any(oid != f.object and b.contains(f.position, margin=-0.01) for oid, b in boxes)}
 
