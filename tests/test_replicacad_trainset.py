@@ -189,3 +189,19 @@ def test_own_dataset_sequence_end_to_end(tmp_path, root, capsys):
     assert reloc_main(["detector", "eval", str(out), "--model", str(tmp_path / "run" / "model.onnx"), "--json", "--quiet"]) == 0
     rep = __import__("json").loads(capsys.readouterr().out)
     assert set(rep["lightings"]) == {"day", "night"}
+
+
+def test_the_shipped_replicacad_model_covers_the_experiment_scenes_classes(root):
+    """The ReplicaCAD detector has an output for every class of apt_0..apt_5's objects (from the real
+    scene instances and lexicon) but shoe, which its training clutter never places (the model
+    card says so); it keeps v2's network, stride and resolution."""
+    from reloc.detection.learned import LearnedDetector
+    from reloc.resources import MODELS_DIR
+
+    det = LearnedDetector(MODELS_DIR / "detector_replicacad_160x120.onnx")
+    v2 = LearnedDetector(MODELS_DIR / "detector_v2_160x120.onnx")
+    assert det.stride == 16 and det.resolution == (160, 120)
+    wanted = {o.cls for k in range(6) for o in load_replicacad(root, f"apt_{k}").objects}
+    assert wanted - set(det.classes) == {"shoe"}
+    assert len(wanted - set(v2.classes)) >= 15  # what v2 could not say at all
+    assert {"wall", "floor", "ceiling"} <= set(det.classes)

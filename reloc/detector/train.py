@@ -133,7 +133,7 @@ def init_from_onnx(model, init: dict, classes: list[str], calib: torch.Tensor) -
     hooks = [bn.register_forward_hook(lambda m, i, o, k=k: stats.__setitem__(k, (i[0].mean((0, 2, 3)), i[0].std((0, 2, 3)))))
              for k, bn in enumerate(bns)]
     model.eval()
-    model(calib)
+    model(pad_to(calib, model.stride))
     for h in hooks:
         h.remove()
     for k, bn in enumerate(bns):
