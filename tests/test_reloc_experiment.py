@@ -166,7 +166,7 @@ class _StubResolver:
 _SENSORS = ("ideal", "structured_light", "tof")
 
 
-@pytest.mark.parametrize("spec", ["demo_checks.yaml", "demo_sensor_checks.yaml"])
+@pytest.mark.parametrize("spec", ["demo_checks.yaml", "demo_sensor_checks.yaml", "replicacad_checks.yaml"])
 def test_every_demo_check_can_fail(monkeypatch, tmp_path, spec):
     """Each check of the shipped check files (reloc/specs/demo_checks.yaml, demo_sensor_checks.yaml)
     passes on constructed values and fails when its metric (a point value, an interval's bound, or one
