@@ -81,15 +81,17 @@ def _dry_run(args, spec: JobSpec, clusters: list) -> int:
 
             spec = prepare_replicacad(spec, Path(tmp), args.replicacad_root, progress=lambda m: print(m, file=sys.stderr))
         if store is None:
-            plan = expand(spec, out, check_clearance=not args.allow_clearance_breach, check_light=not args.allow_dark_tours)
+            plan = expand(spec, out, check_clearance=not args.allow_clearance_breach, check_light=True)
         else:  # what is still to render is read from the storage
             plan = expand(spec, Path(tmp).resolve() / "job", check_clearance=not args.allow_clearance_breach,
-                          check_light=not args.allow_dark_tours)
+                          check_light=True)
             plan.use_storage(store)
         work = ce.plan_work(plan)
         if cal is not None:
             ce.check_fits(cal, spec, work, args.calibration)
         print(describe(plan))
+        for w in plan.warnings:
+            print(f"  WARNING: {w}")
         if cal is None:
             cal = measure_calibration(plan)
             where = "measured here"
@@ -135,7 +137,7 @@ def cmd_render(args) -> int:
     s = run_job(spec, args.out, workers=args.workers, backend=args.backend,
                 ray_address=args.ray_address, ray_runtime_env=args.ray_runtime_env, resume=args.resume, progress=not args.quiet,
                 allow_clearance_breach=args.allow_clearance_breach, replicacad_root=args.replicacad_root,
-                check_light=not args.allow_dark_tours)
+                check_light=True)
     failed = (f", {s['frames_failed']} frames failed in {s['chunks_failed']} chunk(s)" if s["chunks_failed"] else "")
     print(f"{s['job']}: {s['tours']} tours, {s['frames_rendered_now']} frames rendered{failed} in {s['wall_time_s']:.1f} s "
           f"({s['frames_per_s']} frames/s), chunks {s['chunks']} -> {s['out']}")
@@ -173,9 +175,6 @@ def register_cli(subparsers) -> None:
     a.add_argument("--allow-clearance-breach", action="store_true",
                    help="render even where a path comes closer to an object than its declared clearance "
                         "(checked for layouts the path was not planned on)")
-    a.add_argument("--allow-dark-tours", action="store_true",
-                   help="render even a tour lit by lamps alone where none is in sight of the camera (synth.scene.lighting."
-                        "dark_tour_problem: it would come out nearly black)")
     a.add_argument("--replicacad-root", metavar="DIR",
                    help="ReplicaCAD folder for a spec with a replicacad: section (default: its root, else $REPLICACAD_ROOT)")
     add_quiet(a)

@@ -54,6 +54,7 @@ class Plan:
     tours: dict  # tour name -> synth.render.render_tour.Prepared
     chunks: list[Chunk] = field(default_factory=list)
     store: object = None  # synth.jobs.storage.Storage bound to ``out`` (a staging folder), or None: out is the job folder
+    warnings: list = field(default_factory=list)  # one line each: tours that would render nearly black (check_light)
 
     def use_storage(self, store) -> None:
         """Put the job folder on ``store`` (``synth.jobs.storage``); ``out`` becomes the driver's staging folder."""
@@ -77,14 +78,15 @@ def out_error(spec: JobSpec, from_cli: bool, e: UserError):
     raise SceneFormatError(spec.source or "<spec>", "out", str(e)) from None
 
 
-def validate_names(spec: JobSpec, check_clearance: bool = False, check_light: bool = False) -> None:
+def validate_names(spec: JobSpec, check_clearance: bool = False, check_light: bool = False) -> list[str]:
     """Every layout, lighting and path of the spec exists and loads, and every path has the frames
     asked for; a UserError names the spec file and the field (``designs[0].layouts[1]``).
 
     With ``check_clearance``, a path rendered through a layout it was not planned on must keep its
     declared clearance there (``synth.paths.clearance.render_clearance_problem``). With
-    ``check_light``, a tour lit by lamps alone must have one in sight (``synth.scene.lighting.dark_tour_problem``):
-    a night tour that would render black is refused before anything renders."""
+    ``check_light``, a tour lit by lamps alone should have one in sight (``synth.scene.lighting.dark_tour_problem``):
+    returns one warning line per tour that would render nearly black, before anything renders (a
+    warning, not a refusal: dark frames can be what an experiment wants)."""
     from ..paths.clearance import render_clearance_problem
     from ..paths.files import load_path
     from ..scene.lighting import dark_tour_problem, load_lighting
@@ -94,6 +96,7 @@ def validate_names(spec: JobSpec, check_clearance: bool = False, check_light: bo
     layouts: dict[str, tuple] = {}
     paths: dict[str, object] = {}
     checked: set = set()
+    warnings: list[str] = []
 
     def named(field: str, load, name):
         try:
@@ -126,10 +129,13 @@ def validate_names(spec: JobSpec, check_clearance: bool = False, check_light: bo
             if check_light:
                 poses = cpath.poses[: d.frames] if d.frames else cpath.poses
                 for k2, preset in enumerate(presets):
+                    if (name, d.path, d.frames, preset.name) in checked:
+                        continue
+                    checked.add((name, d.path, d.frames, preset.name))
                     why = dark_tour_problem(preset, lay, poses)
                     if why:
-                        fail(src, f"{f}.lightings[{k2}]", f"{why} in {name} on path '{cpath.name}' "
-                             "(--allow-dark-tours renders it anyway)")
+                        warnings.append(f"{src}: {f}.lightings[{k2}]: {why} in {name} on path '{cpath.name}'")
+    return warnings
 
 
 def expand(spec: JobSpec, out: Path | None = None, check_clearance: bool = False, check_light: bool = False) -> Plan:
@@ -144,8 +150,8 @@ def expand(spec: JobSpec, out: Path | None = None, check_clearance: bool = False
         check_output_folder(out)
     except UserError as e:
         out_error(spec, from_cli, e)
-    validate_names(spec, check_clearance, check_light)
-    plan = Plan(spec, out, {})
+    warnings = validate_names(spec, check_clearance, check_light)
+    plan = Plan(spec, out, {}, warnings=warnings)
     seen_geo: dict[str, list[Chunk]] = {}
     for d in spec.designs:
         for layout in d.layouts:

@@ -72,6 +72,8 @@ def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, back
     try:
         if store is None:
             plan = expand(spec, out, check_clearance=not allow_clearance_breach, check_light=check_light)
+            for w in plan.warnings:  # before hours of rendering, not after
+                print(f"warning: {w}", file=sys.stderr)
             try:
                 check_output_folder(plan.out)
             except UserError as e:
@@ -93,6 +95,8 @@ def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, back
 
             staging = Path(tempfile.mkdtemp(prefix="synth_stage_")).resolve()  # chunk jobs hold resolved paths
             plan = expand(spec, staging / "job", check_clearance=not allow_clearance_breach, check_light=check_light)
+            for w in plan.warnings:  # before hours of rendering, not after
+                print(f"warning: {w}", file=sys.stderr)
             plan.use_storage(store)
             old = load_stored_state(store)
             shown = store.url(STATE_FILE)

@@ -349,12 +349,14 @@ def _segments_hit_box(a: np.ndarray, b: np.ndarray, box) -> np.ndarray:
 
 def lamp_visibility(layout: Layout, lamp_ids, positions: np.ndarray) -> np.ndarray:
     """For each camera position (N x 3), whether some lamp of ``lamp_ids`` is in line of sight: no
-    object box (but the lamp's own) and no wall box between the camera and the lamp's light."""
+    wall box and no mesh object's box (but the lamp's own) between the camera and the lamp's light.
+    Procedural furniture does not block: its boxes hold open shelves, legs and air."""
     from .model import object_box, structure_boxes
 
     fx = {f.id: f for f in layout.fixtures}
-    boxes = [(o.id, object_box(o)) for o in layout.objects] + [(None, b) for b in structure_boxes(layout.stage)
-                                                               if b.kind == "wall"]
+    # procedural furniture is open (no doors, see-through shelves and legs): only mesh objects and walls block
+    boxes = [(o.id, object_box(o)) for o in layout.objects if not o.asset.startswith("proc:")] + [
+        (None, b) for b in structure_boxes(layout.stage) if b.kind == "wall"]
     seen = np.zeros(len(positions), bool)
     for lid in lamp_ids:
         f = fx[lid]
