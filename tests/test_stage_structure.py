@@ -530,3 +530,56 @@ def test_rectangular_rooms_have_no_polygon():
     p = np.array([[4.5, 4.0, 0.0], [1.5, 4.0, 0.0], [4.5, 1.5, 0.0], [4.5, 4.0, 2.5]])
     nrm = np.array([[0, 0, 1.0], [0, 0, 1.0], [0, 0, 1.0], [0, 0, -1.0]])
     assert list(face_ids(stage, p, nrm)) == [FLOOR_ID_BASE + 1, FLOOR_ID_BASE, FLOOR_ID_BASE, CEILING_ID_BASE + 1]
+
+
+# --------------------------------------------------------------------------------------------
+# rooms meet in a doorway that is only a gap
+#
+# The two-room stage with the interior door's lintel left out: the wall x[4.0, 4.1] is two pieces,
+# y[0, 1] and y[1.9, 3], and the 0.9 m gap between them reaches the ceiling, so no wall holds a
+# door there and the free floor is one piece. Rooms A x[0, 4] and B x[4.1, 7.1] still meet only
+# in that gap: two rooms, their shared edge open to the path planner, the walls closed elsewhere.
+# A 1.5 m gap (wider than DOORWAY_MAX, an open plan) keeps them one room.
+
+
+def gap_stage(gap=(1.0, 1.9)) -> trimesh.Trimesh:
+    pieces = {k: v for k, v in WALL_PIECES.items() if k != "interior"}
+    pieces["interior"] = [((4.0, 0.0, 0.0), (4.1, gap[0], 2.5)), ((4.0, gap[1], 0.0), (4.1, 3.0, 2.5))]
+    boxes = [FLOOR_SLAB, CEILING_SLAB] + [b for pcs in pieces.values() for b in pcs]
+    return trimesh.util.concatenate([box_mesh(*b) for b in boxes])
+
+
+def test_rooms_meet_in_a_doorway_without_a_lintel():
+    from synth.paths.clearance import wall_segments
+
+    s = derive_structure(gap_stage(), "gap.glb")
+    assert not [o for o in s.openings if o.kind == "door"]  # the gap is not a door in a wall
+    assert len(s.rooms) == 2 and s.report["rooms"]["split_at_doorways"] == 2
+    a, b = s.rooms
+    assert np.allclose(a.rect[:2], ROOM_A[:2], atol=TOL) and np.allclose(b.rect[2:], ROOM_B[2:], atol=TOL)
+    assert a.area == pytest.approx(12.0, abs=0.3) and b.area == pytest.approx(9.0, abs=0.3)
+    assert a.polygon is not None and b.polygon is not None and _ccw(a.polygon) and _ccw(b.polygon)
+    # every point is in one room: the rooms' floors do not overlap
+    pts = np.array([(1.0, 1.5), (6.0, 1.5), (4.05, 0.5), (4.05, 2.5)])
+    assert list(a.contains(pts[:2])) == [True, False] and list(b.contains(pts[:2])) == [False, True]
+    # path walls: along x 4.0 .. 4.1 only the wall pieces y[0, 1] and y[1.9, 3]; nothing crosses the gap
+    stage = _stage(s)
+    segs = wall_segments(stage)
+    for y in (1.2, 1.45, 1.7):
+        crossing = [s_ for s_ in segs if _crosses(s_, (3.8, y), (4.3, y))]
+        assert not crossing, (y, crossing)
+    for y in (0.5, 2.5):
+        assert [s_ for s_ in segs if _crosses(s_, (3.8, y), (4.3, y))], y
+
+    wide = derive_structure(gap_stage((0.7, 2.2)), "wide_gap.glb")
+    assert len(wide.rooms) == 1 and wide.report["rooms"]["split_at_doorways"] == 0
+
+
+def _crosses(seg, p, q) -> bool:
+    a, b = np.asarray(seg[0], float), np.asarray(seg[1], float)
+    p, q = np.asarray(p, float), np.asarray(q, float)
+
+    def orient(u, v, w):
+        return (v[0] - u[0]) * (w[1] - u[1]) - (v[1] - u[1]) * (w[0] - u[0])
+
+    return orient(a, b, p) * orient(a, b, q) < 0 and orient(p, q, a) * orient(p, q, b) < 0

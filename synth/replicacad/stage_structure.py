@@ -37,7 +37,10 @@ Method
       do not join rooms; the free cells within that reach are given back afterwards); connected
       pieces of at least 1 m^2 with a ceiling (or any down-facing surface above 1 m) over at least
       half of them (on an open stage, any) are rooms ``room_<k>`` of type ``room``; a terrace or
-      the ground outside is not. A room's rect is its piece's bounding rectangle in world axes
+      the ground outside is not. A piece that holds two or more spaces joined only through floor
+      narrower than ``DOORWAY_MAX`` (1.1 m: a doorway whose opening reaches the ceiling, so that no
+      wall holds a door there) is split there into rooms (``_split_at_doorways``), which share the
+      edge across the doorway; an open plan (wider joins) stays one room. A room's rect is its piece's bounding rectangle in world axes
       (snapped to axis-aligned wall faces within 4 cm): rooms of a stage that is not aligned with
       the world axes (or that are not rectangles, e.g. an open-plan L-shaped living room) are
       their bounding rectangles, and ``report["rooms"]["fill_ratio"]`` says how much of each rect
@@ -102,6 +105,8 @@ MIN_DOOR_HEIGHT, MIN_DOOR_WIDTH = 1.5, 0.5
 ROOM_CELL = 0.025  # floor grid
 ROOM_OPEN = 0.125  # free floor is opened by a square this wide (drops slivers and cracks)
 MIN_ROOM_AREA = 1.0  # m^2
+DOORWAY_MAX = 1.1  # m: free floor narrower than this between two wider spaces is a doorway; rooms meet there
+MIN_ROOM_CORE = 0.25  # m^2 of floor farther than DOORWAY_MAX / 2 from any wall: a space that counts as a room
 MIN_COVER_Z = 1.0  # down-facing surfaces above this count as a cover (ceiling) over a room
 MIN_COVER_FRACTION = 0.5
 FILL_WARN = 0.85
@@ -881,7 +886,7 @@ def _simplify(q: np.ndarray, eps: float) -> np.ndarray:
     return out if len(out) >= 3 else q
 
 
-def _room_polygon(mine: np.ndarray, origin: np.ndarray, cell: float, rect) -> tuple[tuple, float, float]:
+def _room_polygon(mine: np.ndarray, origin: np.ndarray, cell: float, rect, eps: float = POLY_EPS) -> tuple[tuple, float, float]:
     """The free floor of one room (``mine``: its cells, grid origin at ``origin``) as one simple
     counter-clockwise polygon in world XY, simplified to ``POLY_EPS`` cells and clipped to ``rect``:
     (polygon, area of the holes filled, area of the pieces left off) -- the polygon is the largest
@@ -892,7 +897,7 @@ def _room_polygon(mine: np.ndarray, origin: np.ndarray, cell: float, rect) -> tu
     holes = [q for q in loops if _signed_area(q) < 0]
     outer.sort(key=lambda q: -_signed_area(q))
     main = outer[0]
-    q = _simplify(main, POLY_EPS)
+    q = _simplify(main, eps) if eps > 0 else main
     if _signed_area(q) <= 0:
         q = main
     w = origin + q * cell
@@ -902,6 +907,81 @@ def _room_polygon(mine: np.ndarray, origin: np.ndarray, cell: float, rect) -> tu
     filled = -sum(_signed_area(h) for h in holes) * cell * cell
     left = sum(_signed_area(o) for o in outer[1:]) * cell * cell
     return tuple((float(a), float(b)) for a, b in w), filled, left
+
+
+def _split_at_doorways(mine: np.ndarray, cell: float) -> np.ndarray | None:
+    """Labels 1..k of the rooms one connected piece of free floor (``mine``, bool) holds, or None if
+    it is one room. A room is a space with at least ``MIN_ROOM_CORE`` of floor farther than
+    ``DOORWAY_MAX`` / 2 from its edges (its core); the cores are grown over the rest of the floor
+    widest cells first (a watershed on the distance to the edges), so two rooms meet where the floor
+    between them is narrowest: in the doorway. A meeting line that runs across an axis-aligned
+    doorway is then made straight (one grid line), so the two rooms' outlines share that edge
+    exactly and the path planner sees it open (``synth.paths.clearance``). A corridor narrower than
+    a doorway everywhere has no core and joins the rooms it leads to."""
+    import heapq
+
+    d2 = np.rint(ndimage.distance_transform_edt(mine) ** 2).astype(np.int64)  # squared cells: exact
+    half = DOORWAY_MAX / 2.0 / cell
+    seeds, ns = ndimage.label(d2 > half * half)
+    if ns < 2:
+        return None
+    sizes = np.bincount(seeds.ravel(), minlength=ns + 1)
+    keep = np.flatnonzero(sizes * cell * cell >= MIN_ROOM_CORE)
+    keep = keep[keep > 0]
+    if len(keep) < 2:
+        return None
+    lab = np.zeros(mine.shape, np.int32)
+    for k, s in enumerate(keep, start=1):
+        lab[seeds == s] = k
+    W, H = mine.shape
+    heap = []
+    steps = ((-1, 0), (1, 0), (0, -1), (0, 1))
+
+    def push_around(i, j):
+        for di, dj in steps:
+            a, b = i + di, j + dj
+            if 0 <= a < W and 0 <= b < H and mine[a, b] and lab[a, b] == 0:
+                heapq.heappush(heap, (-int(d2[a, b]), a, b))
+
+    for i, j in zip(*np.nonzero(lab)):
+        push_around(int(i), int(j))
+    while heap:
+        _, i, j = heapq.heappop(heap)
+        if lab[i, j]:
+            continue
+        nb = [lab[i + di, j + dj] for di, dj in steps if 0 <= i + di < W and 0 <= j + dj < H and lab[i + di, j + dj]]
+        lab[i, j] = min(nb)
+        push_around(i, j)
+    # straighten each meeting line that crosses an axis-aligned doorway
+    k = len(keep)
+    for a in range(1, k + 1):
+        for b in range(a + 1, k + 1):
+            for axis in (0, 1):
+                sl_lo = [slice(None), slice(None)]
+                sl_hi = [slice(None), slice(None)]
+                sl_lo[axis], sl_hi[axis] = slice(None, -1), slice(1, None)
+                lo_, hi_ = lab[tuple(sl_lo)], lab[tuple(sl_hi)]
+                e = ((lo_ == a) & (hi_ == b)) | ((lo_ == b) & (hi_ == a))
+                if not e.any():
+                    continue
+                ii, jj = np.nonzero(e)
+                along, across = (jj, ii) if axis == 0 else (ii, jj)  # edges between cells c and c+1 on `axis`
+                if across.max() - across.min() > max(2, int(0.3 / cell)):
+                    continue  # not a thin line across one doorway: left as grown
+                line = int(np.median(across)) + 1  # cells < line on one side
+                span = int(across.max() - across.min()) + 2
+                r0, r1 = max(line - span, 0), min(line + span, mine.shape[axis])
+                c0, c1 = int(along.min()), int(along.max()) + 1
+                win = [slice(None), slice(None)]
+                win[axis], win[1 - axis] = slice(r0, r1), slice(c0, c1)
+                sub = lab[tuple(win)]
+                pos = np.indices(sub.shape)[axis] + r0
+                ab = (sub == a) | (sub == b)
+                low_is_a = pos[sub == a].mean() < pos[sub == b].mean()
+                low, high = (a, b) if low_is_a else (b, a)
+                sub[ab & (pos < line)] = low
+                sub[ab & (pos >= line)] = high
+    return lab
 
 
 def _rooms(tri, cen, n, floor_z, walls: list[Wall], need_cover: bool, report):
@@ -958,6 +1038,7 @@ def _rooms(tri, cen, n, floor_z, walls: list[Wall], need_cover: bool, report):
     found = []
     holes_filled, pieces_left = [0.0], [0.0]
     rejected: dict[str, int] = {}
+    next_label, split_pieces = [nlab + 1], [0]
     counts = np.bincount(lab.ravel(), minlength=nlab + 1)
     covered = np.bincount(lab.ravel(), weights=cover.ravel().astype(float), minlength=nlab + 1)
     for li, sl_ in enumerate(ndimage.find_objects(lab), start=1):
@@ -973,23 +1054,37 @@ def _rooms(tri, cen, n, floor_z, walls: list[Wall], need_cover: bool, report):
         # axis-aligned: give the component back the free cells within the opening's reach
         i0, j0 = max(sl_[0].start - k, 0), max(sl_[1].start - k, 0)
         win = (slice(i0, sl_[0].stop + k), slice(j0, sl_[1].stop + k))
-        mine = ndimage.binary_dilation(lab[win] == li, structure=sq) & free_raw[win]
-        ii, jj = np.nonzero(mine)
-        cells = int(mine.sum())
-        area = cells * cell * cell
-        x0 = snap(lo[0] + (i0 + ii.min()) * cell, xs)
-        x1 = snap(lo[0] + (i0 + ii.max() + 1) * cell, xs)
-        y0 = snap(lo[1] + (j0 + jj.min()) * cell, ys)
-        y1 = snap(lo[1] + (j0 + jj.max() + 1) * cell, ys)
-        fill = area / max((x1 - x0) * (y1 - y0), 1e-12)
-        poly = None
-        if fill < RECT_FILL:
-            sub = np.zeros((ii.max() + 1, jj.max() + 1), bool)
-            sub[ii, jj] = True
-            poly, filled, left = _room_polygon(sub, lo + np.array([i0, j0]) * cell, cell, (x0, y0, x1, y1))
-            holes_filled[0] += filled
-            pieces_left[0] += left
-        found.append((li, (x0, y0, x1, y1), area, min(fill, 1.0), poly))
+        whole = ndimage.binary_dilation(lab[win] == li, structure=sq) & free_raw[win]
+        parts = _split_at_doorways(whole, cell)
+        if parts is None:
+            pieces = [(li, whole)]
+        else:  # rooms meeting in doorways: new labels on the grid the door probes read
+            pieces = []
+            for pk in range(1, int(parts.max()) + 1):
+                lid = li if pk == 1 else next_label[0]
+                next_label[0] += pk != 1
+                lw = lab[win]
+                lw[(lw == li) & (parts == pk)] = lid
+                pieces.append((lid, parts == pk))
+            split_pieces[0] += len(pieces)
+        for lid, mine in pieces:
+            ii, jj = np.nonzero(mine)
+            cells = int(mine.sum())
+            area = cells * cell * cell
+            x0 = snap(lo[0] + (i0 + ii.min()) * cell, xs)
+            x1 = snap(lo[0] + (i0 + ii.max() + 1) * cell, xs)
+            y0 = snap(lo[1] + (j0 + jj.min()) * cell, ys)
+            y1 = snap(lo[1] + (j0 + jj.max() + 1) * cell, ys)
+            fill = area / max((x1 - x0) * (y1 - y0), 1e-12)
+            poly = None
+            if fill < RECT_FILL or parts is not None:  # split rooms are polygons: their shared edges are open
+                sub = np.zeros((ii.max() + 1, jj.max() + 1), bool)
+                sub[ii, jj] = True
+                poly, filled, left = _room_polygon(sub, lo + np.array([i0, j0]) * cell, cell, (x0, y0, x1, y1),
+                                                   eps=POLY_EPS if parts is None else 0.0)
+                holes_filled[0] += filled
+                pieces_left[0] += left
+            found.append((lid, (x0, y0, x1, y1), area, min(fill, 1.0), poly))
     found.sort(key=lambda r: (quantize(r[1][0], 3), quantize(r[1][1], 3), quantize(r[1][2], 3), quantize(r[1][3], 3)))
     rooms, fills, poly_fills, lab_to_room = [], {}, {}, {}
     for k_, (li, rect, area, fill, poly) in enumerate(found):
@@ -1004,7 +1099,7 @@ def _rooms(tri, cen, n, floor_z, walls: list[Wall], need_cover: bool, report):
     report["rooms"] = {"count": len(rooms), "rejected_components": rejected, "fill_ratio": fills,
                        "outline_fill_ratio": poly_fills,
                        "polygon_vertices": {r.name: 0 if r.polygon is None else len(r.polygon) for r in rooms},
-                       "holes_filled_m2": round(holes_filled[0], 3), "pieces_left_off_m2": round(pieces_left[0], 3),
+                       "holes_filled_m2": round(holes_filled[0], 3), "split_at_doorways": split_pieces[0], "pieces_left_off_m2": round(pieces_left[0], 3),
                        "area_m2": {r.name: round(float(a), 3) for r, (_, _, a, _, _) in zip(rooms, found)}}
     return rooms, lab, lo, cell, lab_to_room
 
