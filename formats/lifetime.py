@@ -29,6 +29,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from .errors import UserError
+from .atomic import open_nofollow
 
 LOCK_FILE = ".lock"
 # the signals a driver turns into an orderly stop (Ctrl-C, kill, a closed terminal)
@@ -217,7 +218,7 @@ class FolderLock:
 
         self.folder.mkdir(parents=True, exist_ok=True)
         path = self.folder / LOCK_FILE
-        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+        fd = open_nofollow(path, os.O_RDWR | os.O_CREAT)  # a planted link or folder is refused in one line
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:

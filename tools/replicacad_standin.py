@@ -56,6 +56,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from formats.atomic import write_bytes_atomic, write_text_atomic  # noqa: E402
 from formats.errors import UserError  # noqa: E402
 from synth.replicacad.habitat_format import hab_matrix, mapping, read_json  # noqa: E402
 from synth.replicacad.navmesh import (  # noqa: E402
@@ -181,7 +182,7 @@ def box_glb(bounds: np.ndarray, path: Path, colour=BOX_COLOUR, name: str = "box"
     scene = trimesh.Scene()
     scene.add_geometry(b, node_name=name, geom_name=name)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(trimesh.exchange.gltf.export_glb(scene))
+    write_bytes_atomic(path, trimesh.exchange.gltf.export_glb(scene))
 
 
 def sibling_glb(glb: Path) -> Path | None:
@@ -324,7 +325,7 @@ def main(argv=None) -> int:
         return 2
     print_table(rows)
     if a.report:
-        a.report.write_text(json.dumps(rows, indent=1) + "\n")
+        write_text_atomic(a.report, json.dumps(rows, indent=1) + "\n")
     return 0
 
 

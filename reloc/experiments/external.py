@@ -55,6 +55,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from formats.errors import SceneFormatError, UserError
+from formats.atomic import write_text_atomic
 
 PLACEHOLDERS = ("mapping", "query", "scene", "out", "map_out", "tour", "name")
 MAP_PLACEHOLDERS = ("mapping", "map_out", "name")
@@ -293,9 +294,9 @@ def _run_command(cmd: str, cwd: Path, log: Path, timeout: float | None, what: st
     except FileNotFoundError:
         raise UserError(f"{what}: command not found: {argv[0]}") from None
     except subprocess.TimeoutExpired as e:
-        log.write_text(f"$ {cmd}\n[timed out after {timeout} s]\n{e.stdout or ''}\n{e.stderr or ''}")
+        write_text_atomic(log, f"$ {cmd}\n[timed out after {timeout} s]\n{e.stdout or ''}\n{e.stderr or ''}")
         raise UserError(f"{what}: timed out after {timeout:g} s") from None
-    log.write_text(f"$ {cmd}\n[exit status {p.returncode}]\n--- stdout\n{p.stdout}\n--- stderr\n{p.stderr}")
+    write_text_atomic(log, f"$ {cmd}\n[exit status {p.returncode}]\n--- stdout\n{p.stdout}\n--- stderr\n{p.stderr}")
     if p.returncode != 0:
         raise UserError(f"{what}: exit status {p.returncode}: {_stderr_tail(p.stderr)}")
     return time.perf_counter() - t0

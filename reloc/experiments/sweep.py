@@ -30,6 +30,7 @@ import math
 from dataclasses import dataclass
 
 from formats.errors import SceneFormatError
+from formats.atomic import save_figure
 
 from .intervals import OK_COARSE, figure_values
 
@@ -228,5 +229,5 @@ def plot_sweep(res: dict, path) -> None:
     ax.legend(fontsize=7, loc="lower left")
     ax.set_title(f"Dose-response: {sw['factor']} (dotted: {100 * sw['fraction']:.0f} % of each method's level 0)", fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path, dpi=120)
     plt.close(fig)

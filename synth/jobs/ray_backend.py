@@ -40,7 +40,7 @@ import time
 from pathlib import Path
 
 from formats import frames as fr
-from formats.atomic import replacing, write_text_atomic
+from formats.atomic import replacing, write_bytes_atomic, write_text_atomic
 from formats.errors import UserError, one_line
 from formats.lifetime import reclaim_signals, start_reaper
 
@@ -352,10 +352,13 @@ _PATH_KEYS = ("layout", "poses", "geometry_dir", "out_dir", "previews_dir", "lig
 
 def materialise(packed: dict, scratch: Path) -> dict:
     """Write a packed chunk's files under ``scratch``; its job with absolute paths there."""
+    root = Path(scratch).resolve()
     for rel, data in packed["files"].items():
-        p = scratch / rel
+        p = root / rel
+        if Path(rel).is_absolute() or not p.resolve().is_relative_to(root):
+            raise UserError(f"chunk {packed.get('id')}: file '{rel}' lies outside the chunk's scratch folder")
         p.parent.mkdir(parents=True, exist_ok=True)
-        p.write_bytes(data)
+        write_bytes_atomic(p, data)
     job = dict(packed["job"])
     for k in _PATH_KEYS:
         if job.get(k) and (k != "lighting" or job[k] in packed["files"]):

@@ -23,11 +23,11 @@ writes the job's own files there too.
 
 from __future__ import annotations
 
-import os
 import posixpath
 import re
 from pathlib import Path
 
+from formats.atomic import write_bytes_atomic
 from formats.errors import UserError, check_output_folder
 from formats import frames as fr
 
@@ -152,13 +152,7 @@ class Storage:
                 if parent not in self._dirs:
                     self.fs.makedirs(parent, exist_ok=True)
                     self._dirs.add(parent)
-                tmp = posixpath.join(parent, f".{name}.{os.getpid()}.tmp")
-                try:
-                    self.fs.pipe_file(tmp, data)
-                    self.fs.mv(tmp, r)
-                finally:
-                    if self.fs.exists(tmp):
-                        self.fs.rm_file(tmp)
+                write_bytes_atomic(r, data)  # this machine's files: never through a planted link (formats.atomic)
             else:
                 self.fs.pipe_file(r, data)
         except OSError as e:

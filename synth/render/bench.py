@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from formats.atomic import write_nofollow
 from formats.camera import Intrinsics, write_tum
 from formats.cli import add_json
 
@@ -59,7 +60,7 @@ def bench_blender(layout_file: Path, pass_: str, poses, intr: Intrinsics, qualit
            "device": "cpu", "out_dir": str(gdir if pass_ == "geometry" else out), "geometry_dir": str(gdir),
            "previews_dir": None, "threads": threads}
     jf = work / f"job_{pass_}_{quality}_{intr.width}.json"
-    jf.write_text(json.dumps(job))
+    write_nofollow(jf, json.dumps(job))
     t0 = time.perf_counter()
     proc = subprocess.run([sys.executable, "-m", "synth.blender.worker", str(jf)], capture_output=True, text=True)
     total = time.perf_counter() - t0

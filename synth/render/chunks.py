@@ -19,6 +19,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from formats import frames as fr
+from formats.atomic import nofollow_opener, write_nofollow
 from formats.lifetime import die_with_parent, stop_processes, worker_env
 
 
@@ -60,11 +61,11 @@ def run_chunk_process(chunk_kind: str, job: dict, job_file: str, log_file: str, 
 
     ``env``: the worker's environment (default: this process's); the Ray backend points
     ``SYNTH_SCENES_DIR`` at the scene files it shipped with the chunk."""
-    Path(job_file).write_text(json.dumps(job))
+    write_nofollow(job_file, json.dumps(job))
     worker = "synth.blender.worker" if chunk_kind in BLENDER_PASSES else "synth.render.chunk_worker"
     info: dict = {}
     err = None
-    with open(log_file, "w") as log:
+    with open(log_file, "w", opener=nofollow_opener) as log:
         with _LIVE_LOCK:  # no new worker once the driver is stopping (stopping_workers)
             if _STOPPING.is_set():
                 return 130, "stopped: the run was interrupted", info
