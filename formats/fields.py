@@ -10,6 +10,9 @@ None for the whole file. Booleans are never numbers (``True`` is not 1), and a Y
 from __future__ import annotations
 
 import math
+import os
+import reprlib
+from pathlib import Path
 from typing import NoReturn
 
 import numpy as np
@@ -21,6 +24,41 @@ def fail(file, field: str | None, msg: str) -> NoReturn:
     raise SceneFormatError(file, field, msg)
 
 
+_SHOWN = reprlib.Repr()
+_SHOWN.maxstring, _SHOWN.maxother, _SHOWN.maxlevel = 80, 80, 3
+_SHOWN.maxlist = _SHOWN.maxtuple = _SHOWN.maxdict = _SHOWN.maxset = 6
+
+
+def shown(v) -> str:
+    """A bounded excerpt of a value for an error message (at most ~80 characters a string, 6 items a
+    list, 3 levels deep): a YAML alias bomb or a 100k-character name is never repr()'d whole."""
+    try:
+        return _SHOWN.repr(v)
+    except Exception:  # a hostile __repr__ cannot be one here (YAML and JSON give plain types), but be safe
+        return f"<{type(v).__name__}>"
+
+
+ALLOW_OUTSIDE_ENV = "SYNTH_ALLOW_OUTSIDE_ROOT"
+
+
+def inside_root(file, field: str | None, path, root, what: str = "the dataset folder") -> Path:
+    """``path`` (normalised), refused in one line naming ``file`` and ``field`` when it resolves
+    (links followed) outside ``root``: a dataset or spec cannot make the toolkit read other files of
+    the user's. ``SYNTH_ALLOW_OUTSIDE_ROOT=1`` in the environment allows such paths on purpose. The
+    one home of that rule; checked before the file is opened or even tested for existence."""
+    p = Path(os.path.normpath(path))
+    if os.environ.get(ALLOW_OUTSIDE_ENV) == "1":
+        return p
+    try:
+        rp, rr = p.resolve(), Path(root).resolve()
+    except (OSError, RuntimeError) as e:  # a link loop
+        fail(file, field, f"cannot resolve {shown(str(path))}: {e}")
+    if rp != rr and rr not in rp.parents:
+        fail(file, field, f"{shown(str(path))} lies outside {what} {rr}; set {ALLOW_OUTSIDE_ENV}=1 to allow "
+                          "paths outside it on purpose")
+    return p
+
+
 def _is_number(v) -> bool:
     return not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(float(v))
 
@@ -28,35 +66,35 @@ def _is_number(v) -> bool:
 def number(file, v, field: str, positive: bool = False, lo: float | None = None) -> float:
     """A finite number (int or float); ``positive``: > 0; ``lo``: >= lo."""
     if not _is_number(v):
-        fail(file, field, f"expected a finite number, got {v!r}")
+        fail(file, field, f"expected a finite number, got {shown(v)}")
     if positive and v <= 0:
-        fail(file, field, f"must be > 0, got {v!r}")
+        fail(file, field, f"must be > 0, got {shown(v)}")
     if lo is not None and v < lo:
-        fail(file, field, f"must be >= {lo}, got {v!r}")
+        fail(file, field, f"must be >= {lo}, got {shown(v)}")
     return float(v)
 
 
 def integer(file, v, field: str, lo: int | None = None) -> int:
     """An integer (not a bool, not 2.0); ``lo``: >= lo."""
     if isinstance(v, bool) or not isinstance(v, int):
-        fail(file, field, f"expected an integer, got {v!r}")
+        fail(file, field, f"expected an integer, got {shown(v)}")
     if lo is not None and v < lo:
-        fail(file, field, f"expected an integer >= {lo}, got {v!r}")
+        fail(file, field, f"expected an integer >= {lo}, got {shown(v)}")
     return v
 
 
 def positive_int(file, v, field: str) -> int:
     if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
-        fail(file, field, f"expected a positive integer, got {v!r}")
+        fail(file, field, f"expected a positive integer, got {shown(v)}")
     return v
 
 
 def numbers(file, v, field: str, n: int, what: str = "", positive: bool = False) -> np.ndarray:
     """A list of exactly ``n`` finite numbers (``what`` names them in the message: " (w, x, y, z)")."""
     if not (isinstance(v, list) and len(v) == n and all(_is_number(x) for x in v)):
-        fail(file, field, f"expected {n} numbers{what}, got {v!r}")
+        fail(file, field, f"expected {n} numbers{what}, got {shown(v)}")
     if positive and any(x <= 0 for x in v):
-        fail(file, field, f"expected {n} numbers > 0{what}, got {v!r}")
+        fail(file, field, f"expected {n} numbers > 0{what}, got {shown(v)}")
     return np.array([float(x) for x in v])
 
 
@@ -65,20 +103,20 @@ def unit_quat(file, v, field: str) -> np.ndarray:
     q = numbers(file, v, field, 4, " (w, x, y, z)")
     n = float(np.linalg.norm(q))
     if abs(n - 1.0) > 1e-3:
-        fail(file, field, f"expected a unit quaternion (w, x, y, z), got {v!r} (norm {n:.4f})")
+        fail(file, field, f"expected a unit quaternion (w, x, y, z), got {shown(v)} (norm {n:.4f})")
     return q / n
 
 
 def string(file, v, field: str) -> str:
     if not isinstance(v, str) or not v:
-        fail(file, field, f"expected a non-empty string, got {v!r}")
+        fail(file, field, f"expected a non-empty string, got {shown(v)}")
     return v
 
 
 def text(file, v, field: str) -> str:
     """Free text (a description); may be empty, but must be text."""
     if not isinstance(v, str):
-        fail(file, field, f"expected text, got {v!r}")
+        fail(file, field, f"expected text, got {shown(v)}")
     return v
 
 
@@ -87,13 +125,13 @@ def names(file, v, field: str) -> list[str]:
     if isinstance(v, str):
         v = [v]
     if not isinstance(v, list) or not v or not all(isinstance(x, str) and x for x in v):
-        fail(file, field, f"expected a non-empty list of names, got {v!r}")
+        fail(file, field, f"expected a non-empty list of names, got {shown(v)}")
     return list(v)
 
 
 def boolean(file, v, field: str) -> bool:
     if not isinstance(v, bool):
-        fail(file, field, f"expected true or false, got {v!r}")
+        fail(file, field, f"expected true or false, got {shown(v)}")
     return v
 
 
@@ -119,7 +157,7 @@ BYTES_PER_PIXEL = 24
 def frame_size(file, v, field: str) -> tuple[int, int]:
     """``[width, height]`` in pixels, within the bounds above (checked before anything is written)."""
     if not isinstance(v, list) or len(v) != 2:
-        fail(file, field, f"expected [width, height], got {v!r}")
+        fail(file, field, f"expected [width, height], got {shown(v)}")
     w, h = (positive_int(file, x, field) for x in v)
     if max(w, h) > MAX_SIDE or w * h > MAX_PIXELS:
         fail(file, field, f"{w}x{h} is too large: at most {MAX_SIDE} px a side and {MAX_PIXELS:,} pixels "

@@ -88,3 +88,110 @@ def test_job_files_and_logs_refuse_a_link(tmp_path):
     assert victim.read_text() == "precious\n"
     write_nofollow(tmp_path / "fresh.log", "ok\n")
     assert (tmp_path / "fresh.log").read_text() == "ok\n"
+
+
+# ---------------------------------------------------------------------------------------------
+# a hostile dataset stays inside its root (the ReplicaCAD-shaped fixture, damaged)
+
+from test_replicacad_bad_input import (SCENE, external_texture, import_error, object_glb, pristine, root,  # noqa: E402,F401
+                                       scene_doc, urdf_glb)
+
+
+def _object_config(root: Path) -> Path:
+    for inst in scene_doc(root)["object_instances"]:
+        base = inst["template_name"].rsplit("/", 1)[-1]
+        hits = sorted((root / "configs/objects").rglob(f"{base}.object_config.json"))
+        if hits:
+            return hits[0]
+    raise AssertionError("no object config")
+
+
+def _set(config: Path, **fields) -> None:
+    import json
+
+    doc = json.loads(config.read_text())
+    doc.update(fields)
+    config.write_text(json.dumps(doc))
+
+
+@pytest.mark.parametrize("where", ["absolute", "climbing", "secret"])
+def test_a_render_asset_outside_the_root_is_refused(root, tmp_path, capsys, where):
+    import shutil
+
+    outside = tmp_path / "elsewhere"
+    outside.mkdir()
+    good = object_glb(root)
+    shutil.copy(good, outside / "valid.glb")  # a valid GLB: it would import without the rule
+    secret = tmp_path / "shadow"
+    secret.write_text("root:$6$secret\n")
+    cfg = _object_config(root)
+    target = {"absolute": str(outside / "valid.glb"), "climbing": os.path.relpath(outside / "valid.glb", cfg.parent),
+              "secret": str(secret)}[where]
+    _set(cfg, render_asset=target)
+    err = import_error(root, tmp_path, capsys)
+    assert f"{cfg}: render_asset: " in err and "lies outside the dataset folder" in err and "SYNTH_ALLOW_OUTSIDE_ROOT" in err
+    assert "secret" not in err.split("lies outside")[1]  # the file's content is never in the message
+    if where == "absolute":  # allowed on purpose
+        os.environ["SYNTH_ALLOW_OUTSIDE_ROOT"] = "1"
+        try:
+            assert synth_main_ok(root, tmp_path)
+        finally:
+            del os.environ["SYNTH_ALLOW_OUTSIDE_ROOT"]
+
+
+def synth_main_ok(root, tmp_path) -> bool:
+    from synth.cli import main as synth_main
+
+    return synth_main(["scene", "import-replicacad", str(root), SCENE, "--out", str(tmp_path / "ok.yaml"),
+                       "--allow-unknown"]) == 0
+
+
+@pytest.mark.parametrize("uri", ["/etc/shadow", "../../../../../../../etc/passwd", "file:///etc/passwd", "OUTSIDE"])
+def test_a_texture_uri_outside_the_root_is_refused(root, tmp_path, capsys, uri):
+    from test_gltf_render import glb_chunks, write_glb_chunks
+
+    from synth.replicacad.gltf import check_glb, clear_cache
+
+    glb = object_glb(root)
+    png = external_texture(glb)
+    if uri == "OUTSIDE":  # a real PNG, outside the dataset
+        (tmp_path / "tex.png").write_bytes(png.read_bytes())
+        uri = str(tmp_path / "tex.png")
+    doc, binary = glb_chunks(glb)
+    doc["images"][0] = {"uri": uri}
+    write_glb_chunks(glb, doc, binary)
+    clear_cache()
+    with pytest.raises(SceneFormatError) as e:
+        check_glb(glb)
+    assert e.value.field == "images[0].uri" and len(str(e.value).splitlines()) == 1
+    assert ("lies outside the dataset folder" in str(e.value)) or ("scheme" in str(e.value))
+    assert f"{glb}: images[0].uri: " in import_error(root, tmp_path, capsys)
+
+
+def test_a_urdf_mesh_outside_the_root_is_refused(root, tmp_path, capsys):
+    import xml.etree.ElementTree as ET
+
+    glb = urdf_glb(root)
+    urdf = next(glb.parent.glob("*.urdf"))
+    text = urdf.read_text()
+    mesh = next(ET.parse(urdf).iter("mesh")).get("filename")
+    outside = tmp_path / "x" / "link.glb"
+    outside.parent.mkdir()
+    outside.write_bytes(glb.read_bytes())
+    urdf.write_text(text.replace(f'filename="{mesh}"', f'filename="{outside}"', 1))
+    err = import_error(root, tmp_path, capsys)
+    assert str(urdf) in err and "lies outside the dataset folder" in err
+
+
+from formats.errors import SceneFormatError  # noqa: E402
+
+
+def test_a_layout_asset_name_cannot_climb_out_of_the_root(root, tmp_path):
+    from synth.replicacad.mesh_assets import asset_file
+    from synth.replicacad.urdf import urdf_path
+
+    (tmp_path / "x.glb").write_bytes(b"glTF")
+    for fn, name in ((asset_file, "replicacad:../x.glb"), (urdf_path, "replicacad-urdf:../../x.urdf")):
+        with pytest.raises(SceneFormatError, match="lies outside the dataset folder") as e:
+            fn(root, name) if fn is not asset_file else fn(root, name)
+        assert name in str(e.value) and len(str(e.value).splitlines()) == 1

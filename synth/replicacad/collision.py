@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from ..scene import geometry as geo
-from .habitat_format import Y_UP_TO_Z_UP, dataset_root
+from .habitat_format import Y_UP_TO_Z_UP, dataset_root, inside_root, owning_root
 from ..scene.model import GLB_ASSET_PREFIX, URDF_ASSET_PREFIX
 
 log = logging.getLogger(__name__)
@@ -91,7 +91,8 @@ def _urdf_collision_elements(path: str) -> tuple:
                 scale = tuple(float(x) for x in sc.replace(",", " ").split()) if sc else (1.0, 1.0, 1.0)
                 if len(scale) == 1:
                     scale = scale * 3
-                out.append((link.get("name"), T, ("mesh", str(Path(path).parent / mesh.get("filename")), scale)))
+                f = inside_root(path, "collision.geometry.mesh", Path(path).parent / mesh.get("filename"), owning_root(path))
+                out.append((link.get("name"), T, ("mesh", str(f), scale)))
     return tuple(out)
 
 

@@ -78,7 +78,7 @@ from trimesh.visual import TextureVisuals
 from trimesh.visual.material import PBRMaterial
 
 from formats.errors import SceneFormatError
-from formats.fields import listing
+from formats.fields import inside_root, listing, shown
 from formats.lfs import LFS_HINT, LFS_POINTER_PREFIX, is_lfs_pointer  # noqa: F401 - re-exported for readers
 
 from ..scene.geometry import Y_UP_TO_Z_UP
@@ -149,11 +149,17 @@ def _read_container(path: Path) -> tuple[dict, bytes | None, int]:
     return doc, binary, bin_at
 
 
-def _external(path: Path, uri: str) -> Path | None:
-    """The file an external URI names (relative to the GLB's folder); None for a data: URI."""
+def _external(path: Path, uri: str, field: str = "images[].uri") -> Path | None:
+    """The file an external URI names (relative to the GLB's folder); None for a data: URI.
+    SceneFormatError naming the GLB and ``field`` for a URI with a scheme or outside the GLB's
+    dataset folder (``owning_root``; ``formats.fields.inside_root``)."""
     if uri.startswith("data:"):
         return None
-    return path.parent / urllib.parse.unquote(uri)
+    if "://" in uri:
+        raise SceneFormatError(path, field, f"URIs with a scheme are not read: {shown(uri)}")
+    from .habitat_format import owning_root
+
+    return inside_root(path, field, path.parent / urllib.parse.unquote(uri), owning_root(path))
 
 
 def check_glb(path) -> dict:
@@ -172,14 +178,14 @@ def _check(path: Path) -> tuple[dict, bytes | None, int]:
     doc, binary, bin_at = _read_container(path)
     for i, img in enumerate(listing(path, doc.get("images", []), "images")):
         if isinstance(img, dict) and isinstance(img.get("uri"), str):
-            f = _external(path, img["uri"])
+            f = _external(path, img["uri"], f"images[{i}].uri")
             if f is not None and not f.is_file():
                 raise SceneFormatError(path, f"images[{i}].uri", f"texture not found: {f}")
             if f is not None and is_lfs_pointer(f):
                 raise SceneFormatError(path, f"images[{i}].uri", f"texture {f} {LFS_HINT}")
     for i, buf in enumerate(listing(path, doc.get("buffers", []), "buffers")):
         if isinstance(buf, dict) and isinstance(buf.get("uri"), str):
-            f = _external(path, buf["uri"])
+            f = _external(path, buf["uri"], f"buffers[{i}].uri")
             if f is not None and not f.is_file():
                 raise SceneFormatError(path, f"buffers[{i}].uri", f"buffer not found: {f}")
             if f is not None and is_lfs_pointer(f):

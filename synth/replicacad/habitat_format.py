@@ -11,12 +11,13 @@ rotation (+90 deg about X). A habitat pose ``T_h`` becomes ``C T_h C^T``, a vert
 
 from __future__ import annotations
 
+import functools
 import os
 from pathlib import Path
 
 import numpy as np
 
-from formats.fields import fail, mapping, number, numbers, string  # noqa: F401  (re-exported)
+from formats.fields import fail, inside_root, mapping, number, numbers, string  # noqa: F401  (re-exported)
 from formats.fields import unit_quat as quat  # noqa: F401
 from formats.yamlfile import read_json  # noqa: F401  (re-exported: every habitat config is read with it)
 
@@ -67,6 +68,25 @@ def translation_origin(file, v, field: str) -> str | None:
 
 
 DATASET_CONFIG_GLOB = "*.scene_dataset_config.json"
+
+
+def owning_root(path) -> Path:
+    """The dataset folder a file belongs to: its nearest ancestor holding a
+    ``*.scene_dataset_config.json``, else the file's own folder. Paths a file names (a URDF's
+    meshes, a GLB's textures) must stay inside it (``formats.fields.inside_root``)."""
+    p = Path(path).resolve().parent
+    return _owning(p)
+
+
+@functools.lru_cache(maxsize=4096)
+def _owning(folder: Path) -> Path:
+    for d in (folder, *folder.parents):
+        try:
+            if any(d.glob(DATASET_CONFIG_GLOB)):
+                return d
+        except OSError:
+            break
+    return folder
 
 
 def dataset_root(root, require_config: bool = False) -> Path:
@@ -136,7 +156,7 @@ def render_asset(root: Path, config: Path, cfg: dict) -> Path:
     from formats.lfs import LFS_HINT, is_lfs_pointer
 
     rel = string(config, cfg.get("render_asset"), "render_asset")
-    glb = Path(os.path.normpath(config.parent / rel))
+    glb = inside_root(config, "render_asset", config.parent / rel, root)
     if not glb.is_file():
         fail(config, "render_asset", f"GLB not found: {glb}")
     if is_lfs_pointer(glb):

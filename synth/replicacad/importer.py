@@ -71,7 +71,7 @@ from formats.errors import UnknownNameError
 
 from ..scene.classes import ClassTable, LexiconTable, class_table, lexicon_table
 from .receptacles import read_receptacles, to_object_frame
-from .habitat_format import ASSET_PREFIX, MIN_EXTENT, dataset_config_path, MOTION_TYPES, UNKNOWN_CLASS, URDF_PREFIX, Y_UP_TO_Z_UP, ConfigFinder, asset_name, check_frame, convert_quat, dataset_root, fail, hab_matrix, mapping, number, numbers, quat, read_json, render_asset, string, translation_origin, vec
+from .habitat_format import ASSET_PREFIX, MIN_EXTENT, dataset_config_path, MOTION_TYPES, UNKNOWN_CLASS, URDF_PREFIX, Y_UP_TO_Z_UP, ConfigFinder, asset_name, check_frame, convert_quat, dataset_root, fail, hab_matrix, inside_root, mapping, number, numbers, quat, read_json, render_asset, string, translation_origin, vec
 from .gltf import check_glb, glb_geometry
 from .mesh_assets import load_asset_mesh
 from ..scene.model import Layout, ObjectInstance, Stage
@@ -143,7 +143,7 @@ def _object_template(root: Path, config: Path) -> _Template:
         sid = v
     collision = "box" if cfg.get("use_bounding_box_for_collision") is True else None
     if collision is None and isinstance(cfg.get("collision_asset"), str) and cfg["collision_asset"]:
-        cpath = Path(os.path.normpath(config.parent / cfg["collision_asset"]))
+        cpath = inside_root(config, "collision_asset", config.parent / cfg["collision_asset"], root)
         if cpath.is_file():  # optional: the checks fall back to the object's box without it
             check_glb(cpath)
             collision = Path(os.path.relpath(cpath, root)).as_posix()

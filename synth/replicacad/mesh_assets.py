@@ -14,7 +14,7 @@ import trimesh
 
 from formats.errors import UnknownNameError
 
-from .habitat_format import ASSET_PREFIX, URDF_PREFIX, dataset_root, fail
+from .habitat_format import ASSET_PREFIX, URDF_PREFIX, dataset_root, fail, inside_root
 
 
 def asset_file(root, asset: str) -> Path:
@@ -22,7 +22,7 @@ def asset_file(root, asset: str) -> Path:
     r = dataset_root(root)
     for prefix, what in ((URDF_PREFIX, "URDF"), (ASSET_PREFIX, "GLB")):
         if isinstance(asset, str) and asset.startswith(prefix) and len(asset) > len(prefix):
-            path = r / asset[len(prefix):]
+            path = inside_root(asset, None, r / asset[len(prefix):], r)
             if not path.is_file():
                 fail(path, None, f"{what} not found (asset {asset!r})")
             return path

@@ -61,7 +61,7 @@ import numpy as np
 from formats.lfs import LFS_HINT, is_lfs_pointer
 from scipy import ndimage
 
-from .habitat_format import Y_UP_TO_Z_UP, fail, mapping, read_json
+from .habitat_format import Y_UP_TO_Z_UP, fail, inside_root, mapping, read_json
 
 __all__ = ["NavMesh", "NavSettings", "NavPolygon", "Level", "Grid", "read_navmesh", "navmesh_for_scene", "footprint_of",
            "StandinSpec", "Standin", "standin_stage", "write_standin_glb",
@@ -396,11 +396,11 @@ def navmesh_for_scene(root, scene_doc: dict, scene_path=None) -> Path | None:
             cfg, rel = table[c]
             if not isinstance(rel, str):
                 fail(cfg, f"navmesh_instances.{c}", f"expected a path, got {rel!r}")
-            f = (cfg.parent / rel)
+            f = inside_root(cfg, f"navmesh_instances.{c}", cfg.parent / rel, root)
             if not f.is_file():
                 fail(cfg, f"navmesh_instances.{c}", f"navmesh file not found: {f}")
             return f
-    direct = root / name
+    direct = inside_root(where, "navmesh_instance", root / name, root)
     if direct.is_file():
         return direct
     fail(where, "navmesh_instance", f"no navmesh '{name}' in the scene dataset config's navmesh_instances "

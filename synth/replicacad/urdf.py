@@ -259,7 +259,7 @@ def _parse_visual(file: Path, link: str, index: int, vis) -> _Visual:
         fail(file, f"{field}.mesh", "missing filename")
     if "://" in fn:
         fail(file, f"{field}.mesh", f"URIs such as {fn!r} are not resolved (habitat-sim neither); use a path relative to the URDF")
-    glb = Path(os.path.normpath(file.parent / fn))
+    glb = hf.inside_root(file, f"{field}.mesh", file.parent / fn, hf.owning_root(file))
     if glb.suffix.lower() != ".glb":
         fail(file, f"{field}.mesh", f"only .glb meshes are supported, got {fn!r}")
     if not glb.is_file():
@@ -472,7 +472,7 @@ def urdf_path(root, asset: str) -> Path:
     r = hf.dataset_root(root)
     if not isinstance(asset, str) or not asset.startswith(URDF_ASSET_PREFIX) or len(asset) == len(URDF_ASSET_PREFIX):
         raise UnknownNameError(f"not a ReplicaCAD URDF asset name: {asset!r} (expected '{URDF_ASSET_PREFIX}<relative urdf path>')")
-    p = r / asset[len(URDF_ASSET_PREFIX):]
+    p = hf.inside_root(asset, None, r / asset[len(URDF_ASSET_PREFIX):], r)
     if not p.is_file():
         fail(p, None, f"URDF not found (asset {asset!r})")
     return p
@@ -505,6 +505,8 @@ def _dataset_urdf_dirs(root: Path) -> list[Path]:
             if not isinstance(g, str):
                 continue
             g = g.replace("\\", "/").rstrip("/")
+            if Path(g).is_absolute() or ".." in Path(g).parts:  # ignored as habitat would not find it there either
+                hf.inside_root(cfg_path, "articulated_objects.paths", cfg_path.parent / g, root)
             for hit in sorted(cfg_path.parent.glob(g)) if any(c in g for c in "*?[") else [cfg_path.parent / g]:
                 if hit.is_dir():
                     dirs.append(hit)
@@ -556,7 +558,7 @@ def find_urdf(root, template: str) -> Path | None:
         except (OSError, ValueError, AttributeError):
             rel = None
         if isinstance(rel, str) and rel:
-            p = Path(os.path.normpath(cfg.parent / rel))
+            p = hf.inside_root(cfg, "urdf_filepath", cfg.parent / rel, root)
             return p if p.is_file() else None
     return _search(Path(root), _template_name(template), ".urdf")
 
@@ -569,7 +571,7 @@ def _ao_config(cfg_path: Path | None) -> dict:
     out = {}
     if "urdf_filepath" in cfg:
         rel = hf.string(cfg_path, cfg["urdf_filepath"], "urdf_filepath")
-        p = Path(os.path.normpath(cfg_path.parent / rel))
+        p = hf.inside_root(cfg_path, "urdf_filepath", cfg_path.parent / rel, hf.owning_root(cfg_path))
         if not p.is_file():
             fail(cfg_path, "urdf_filepath", f"URDF not found: {p}")
         out["urdf"] = p
