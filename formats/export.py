@@ -620,10 +620,10 @@ def _folder_state(out: Path, want: dict, tour_path: str) -> dict | None:
         _compare(man_path, _request_of(manifest), want, manifest["tour"].get("path"))
     if req_path.exists():
         try:
-            req = json.loads(req_path.read_text())
+            req = read_json(req_path, expect_object=False)
             if not isinstance(req, dict):
                 raise ValueError
-        except (ValueError, OSError, UnicodeDecodeError):
+        except (SceneFormatError, ValueError, OSError, UnicodeDecodeError):
             raise SceneFormatError(req_path, None, "unreadable export request (delete the folder and export again)") from None
         _compare(req_path, _request_of(req), want, req.get("tour_path"))
     elif manifest is None and out.is_dir() and any(out.iterdir()):
@@ -754,10 +754,10 @@ def _fixed_factor(tour: Tour, rgb_frames: list[_Frame], out: Path, manifest: dic
         return float(manifest["exposure"]["factor"])
     req_path = out / REQUEST_FILE
     try:
-        req = json.loads(req_path.read_text())
+        req = read_json(req_path, expect_object=False)
         if isinstance(req.get("fixed_factor"), (int, float)):
             return float(req["fixed_factor"])
-    except (OSError, ValueError, AttributeError):
+    except (SceneFormatError, OSError, ValueError, AttributeError):
         pass
     from tqdm import tqdm
 
@@ -765,9 +765,9 @@ def _fixed_factor(tour: Tour, rgb_frames: list[_Frame], out: Path, manifest: dic
             for f in tqdm(rgb_frames, desc="exposure", unit="frame", disable=not progress, file=sys.stderr)]
     factor = float(np.median(vals))
     try:
-        req = json.loads(req_path.read_text())
+        req = read_json(req_path, expect_object=False)
         write_json_atomic(req_path, {**req, "fixed_factor": factor})
-    except (OSError, ValueError):
+    except (SceneFormatError, OSError, ValueError):
         pass
     return factor
 

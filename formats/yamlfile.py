@@ -1,4 +1,16 @@
-"""Reading the YAML (and JSON) files users write: specs, layouts, lighting presets, configs."""
+"""Reading the YAML (and JSON) files users write: specs, layouts, lighting presets, configs.
+
+Every reader bounds what a file can make it do (a file may come from someone else):
+
+* size: at most ``MAX_BYTES`` (a larger file is refused before it is parsed);
+* text: UTF-8, or one line naming the byte that is not;
+* depth: nesting deeper than ``MAX_DEPTH`` levels is refused (the parsers recurse; 100,000 levels
+  would end in a RecursionError);
+* YAML aliases: a document that expands to more than ``MAX_VALUES`` values (a "billion laughs" of
+  anchors and aliases) is refused before any code walks it.
+
+Error messages show bounded excerpts of values (``formats.fields.shown``), never a whole value.
+"""
 
 from __future__ import annotations
 
@@ -9,6 +21,67 @@ import yaml
 
 from .errors import SceneFormatError
 
+MAX_BYTES = 256 * 2**20  # 256 MiB: the largest file the toolkit writes (a map, results.json) is far below
+MAX_DEPTH = 64  # levels of nesting; the toolkit's own files use at most ~8
+MAX_VALUES = 2_000_000  # values in a YAML document once its aliases are expanded
+
+
+def read_text(path, what: str = "file") -> str:
+    """A file's text: SceneFormatError naming the file when it is missing, larger than
+    ``MAX_BYTES``, unreadable or not UTF-8 (with the offset of the first bad byte)."""
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+    except FileNotFoundError:
+        raise SceneFormatError(path, None, f"{what} not found") from None
+    except OSError as e:
+        raise SceneFormatError(path, None, f"cannot read: {e.strerror or e}") from None
+    if size > MAX_BYTES:
+        raise SceneFormatError(path, None, f"{size / 2**20:.0f} MiB; files larger than {MAX_BYTES // 2**20} MiB are refused")
+    try:
+        data = path.read_bytes()
+    except OSError as e:
+        raise SceneFormatError(path, None, f"cannot read: {e.strerror or e}") from None
+    return decode_text(path, data)
+
+
+def decode_text(path, data: bytes) -> str:
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise SceneFormatError(path, None, f"not UTF-8 text: byte 0x{data[e.start]:02X} at offset {e.start} "
+                                           "(save the file as UTF-8)") from None
+
+
+def parse_json(path, text: str):
+    """``json.loads`` with the depth bound; SceneFormatError naming the file (and the line)."""
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as e:
+        raise SceneFormatError(path, f"line {e.lineno}", f"not valid JSON ({e.msg})") from None
+    except RecursionError:
+        raise SceneFormatError(path, None, f"nested more than {MAX_DEPTH} levels deep") from None
+    check_shape(path, data)
+    return data
+
+
+def check_shape(path, data) -> None:
+    """Refuse a parsed document nested more than ``MAX_DEPTH`` levels or (through YAML aliases)
+    holding more than ``MAX_VALUES`` values. Iterative: a hostile document cannot make it recurse."""
+    stack = [(data, 0)]
+    seen = 0
+    while stack:
+        v, d = stack.pop()
+        seen += 1
+        if seen > MAX_VALUES:
+            raise SceneFormatError(path, None, f"expands to more than {MAX_VALUES:,} values (YAML anchors and aliases?)")
+        if d > MAX_DEPTH:
+            raise SceneFormatError(path, None, f"nested more than {MAX_DEPTH} levels deep")
+        if isinstance(v, dict):
+            stack.extend((x, d + 1) for x in v.values())
+        elif isinstance(v, list):
+            stack.extend((x, d + 1) for x in v)
+
 
 def read_json(path, missing: str = "file not found", expect_object: bool = True):
     """The value in a JSON file the toolkit writes (tour metadata, export manifests, design.json,
@@ -18,14 +91,7 @@ def read_json(path, missing: str = "file not found", expect_object: bool = True)
     path = Path(path)
     if not path.is_file():
         raise SceneFormatError(path, None, missing)
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as e:
-        raise SceneFormatError(path, f"line {e.lineno}", f"not valid JSON ({e.msg})") from None
-    except OSError as e:
-        raise SceneFormatError(path, None, f"cannot read: {e.strerror or e}") from None
-    except UnicodeDecodeError as e:
-        raise SceneFormatError(path, None, f"cannot read: not UTF-8 text ({e.reason})") from None
+    data = parse_json(path, read_text(path))
     if expect_object and not isinstance(data, dict):
         raise SceneFormatError(path, None, f"expected a JSON object, got {type(data).__name__}")
     return data
@@ -37,13 +103,21 @@ def read_yaml(path) -> object:
     path = Path(path)
     if not path.exists():
         raise SceneFormatError(path, None, "file not found")
+    return parse_yaml(path, read_text(path))
+
+
+def parse_yaml(path, text: str) -> object:
+    """YAML text (JSON when ``path`` ends in .json) parsed with the bounds above."""
+    path = Path(path)
+    if path.suffix == ".json":
+        return parse_json(path, text)
     try:
-        text = path.read_text()
-    except OSError as e:
-        raise SceneFormatError(path, None, f"cannot read: {e.strerror}") from None
-    try:
-        if path.suffix == ".json":
-            return json.loads(text)
-        return yaml.safe_load(text)
-    except (yaml.YAMLError, ValueError) as e:
-        raise SceneFormatError(path, None, "malformed " + ("JSON" if path.suffix == ".json" else "YAML") + ": " + str(e).replace("\n", " ")) from None
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        raise SceneFormatError(path, None, "malformed YAML: " + str(e).replace("\n", " ")[:500]) from None
+    except (RecursionError, MemoryError):
+        raise SceneFormatError(path, None, f"nested more than {MAX_DEPTH} levels deep") from None
+    except ValueError as e:  # a constructor's complaint (e.g. a timestamp out of range)
+        raise SceneFormatError(path, None, "malformed YAML: " + str(e).replace("\n", " ")[:500]) from None
+    check_shape(path, data)
+    return data

@@ -17,9 +17,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import yaml
 
 from formats.errors import UserError
+from formats.yamlfile import read_yaml
 
 
 
@@ -284,10 +284,7 @@ def load_config(path) -> Config:
     p = Path(path)
     if not p.is_file():
         raise UserError(f"{p}: config file not found")
-    try:
-        d = yaml.safe_load(p.read_text())
-    except yaml.YAMLError as e:
-        raise UserError(f"{p}: not valid YAML ({' '.join(str(e).split())[:160]})") from None
+    d = read_yaml(p)
     if d is not None and not isinstance(d, dict):
         raise UserError(f"{p}: expected a mapping of sections (map, odometry, clips, registration, ...)")
     try:

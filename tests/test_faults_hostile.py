@@ -195,3 +195,105 @@ def test_a_layout_asset_name_cannot_climb_out_of_the_root(root, tmp_path):
         with pytest.raises(SceneFormatError, match="lies outside the dataset folder") as e:
             fn(root, name) if fn is not asset_file else fn(root, name)
         assert name in str(e.value) and len(str(e.value).splitlines()) == 1
+
+
+# ---------------------------------------------------------------------------------------------
+# readers bound depth, size, text encoding and alias expansion
+
+DEEP = 100_000
+
+
+def _deep_yaml() -> str:
+    return "a: " + "[" * DEEP + "]" * DEEP + "\n"
+
+
+def _deep_json() -> str:
+    return '{"a": ' + "[" * DEEP + "]" * DEEP + "}"
+
+
+BOMB = "".join([
+    "a0: &a0 [x, x, x, x, x, x, x, x, x, x]\n",
+    *(f"a{k}: &a{k} [*a{k - 1}, *a{k - 1}, *a{k - 1}, *a{k - 1}, *a{k - 1}, *a{k - 1}, *a{k - 1}, *a{k - 1}, *a{k - 1}, *a{k - 1}]\n"
+      for k in range(1, 9)),
+])  # a8 expands to 10^9 values
+
+
+def _one_line(capsys, code, want: str):
+    err = capsys.readouterr().err.strip()
+    assert code == 2, err
+    assert len(err.splitlines()) == 1 and want in err, err
+    assert "Traceback" not in err and len(err) < 600, err
+    return err
+
+
+CLI_SPECS = [  # (command, file name, extra args): every kind of YAML a user hands the CLI
+    (["synth", "render"], "spec.yaml", ["--dry-run"]),
+    (["reloc", "experiment"], "exp.yaml", []),
+    (["reloc", "check"], "checks.yaml", ["RESULTS"]),
+    (["synth", "scene", "show"], "layout.yaml", []),
+    (["synth", "path", "show"], "path.yaml", []),
+]
+
+
+def _run(argv):
+    from reloc.cli import main as reloc_main
+    from synth.cli import main as synth_main
+
+    return (synth_main if argv[0] == "synth" else reloc_main)(argv[1:])
+
+
+@pytest.mark.parametrize("cmd, name, extra", CLI_SPECS, ids=[" ".join(c[0]) for c in CLI_SPECS])
+@pytest.mark.parametrize("damage", ["deep", "latin1", "bomb_in_name"])
+def test_hostile_yaml_is_one_line(tmp_path, capsys, cmd, name, extra, damage):
+    f = tmp_path / name
+    if name == "path.yaml":  # a saved path is PATH.txt + its PATH.yaml side file
+        f = tmp_path / "p.yaml"
+        (tmp_path / "p.txt").write_text("# timestamp tx ty tz qx qy qz qw\n0 0 0 1.5 0 0 0 1\n")
+    if damage == "deep":
+        f.write_text(_deep_yaml())
+        want = "nested more than"
+    elif damage == "latin1":
+        f.write_bytes("name: caf\u00e9\n".encode("latin-1"))
+        want = "not UTF-8 text: byte 0xE9"
+    else:
+        f.write_text(BOMB + "name: *a8\ndescription: *a8\n")
+        want = "expands to more than"
+    target = str(tmp_path / "p.txt") if name == "path.yaml" else str(f)
+    extra = [str(tmp_path) if x == "RESULTS" else x for x in extra]
+    err = _one_line(capsys, _run(cmd + [target] + extra), want)
+    assert str(f) in err
+
+
+@pytest.mark.parametrize("damage", ["deep", "latin1"])
+@pytest.mark.parametrize("which", ["results.json", "scene_instance"])
+def test_hostile_json_is_one_line(root, tmp_path, capsys, damage, which):
+    data = _deep_json().encode() if damage == "deep" else '{"a": "caf\u00e9"}'.encode("latin-1")
+    if which == "results.json":
+        out = tmp_path / "exp"
+        out.mkdir()
+        (out / "results.json").write_bytes(data)
+        code = _run(["reloc", "check", "demo_checks", str(out)])
+        f = out / "results.json"
+    else:
+        f = root / f"configs/scenes/{SCENE}.scene_instance.json"
+        f.write_bytes(data)
+        code = _run(["synth", "scene", "import-replicacad", str(root), SCENE, "--out", str(tmp_path / "x.yaml")])
+    err = _one_line(capsys, code, "nested more than" if damage == "deep" else "not UTF-8 text")
+    assert str(f) in err
+
+
+def test_readers_bound_size_depth_and_aliases(tmp_path, monkeypatch):
+    import formats.yamlfile as yf
+    from formats.yamlfile import read_json, read_yaml
+
+    ok = tmp_path / "ok.yaml"
+    ok.write_text("a: [1, 2, {b: 3}]\n")
+    assert read_yaml(ok) == {"a": [1, 2, {"b": 3}]}
+    monkeypatch.setattr(yf, "MAX_BYTES", 10)
+    with pytest.raises(SceneFormatError, match="larger than"):
+        read_yaml(ok)
+    monkeypatch.undo()
+    nest = tmp_path / "n.json"
+    nest.write_text('{"a": ' + "[" * 70 + "]" * 70 + "}")  # deeper than MAX_DEPTH, but no RecursionError
+    with pytest.raises(SceneFormatError, match="nested more than 64"):
+        read_json(nest)

@@ -23,6 +23,7 @@ import numpy as np
 import yaml
 
 from formats.errors import UserError, one_line
+from formats.yamlfile import read_yaml
 from formats.frames import srgb8
 
 from .base import Detection, FrameData
@@ -95,10 +96,7 @@ def load_class_map(source) -> tuple[dict[int | str, str | None], str]:
     p = Path(source)
     if not p.is_file():
         raise UserError(f"{p}: class map not found")
-    try:
-        data = yaml.safe_load(p.read_text())
-    except (yaml.YAMLError, UnicodeDecodeError) as e:
-        raise UserError(f"{p}: class map is not valid YAML/JSON: {one_line(e)}") from None
+    data = read_yaml(p)
     return _normalize_class_map(data, str(p)), str(p)
 
 

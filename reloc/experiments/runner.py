@@ -27,6 +27,7 @@ from pathlib import Path
 from formats.atomic import write_json_atomic
 from formats.design import DESIGN_FILE, list_tours, read_design, tour_name
 from formats.errors import SceneFormatError, UserError, check_output_folder
+from formats.yamlfile import read_json
 from formats.lifetime import folder_lock, stop_processes, worker_init
 from formats.sensors import load_sensor
 from formats.tour import Tour
@@ -253,8 +254,8 @@ def _run_experiment(spec: ExperimentSpec, out: Path, workers: int | None, progre
             key = key_of(kind, file_key(Path(mapping["dir"]) / "poses.txt"), mapping, source, options[kind], code,
                        det, model_key if det is spec.detector else None, sensor_key)
             try:
-                done = json.loads(f.with_name(f.name + ".done.json").read_text()).get("key") == key and f.is_file()
-            except (OSError, ValueError):
+                done = read_json(f.with_name(f.name + ".done.json")).get("key") == key and f.is_file()
+            except (SceneFormatError, OSError, ValueError):
                 done = False
             if not done:
                 f.parent.mkdir(parents=True, exist_ok=True)
@@ -386,8 +387,8 @@ def _external_tasks(spec: ExperimentSpec, out: Path, mapping: dict, queries: dic
             map_ids[mname] = f"map/{m.name}{suffix}"
             done = out / "maps" / f"{m.name}{suffix}.done.json"
             try:
-                fresh = json.loads(done.read_text()).get("key") == map_keys[mname]
-            except (OSError, ValueError):
+                fresh = read_json(done).get("key") == map_keys[mname]
+            except (SceneFormatError, OSError, ValueError):
                 fresh = False
             if not fresh:
                 tasks.append((map_ids[mname], run_external_map_task, {"method": md, "dir": str(map_out),
@@ -449,8 +450,8 @@ def _degenerate_frames(out: Path, queries: dict, methods: list) -> dict:
             continue
         for name in queries:
             try:
-                dg = json.loads((out / "runs" / m / name / "run.json").read_text()).get("degenerate_frames")
-            except (OSError, ValueError):
+                dg = read_json(out / "runs" / m / name / "run.json").get("degenerate_frames")
+            except (SceneFormatError, OSError, ValueError):
                 continue
             if dg and dg.get("frames") and name not in found:
                 found[name] = dg
@@ -462,15 +463,15 @@ def _seconds(out: Path, queries: dict, methods: list, variants: list, files: dic
     s: dict = {}
     for kind, f in files.items():
         try:
-            s[f"map_{kind}"] = json.loads(f.with_name(f.name + ".done.json").read_text())["seconds"]
-        except (OSError, ValueError, KeyError):
+            s[f"map_{kind}"] = read_json(f.with_name(f.name + ".done.json"))["seconds"]
+        except (SceneFormatError, OSError, ValueError, KeyError):
             s[f"map_{kind}"] = None
     for m in list(methods) + [ablation_name(v) for v in variants]:
         tot = 0.0
         for name in queries:
             try:
-                tot += json.loads((out / "runs" / m / name / DONE).read_text())["seconds"]
-            except (OSError, ValueError, KeyError):
+                tot += read_json(out / "runs" / m / name / DONE)["seconds"]
+            except (SceneFormatError, OSError, ValueError, KeyError):
                 tot = math.nan
         s[m] = None if math.isnan(tot) else round(tot, 1)
     return s

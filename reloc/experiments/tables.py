@@ -29,7 +29,6 @@ one-frame unit: every k-th frame) are evaluated over those frames, which ``frame
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
@@ -37,6 +36,7 @@ import numpy as np
 
 from formats.atomic import write_json_atomic, write_text_atomic
 from formats.camera import read_tum
+from formats.errors import SceneFormatError
 from formats.yamlfile import read_json
 
 from .evaluation import END_REASONS, THRESHOLDS, end_reason_kind, odometry_drift, pose_errors, summarize
@@ -409,7 +409,7 @@ def sensor_figures(out: Path, queries: dict, sensors: list, gts: dict, map_files
             for c, V in load_clip_poses(d).items():
                 clips_all[base + c] = {base + i: T for i, T in V.items()}
             gt_all.update({base + i: T for i, T in gts[n][1].items()})
-            for c in json.loads((d / "clips.json").read_text()):
+            for c in read_json(d / "clips.json", expect_object=False):
                 ends[end_reason_kind(c.get("end_reason"))] += 1
         odo = odometry_drift(clips_all, gt_all) if n_runs else {}
         frames = sum(queries[n]["frames"] for n in names)
@@ -441,8 +441,8 @@ def map_quality(report_path: Path) -> dict | None:
     """A built box map against the mapping layout's ground truth (``reloc.map.scoring.box_errors``
     in the map's build report): boxes built, matched, missing and extra, median errors by kind."""
     try:
-        rep = json.loads(Path(report_path).read_text())
-    except (OSError, ValueError):
+        rep = read_json(report_path)
+    except (SceneFormatError, OSError, ValueError):
         return None
     e = rep.get("errors")
     if not e:
@@ -485,7 +485,7 @@ def _units(out: Path, queries: dict, unchanged: str, gts: dict | None = None,
     for name in queries:
         p = out / "runs" / "one_frame" / name / "units.json"
         if p.is_file():
-            reps[name] = json.loads(p.read_text())
+            reps[name] = read_json(p)
     rows = []
     lengths = sorted({u["unit"] for r in reps.values() for u in r["units"]})
     for L in lengths:

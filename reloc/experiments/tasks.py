@@ -10,14 +10,14 @@ within-clip odometry (``clip_poses.npz`` of its run), as the paper's dagger rows
 
 from __future__ import annotations
 
-import json
 import os
 import time
 from pathlib import Path
 
 from formats.atomic import write_json_atomic, write_text_atomic
 from formats.camera import write_tum
-from formats.errors import UserError
+from formats.errors import SceneFormatError, UserError
+from formats.yamlfile import read_json
 from formats.tour import Tour
 
 from . import tables
@@ -28,8 +28,8 @@ DONE = "done.json"
 
 def is_done(d: Path, key: str) -> bool:
     try:
-        return json.loads((d / DONE).read_text()).get("key") == key
-    except (OSError, ValueError):
+        return read_json(d / DONE).get("key") == key
+    except (SceneFormatError, OSError, ValueError):
         return False
 
 

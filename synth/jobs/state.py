@@ -87,6 +87,8 @@ def parse_state(text: str, where: str) -> dict:
         doc = json.loads(text)
     except json.JSONDecodeError as e:
         problem = f"not valid JSON: {e.msg} at line {e.lineno}"
+    except RecursionError:
+        problem = "nested too deeply"  # (formats.yamlfile bounds the files users hand it; this one the toolkit wrote)
     else:
         if isinstance(doc, dict):
             return doc

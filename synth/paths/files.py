@@ -14,6 +14,7 @@ import yaml
 from formats import camera
 from formats.atomic import write_text_atomic
 from formats.errors import SceneFormatError, UnknownNameError, UserError
+from formats.yamlfile import MAX_DEPTH, check_shape, read_text
 
 from ..resources import paths_dir  # $SYNTH_SCENES_DIR/paths, else synth/data/paths
 from .model import FORMAT, CameraPath
@@ -80,12 +81,16 @@ def load_path(name_or_file) -> CameraPath:
     side = txt.with_suffix(".yaml")
     fps, meta, name, n_expect = camera.DEFAULT_FPS, {}, txt.stem, None
     if side.exists():
+        text = read_text(side)
         try:
-            doc = yaml.safe_load(side.read_text())
+            doc = yaml.safe_load(text)
         except yaml.YAMLError as e:
             mark = getattr(e, "problem_mark", None)
             where = f"line {mark.line + 1}" if mark is not None else None
             raise SceneFormatError(side, where, f"not valid YAML ({getattr(e, 'problem', e)})") from None
+        except RecursionError:
+            raise SceneFormatError(side, None, f"nested more than {MAX_DEPTH} levels deep") from None
+        check_shape(side, doc)
         if not isinstance(doc, dict):
             raise SceneFormatError(side, None, "expected a mapping")
         if doc.get("format", FORMAT) != FORMAT:

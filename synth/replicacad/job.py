@@ -105,7 +105,7 @@ def prepare(spec, out: Path, cli_root: str | None = None, progress=print):
     state_file = prep / PREPARED
     try:
         state = json.loads(state_file.read_text()) if state_file.exists() else {}
-    except ValueError:
+    except (ValueError, RecursionError):
         state = {}  # a damaged record only costs a replan
     if state.get("root") != str(root):
         state = {"root": str(root), "paths": {}}

@@ -7,9 +7,9 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-import yaml
 
 from formats.errors import SceneFormatError, UnknownNameError
+from formats.yamlfile import read_yaml
 
 from ..resources import classes_file, replicacad_lexicon_file
 
@@ -110,11 +110,7 @@ def _load(path: str) -> ClassTable:
     p = Path(path)
     if not p.exists():
         raise SceneFormatError(p, None, "class table not found")
-    try:
-        data = yaml.safe_load(p.read_text())
-    except yaml.YAMLError as e:
-        raise SceneFormatError(p, None, f"malformed YAML: {e}".replace("\n", " ")) from None
-    return parse_class_table(data, str(p))
+    return parse_class_table(read_yaml(p), str(p))
 
 
 def class_table(path: str | Path | None = None) -> ClassTable:
@@ -184,10 +180,7 @@ def _read_lexicon(path: str):
     p = Path(path)
     if not p.exists():
         raise SceneFormatError(p, None, "ReplicaCAD lexicon table not found")
-    try:
-        return yaml.safe_load(p.read_text())
-    except yaml.YAMLError as e:
-        raise SceneFormatError(p, None, f"malformed YAML: {e}".replace("\n", " ")) from None
+    return read_yaml(p)
 
 
 def lexicon_table(path: str | Path | None = None, classes: ClassTable | None = None) -> LexiconTable:
