@@ -16,6 +16,7 @@ The machine is shared and noisy: quote the medians and the ratios, never one run
 """
 
 from __future__ import annotations
+from formats.cli import positive_int
 
 import argparse
 import statistics
@@ -88,7 +89,7 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m formats.bench_sensors", description=__doc__.split("\n\n")[0])
     p.add_argument("tour", help="a rendered tour with RGB")
     p.add_argument("--sensors", nargs="*", help="presets or sensor YAML files (default: every preset)")
-    p.add_argument("--frames", type=int, default=60, help="frames with RGB to read (spread over the tour)")
+    p.add_argument("--frames", type=positive_int, default=60, help="frames with RGB to read (spread over the tour)")
     p.add_argument("--seed", type=int, default=0)
     a = p.parse_args(argv)
     print(format_table(bench(a.tour, a.sensors, a.frames, a.seed, progress=sys.stderr.isatty())))

@@ -38,6 +38,37 @@ def positive_int(text: str) -> int:
     return v
 
 
+MAX_WORKERS = 256  # processes or threads one option may ask for
+
+
+def bounded_int(hi: int):
+    """argparse ``type``: an integer from 1 to ``hi``, the bound stated in the message."""
+
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            v = 0
+        if not 1 <= v <= hi:
+            raise argparse.ArgumentTypeError(f"expected an integer from 1 to {hi}, got {text[:40]!r}")
+        return v
+
+    return parse
+
+
+def fraction(text: str) -> float:
+    """argparse ``type`` of a share: a finite number from 0 to 1."""
+    import math
+
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not (math.isfinite(v) and 0.0 <= v <= 1.0):
+        raise argparse.ArgumentTypeError(f"expected a fraction from 0 to 1, got {text[:40]!r}")
+    return v
+
+
 def add_json(p: argparse.ArgumentParser, what: str = "the result"):
     return p.add_argument("--json", action="store_true", help=f"print {what} as JSON on stdout instead of the table")
 
@@ -49,7 +80,7 @@ def add_quiet(p: argparse.ArgumentParser):
 
 def add_workers(p: argparse.ArgumentParser, what: str, default: int | None = 1):
     shown = f"default {default}" if default is not None else "default: the spec's workers"
-    return p.add_argument("--workers", type=positive_int, default=default, metavar="N",
+    return p.add_argument("--workers", type=bounded_int(MAX_WORKERS), default=default, metavar="N",
                           help=f"{what} at a time ({shown})")
 
 

@@ -297,3 +297,37 @@ def test_readers_bound_size_depth_and_aliases(tmp_path, monkeypatch):
     nest.write_text('{"a": ' + "[" * 70 + "]" * 70 + "}")  # deeper than MAX_DEPTH, but no RecursionError
     with pytest.raises(SceneFormatError, match="nested more than 64"):
         read_json(nest)
+
+
+# ---------------------------------------------------------------------------------------------
+# numbers from the user: range and finiteness where they are read; resources bounded
+
+
+def _exit_code(argv) -> int:
+    try:
+        return _run(argv)
+    except SystemExit as e:  # argparse's own refusals
+        return e.code
+
+
+@pytest.mark.parametrize("args, says", [
+    (["--perturbation", "threads:99999999"], "from 1 to 256"),
+    (["--perturbation", "jitter:1:100000"], "at most 255"),
+    (["--max-spread", "-1"], "fraction from 0 to 1"),
+    (["--max-spread", "nan"], "fraction from 0 to 1"),
+    (["--max-tour-loss", "5"], "fraction from 0 to 1"),
+    (["--workers", "100000"], "from 1 to 256"),
+])
+def test_stability_benchmark_options_are_bounded(capsys, args, says):
+    code = _exit_code(["reloc", "bench", "stability", "demo_experiment", *args])
+    _one_line(capsys, code, says)
+
+
+def test_stability_benchmark_out_inside_a_render_folder_is_refused(tmp_path, capsys):
+    job = tmp_path / "job"
+    job.mkdir()
+    (job / "design.json").write_text("{}")
+    for out in (job, job / "sub"):
+        code = _exit_code(["reloc", "bench", "stability", "demo_experiment", "--out", str(out)])
+        _one_line(capsys, code, "rendered design")
+    assert sorted(p.name for p in job.iterdir()) == ["design.json"]  # nothing written into it

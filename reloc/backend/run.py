@@ -29,7 +29,7 @@ import numpy as np
 from formats.atomic import save_npz_atomic, write_json_atomic
 from formats.camera import write_tum
 from formats.errors import UserError, check_output_folder
-from formats.cli import add_quiet, add_sensor
+from formats.cli import add_quiet, add_sensor, positive_int
 
 from .online import Backend, ClipState
 from ..frontend.clips import fuse
@@ -363,7 +363,7 @@ def register_cli(subparsers) -> None:
     p.add_argument("--budget", type=int, default=0, help="also write budget_B.txt: delayed-output replay with B frames")
     p.add_argument("--poses", choices=("odometry", "gt"), default="odometry",
                    help="within-clip poses: RGB-D odometry (default) or ground truth")
-    p.add_argument("--frames", type=int, help="only the first N frames")
+    p.add_argument("--frames", type=positive_int, help="only the first N frames")
     p.add_argument("--config", help="YAML overrides of the paper's thresholds")
     p.add_argument("--point-to-point", action="store_true", help="ablation: point-to-point refinement")
     p.add_argument("--no-run-level", action="store_true", help="ablation: no run-level decision")

@@ -12,6 +12,7 @@ ratios, never one run.
 """
 
 from __future__ import annotations
+from formats.cli import positive_int
 
 import argparse
 import statistics
@@ -62,7 +63,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m reloc.detection.bench_speed", description=__doc__.split("\n\n")[0])
     ap.add_argument("tour", help="a rendered tour with RGB frames")
     ap.add_argument("-m", "--models", nargs="+", required=True, help="ONNX models (the first is the reference)")
-    ap.add_argument("--frames", type=int, default=40)
+    ap.add_argument("--frames", type=positive_int, default=40)
     ap.add_argument("--repeats", type=int, default=3)
     args = ap.parse_args(argv)
     rows = bench(args.tour, args.models, args.frames, args.repeats)

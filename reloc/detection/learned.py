@@ -27,7 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
+from formats.cli import MAX_WORKERS as MAX_THREADS
 from formats.errors import UserError, one_line
+from formats.fields import shown
 from formats.tour import tonemap
 
 from .. import resources
@@ -62,8 +64,11 @@ class Perturbation:
             v = getattr(self, k)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise ValueError(f"perturbation.{k}: expected a non-negative integer, got {v!r}")
-        if isinstance(self.threads, bool) or not isinstance(self.threads, int) or self.threads < 1:
-            raise ValueError(f"perturbation.threads: expected a positive integer, got {self.threads!r}")
+        if isinstance(self.threads, bool) or not isinstance(self.threads, int) or not 1 <= self.threads <= MAX_THREADS:
+            raise ValueError(f"perturbation.threads: expected an integer from 1 to {MAX_THREADS}, got {shown(self.threads)}")
+        if self.input_jitter > 255 or self.seed >= 2**32:
+            raise ValueError(f"perturbation: input_jitter is at most 255 levels and seed below 2^32, got "
+                             f"{shown(self.input_jitter)} and {shown(self.seed)}")
         if not isinstance(self.graph_optimization, bool):
             raise ValueError(f"perturbation.graph_optimization: expected true or false, got {self.graph_optimization!r}")
 

@@ -13,7 +13,7 @@ from formats.design import list_tours
 from formats.errors import UserError, check_output_file, check_output_folder
 
 from .settings import TrainConfig
-from formats.cli import add_json, add_quiet
+from formats.cli import add_json, add_quiet, positive_int
 
 
 def _tours(args_tours) -> list[Path]:
@@ -98,15 +98,15 @@ def register_cli(subparsers) -> None:
     a = ds.add_parser("pack", help="pack rendered tours into a training set (.npz)")
     a.add_argument("tours", nargs="+", help="tour folders, or design folders holding tours")
     a.add_argument("--out", required=True, help="training set file (.npz)")
-    a.add_argument("--every", type=int, default=1, help="every N-th frame (default 1)")
+    a.add_argument("--every", type=positive_int, default=1, help="every N-th frame (default 1)")
     add_quiet(a)
     a.set_defaults(fn=cmd_pack)
     a = ds.add_parser("train", help="train the segmentation model, then export it (needs PyTorch)")
     a.add_argument("data", help="training set (.npz) from reloc detector pack")
     a.add_argument("--out", required=True, help="folder: checkpoint.pt, train_log.json, model.onnx")
     d = TrainConfig()
-    a.add_argument("--epochs", type=int, default=d.epochs, help=f"default {d.epochs}")
-    a.add_argument("--batch", type=int, default=d.batch, help=f"frames per step (default {d.batch})")
+    a.add_argument("--epochs", type=positive_int, default=d.epochs, help=f"default {d.epochs}")
+    a.add_argument("--batch", type=positive_int, default=d.batch, help=f"frames per step (default {d.batch})")
     a.add_argument("--lr", type=float, default=d.lr, help=f"Adam's learning rate (default {d.lr:g})")
     a.add_argument("--width", type=int, default=d.width, help=f"channels of the first stage (default {d.width})")
     a.add_argument("--seed", type=int, default=d.seed, help=f"default {d.seed}")
@@ -130,7 +130,7 @@ def register_cli(subparsers) -> None:
     a = ds.add_parser("eval", help="per-lighting class IoU, instance recall/precision, confusions, ms/frame")
     a.add_argument("tours", nargs="+", help="tour folders, or design folders holding tours")
     a.add_argument("--model", required=True, help="ONNX model (reloc detector export)")
-    a.add_argument("--every", type=int, default=1)
+    a.add_argument("--every", type=positive_int, default=1)
     a.add_argument("--sensor", help="read the frames through a sensor preset or file (formats/sensor_presets: "
                                     "structured_light, tof; default: the renders as they are)")
     add_json(a, "the report")

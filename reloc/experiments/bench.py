@@ -9,7 +9,7 @@ second are given with and without io, as the median over ``--repeat`` runs (the 
 
 from __future__ import annotations
 
-from formats.cli import add_json
+from formats.cli import add_json, positive_int
 
 import json
 import statistics
@@ -100,7 +100,7 @@ def register_cli(subparsers) -> None:
     a = sub.add_parser("frontend", help="front-end frames per second by stage")
     a.add_argument("--tour", required=True)
     a.add_argument("--map", required=True)
-    a.add_argument("--frames", type=int, default=600)
+    a.add_argument("--frames", type=positive_int, default=600)
     a.add_argument("--poses", choices=("odometry", "gt"), default="odometry")
     a.add_argument("--repeat", type=int, default=3)
     a.add_argument("--config")

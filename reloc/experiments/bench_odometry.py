@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from formats.atomic import write_json_atomic
-from formats.cli import add_json, add_out, run_command
+from formats.cli import add_json, add_out, positive_int, run_command
 from formats.errors import check_output_file
 
 from ..config import OdometryConfig
@@ -193,7 +193,7 @@ def format_table(rows: list[dict]) -> str:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The options of ``reloc bench odometry`` (declared once: the ``python -m`` entry point is the same command)."""
     p.add_argument("tour", help="tour directory")
-    p.add_argument("--frames", type=int, default=900, help="frames to load (default 900)")
+    p.add_argument("--frames", type=positive_int, default=900, help="frames to load (default 900)")
     p.add_argument("--start", type=int, default=0, help="first frame position (default 0)")
     p.add_argument("--window", type=int, default=300, help="frames per window (a clip-like length; default 300)")
     p.add_argument("--windows", type=int, help="number of windows (default: one every half window)")

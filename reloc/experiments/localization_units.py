@@ -13,7 +13,7 @@ states.
 
 from __future__ import annotations
 
-from formats.cli import add_json, add_quiet
+from formats.cli import add_json, add_quiet, positive_int
 
 import dataclasses
 import sys
@@ -177,7 +177,7 @@ def register_cli(subparsers) -> None:
     p.add_argument("--lengths", default=",".join(map(str, DEFAULT_LENGTHS)), help="unit lengths in frames (default 1,30,100,250)")
     p.add_argument("--poses", choices=("odometry", "gt"), default="odometry",
                    help="within-unit poses: RGB-D odometry (default) or the tour's ground truth")
-    p.add_argument("--frames", type=int, help="only the first N frames of the tour")
+    p.add_argument("--frames", type=positive_int, help="only the first N frames of the tour")
     p.add_argument("--one-frame-stride", type=int, default=1,
                    help="evaluate one-frame units on every k-th frame only (the expensive row)")
     p.add_argument("--config", help="YAML overrides of the paper's thresholds")

@@ -211,6 +211,15 @@ class _Runner:
             self.pool.shutdown()
 
 
+def check_not_a_render_folder(out: Path, what: str = "the experiment") -> None:
+    """Results written among a render job's tours would mix two kinds of folder: refused, one line."""
+    out = Path(out)
+    for d in (out, *out.parents):
+        if (d / DESIGN_FILE).is_file():
+            raise UserError(f"{out}: {'holds' if d == out else 'lies inside'} a rendered design ({d / DESIGN_FILE}); "
+                            f"write {what} into another folder")
+
+
 def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int | None = None,
                    progress: bool = True, plots: bool = True) -> dict:
     """Maps, every method on every query tour, evaluation, tables, plots and the report."""
@@ -229,8 +238,7 @@ def _run_experiment(spec: ExperimentSpec, out: Path, workers: int | None, progre
     workers = workers or spec.workers
     queries, mapping = design_tours(spec)
     _check_detector_inputs(spec, queries, mapping)
-    if (out / DESIGN_FILE).is_file():  # results written among a render job's tours would mix two kinds of folder
-        raise UserError(f"{out}: holds a rendered design ({DESIGN_FILE}); write the experiment into another folder")
+    check_not_a_render_folder(out)
     lock.acquire()  # one experiment per folder; made and locked only once the inputs are known to be good
     out.mkdir(parents=True, exist_ok=True)
     maps_dir = out / "maps"

@@ -19,7 +19,7 @@ import sys
 from pathlib import Path
 
 from formats.atomic import write_json_atomic, write_text_atomic
-from formats.cli import add_json, add_quiet, add_workers
+from formats.cli import add_json, add_quiet, add_workers, fraction
 from formats.errors import UserError
 
 # the default perturbations: name -> Perturbation settings
@@ -136,6 +136,9 @@ def cmd_stability(args) -> int:
         spec.tours_root = Path(args.tours)
     perts = dict(parse_perturbation(p) for p in args.perturbation) if args.perturbation else dict(DEFAULT_PERTURBATIONS)
     out = Path(args.out) if args.out else Path(spec.out).with_name(Path(spec.out).name + "_stability")
+    from .runner import check_not_a_render_folder
+
+    check_not_a_render_folder(out, "the stability benchmark")
     rep = stability(spec, out, perts, methods=tuple(args.methods.split(",")), workers=args.workers,
                     progress=not args.quiet)
     print(json.dumps(rep, indent=1) if args.json else format_stability(rep))
@@ -158,8 +161,10 @@ def add_arguments(a) -> None:
     a.add_argument("--perturbation", action="append", metavar="P",
                    help="jitter:SEED[:LEVELS], threads:N or no-graph-opt; repeat for several (default: "
                         "jitter:1, jitter:2, jitter:3, threads:2, no-graph-opt)")
-    a.add_argument("--max-spread", type=float, help="fail (exit 1) when a recall's spread exceeds this fraction")
-    a.add_argument("--max-tour-loss", type=float, help="fail (exit 1) when a tour loses more than this fraction")
+    a.add_argument("--max-spread", type=fraction, metavar="F",
+                   help="fail (exit 1) when a recall's spread exceeds this fraction (0..1)")
+    a.add_argument("--max-tour-loss", type=fraction, metavar="F",
+                   help="fail (exit 1) when a tour loses more than this fraction (0..1)")
     add_workers(a, "processes", default=None)
     add_quiet(a)
     add_json(a, "the report")

@@ -9,7 +9,7 @@ import numpy as np
 
 from formats import camera
 from formats.errors import UnknownNameError, UserError
-from formats.cli import add_json
+from formats.cli import add_json, positive_int
 
 from .clearance import CLEARANCE_TOL, _range_text, _what, clearance_report, declared_clearance, replan_command
 from .files import load_path, save_path
@@ -188,7 +188,7 @@ def register_cli(subparsers) -> None:
     ps = plan.add_subparsers(dest="kind", required=True)
 
     def common(a, frames):
-        a.add_argument("--frames", type=int, default=frames)
+        a.add_argument("--frames", type=positive_int, default=frames)
         a.add_argument("--seed", type=int, default=0)
         a.add_argument("--fps", type=float, default=camera.DEFAULT_FPS)
         a.add_argument("--speed", type=float, default=1.0, help="m/s (default 1)")

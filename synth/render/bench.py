@@ -21,7 +21,7 @@ import numpy as np
 
 from formats.atomic import write_nofollow
 from formats.camera import Intrinsics, write_tum
-from formats.cli import add_json
+from formats.cli import add_json, positive_int
 
 from .settings import QUALITY
 
@@ -135,7 +135,7 @@ def cmd_bench(args) -> int:
 
 def register_cli(subparsers) -> None:
     a = subparsers.add_parser("bench", help="seconds per frame of each renderer and quality on this machine")
-    a.add_argument("--frames", type=int, default=5, help="frames per measurement (median reported)")
+    a.add_argument("--frames", type=positive_int, default=5, help="frames per measurement (median reported)")
     a.add_argument("--quality", action="append", choices=list(QUALITY), help="RGB presets to time (default: all)")
     add_json(a)
     a.set_defaults(fn=cmd_bench)
