@@ -163,7 +163,7 @@ def test_a_closed_stdout_pipe_ends_a_command_quietly():
 
 
 @pytest.mark.parametrize("argv, part", [
-    (["synth", "render", "smoke", "--workers", "0"], "synth render: error: argument --workers: expected a positive integer, got '0'"),
+    (["synth", "render", "smoke", "--workers", "0"], "synth render: error: argument --workers: expected an integer from 1 to 256, got '0'"),
     (["synth", "tour", "render", "apt_0", "query", "--out", "x", "--device", "tpu"], "argument --device: invalid choice: 'tpu'"),
     (["synth", "rendr"], "synth: error: argument group: invalid choice: 'rendr'"),
     (["reloc", "experiment", "demo_experiment", "--workers", "-2"], "reloc experiment: error: argument --workers"),
