@@ -132,7 +132,7 @@ import numpy as np
 
 from .camera import Intrinsics
 from .errors import SceneFormatError
-from .fields import number
+from .fields import number, shown
 from .yamlfile import read_yaml
 
 PRESET_DIR = Path(__file__).parent / "sensor_presets"
@@ -308,7 +308,7 @@ def _section(doc, cls, file: str, key: str):
     return m
 
 
-def parse_sensor(doc, source: str) -> Sensor:
+def parse_sensor(doc, source: str, _chain: tuple = ()) -> Sensor:
     """A Sensor from a YAML document (keys: name, source, depth, color); ``source`` is the file the
     document came from, named by every error together with the offending key."""
     if not isinstance(doc, dict):
@@ -321,10 +321,18 @@ def parse_sensor(doc, source: str) -> Sensor:
         if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9_-]+", name):
             raise SceneFormatError(source, "name", f"expected a name of letters, digits, _ and -, got {name!r}")
         base = doc["base"]
-        if not isinstance(base, str) or base == Path(str(source)).stem:
-            raise SceneFormatError(source, "base", f"expected the name of another sensor preset, got {base!r}")
+        if not isinstance(base, str) or not base:
+            raise SceneFormatError(source, "base", f"expected the name of another sensor preset or file, got {shown(base)}")
+        here = Path(str(source))
+        bp = _sensor_file(base, source, "base", here.parent)
+        chain = (*_chain, here.resolve())
+        if bp.resolve() in chain:
+            loop = " -> ".join(c.name for c in chain[chain.index(bp.resolve()):]) + f" -> {bp.name}"
+            raise SceneFormatError(source, "base", f"a cycle of bases: {loop}")
+        if len(chain) > MAX_BASE_CHAIN:
+            raise SceneFormatError(source, "base", f"more than {MAX_BASE_CHAIN} bases deep")
         try:
-            return scale_noise(load_sensor(base), doc.get("noise_scale", 1.0), name)
+            return scale_noise(parse_sensor(read_yaml(bp), str(bp), chain), doc.get("noise_scale", 1.0), name)
         except ValueError as e:
             raise SceneFormatError(source, "noise_scale", str(e).split(": ", 1)[1]) from None
     allowed = {"name", "source", "depth", "color", "resolution"}
@@ -375,17 +383,29 @@ def list_sensors() -> list[str]:
     return sorted(p.stem for p in PRESET_DIR.glob("*.yaml"))
 
 
-def load_sensor(name_or_file) -> Sensor:
-    """A preset by name (``formats/sensor_presets/<name>.yaml``) or a sensor YAML file."""
-    if isinstance(name_or_file, Sensor):
-        return name_or_file
-    s = str(name_or_file)
+def _sensor_file(s: str, source=None, field: str = "sensor", folder: Path | None = None) -> Path:
+    """The file a sensor name or path names: a preset name (``formats/sensor_presets/<name>.yaml``),
+    else a YAML file (relative to ``folder``, the naming file's, when given). An unknown preset is
+    reported against ``source`` and ``field`` (the file and key that named it)."""
     p = Path(s)
     if p.suffix.lower() not in (".yaml", ".yml", ".json") and "/" not in s and "\\" not in s:
         p = PRESET_DIR / f"{s}.yaml"
         if not p.is_file():
-            raise SceneFormatError(PRESET_DIR, "sensor", f"unknown sensor preset {s!r}; known: {', '.join(list_sensors())} (or a YAML file)")
-    return parse_sensor(read_yaml(p), str(p))
+            raise SceneFormatError(source if source is not None else PRESET_DIR, field,
+                                   f"unknown sensor preset {shown(s)}; known: {', '.join(list_sensors())} (or a YAML file)")
+        return p
+    return folder / p if folder is not None and not p.is_absolute() else p
+
+
+MAX_BASE_CHAIN = 8  # a scaled sensor's base may itself be scaled, this many levels deep
+
+
+def load_sensor(name_or_file, _chain: tuple = ()) -> Sensor:
+    """A preset by name (``formats/sensor_presets/<name>.yaml``) or a sensor YAML file."""
+    if isinstance(name_or_file, Sensor):
+        return name_or_file
+    p = _sensor_file(str(name_or_file))
+    return parse_sensor(read_yaml(p), str(p), _chain)
 
 
 # ---------------------------------------------------------------- seeding

@@ -331,3 +331,42 @@ def test_stability_benchmark_out_inside_a_render_folder_is_refused(tmp_path, cap
         code = _exit_code(["reloc", "bench", "stability", "demo_experiment", "--out", str(out)])
         _one_line(capsys, code, "rendered design")
     assert sorted(p.name for p in job.iterdir()) == ["design.json"]  # nothing written into it
+
+
+# ---------------------------------------------------------------------------------------------
+# sensor files: bases
+
+
+@pytest.mark.parametrize("case", ["self", "pair", "unknown"])
+def test_sensor_bases_that_loop_or_do_not_exist_are_one_line(tmp_path, case):
+    from formats.sensors import load_sensor
+
+    a, b = tmp_path / "a.yaml", tmp_path / "b.yaml"
+    if case == "self":
+        a.write_text("name: a\nbase: a.yaml\nnoise_scale: 2\n")
+        want = "a cycle of bases: a.yaml -> a.yaml"
+    elif case == "pair":
+        a.write_text("name: a\nbase: b.yaml\nnoise_scale: 2\n")
+        b.write_text("name: b\nbase: a.yaml\nnoise_scale: 2\n")
+        want = "a cycle of bases: a.yaml -> b.yaml -> a.yaml"
+    else:
+        a.write_text("name: a\nbase: kinect9\n")
+        want = "unknown sensor preset 'kinect9'"
+    with pytest.raises(SceneFormatError) as e:
+        load_sensor(str(a))
+    assert want in str(e.value) and len(str(e.value).splitlines()) == 1
+    assert e.value.field == "base" and e.value.file in (str(a), str(b))
+    if case == "unknown":
+        assert e.value.file == str(a)
+
+
+def test_a_sensor_base_file_is_found_next_to_the_sensor_file(tmp_path, monkeypatch):
+    from formats.sensors import load_sensor
+
+    d = tmp_path / "sensors"
+    d.mkdir()
+    (d / "noisy.yaml").write_text("name: noisy\nbase: structured_light\nnoise_scale: 2\n")
+    (d / "noisier.yaml").write_text("name: noisier\nbase: noisy.yaml\nnoise_scale: 2\n")
+    monkeypatch.chdir(tmp_path)  # not the sensor files' folder
+    s = load_sensor(str(d / "noisier.yaml"))
+    assert s.name == "noisier"
