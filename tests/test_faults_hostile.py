@@ -370,3 +370,48 @@ def test_a_sensor_base_file_is_found_next_to_the_sensor_file(tmp_path, monkeypat
     monkeypatch.chdir(tmp_path)  # not the sensor files' folder
     s = load_sensor(str(d / "noisier.yaml"))
     assert s.name == "noisier"
+
+
+# ---------------------------------------------------------------------------------------------
+# navmeshes and the stand-in tool
+
+
+@pytest.mark.parametrize("setting, value", [("cell_size", 1e-9), ("agent_radius", 1e9), ("cell_size", float("nan"))])
+def test_a_navmesh_with_hostile_settings_is_one_line(tmp_path, setting, value):
+    import struct
+
+    from replicacad_real_fixture import FILES
+    from synth.replicacad.navmesh import HEADER, PARAMS, SETTINGS, SETTINGS_NAMES, read_navmesh
+
+    b = bytearray((FILES / "navmeshes" / "apt_0.navmesh").read_bytes())
+    at = HEADER.size + PARAMS.size + 4 * SETTINGS_NAMES.index(setting)
+    assert SETTINGS.size > 4 * SETTINGS_NAMES.index(setting)
+    struct.pack_into("<f", b, at, value)
+    p = tmp_path / "hostile.navmesh"
+    p.write_bytes(bytes(b))
+    with pytest.raises(SceneFormatError) as e:
+        read_navmesh(p)
+    assert str(p) in str(e.value) and "\n" not in str(e.value)
+    assert f"settings.{setting}" in str(e.value) or "implausible" in str(e.value)
+
+
+def test_a_failed_standin_build_leaves_nothing_and_links_out_are_refused(tmp_path, capsys):
+    import subprocess
+    import sys
+
+    repo = Path(__file__).resolve().parents[1]
+    src = tmp_path / "src"
+    (src / "configs" / "stages").mkdir(parents=True)
+    (src / "configs" / "stages" / "bad.stage_config.json").write_text("{not json")
+    out = tmp_path / "out"
+    tool = [sys.executable, str(repo / "tools" / "replicacad_standin.py")]
+    p = subprocess.run(tool + [str(src), str(out)], capture_output=True, text=True)
+    assert p.returncode != 0 and "Traceback" not in p.stderr, p.stderr
+    assert not out.exists() and not (tmp_path / "out.building").exists()
+    victim = _victim(tmp_path)
+    (src / "configs" / "stolen.txt").symlink_to(victim)
+    p = subprocess.run(tool + [str(src), str(out)], capture_output=True, text=True)
+    assert p.returncode == 2 and "outside" in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
+    assert not (tmp_path / "out.building").exists()
+    p = subprocess.run(tool + [str(src), str(out), "--ceiling", "nan"], capture_output=True, text=True)
+    assert p.returncode == 2 and "--ceiling" in p.stderr

@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import shutil
 import sys
 import time
@@ -207,6 +208,17 @@ def glb_bounds_habitat(path: Path) -> np.ndarray:
     return np.stack([v.min(0), v.max(0)])
 
 
+def _refuse_outside_links(src: Path) -> None:
+    """A link in SRC that leads outside it would copy another file of the user's into OUT: refused."""
+    import os
+
+    for d, dirs, files in os.walk(src):
+        for n in dirs + files:
+            p = Path(d) / n
+            if p.is_symlink() and not p.resolve().is_relative_to(src):
+                raise UserError(f"{p}: a link to {p.resolve()}, outside {src}; copy the file itself into the dataset")
+
+
 def build(src: Path, final: Path, spec: StandinSpec, force: bool = False, hold: bool = True) -> list[dict]:
     """Copy ``src`` to ``final`` with stand-ins (built in a temporary sibling folder, then swapped in,
     so that readers of ``final`` never see a half-built dataset)."""
@@ -216,10 +228,15 @@ def build(src: Path, final: Path, spec: StandinSpec, force: bool = False, hold: 
     if final.exists() and not force:
         raise UserError(f"{final}: exists (pass --force to replace it)")
     out = final.with_name(final.name + ".building")
+    _refuse_outside_links(src)
     if out.exists():
         shutil.rmtree(out)
-    shutil.copytree(src, out, symlinks=False)
-    rows = _fill(out, spec, hold)
+    try:
+        shutil.copytree(src, out, symlinks=False)
+        rows = _fill(out, spec, hold)
+    except BaseException:  # a failed build leaves nothing behind (OUT.building is a full copy of SRC)
+        shutil.rmtree(out, ignore_errors=True)
+        raise
     if final.exists():
         old = final.with_name(final.name + ".old")
         if old.exists():
@@ -318,6 +335,8 @@ def main(argv=None) -> int:
     ap.add_argument("--report", type=Path, help="write the rows as JSON here")
     a = ap.parse_args(argv)
     try:
+        if not (math.isfinite(a.ceiling) and 1.5 <= a.ceiling <= 10.0):
+            raise UserError(f"--ceiling: expected a height from 1.5 to 10 m, got {a.ceiling:g}")
         rows = build(a.src, a.out, StandinSpec(ceiling=a.ceiling, windows=not a.no_windows), a.force,
                      hold=not a.no_hold_objects)
     except UserError as e:

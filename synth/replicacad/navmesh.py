@@ -310,6 +310,10 @@ def read_navmesh(path) -> NavMesh:
     settings = NavSettings(*[float(v) for v in s[:13]], *[bool(v) for v in s[13:]])
     if not (settings.cell_size > 0 and settings.cell_height > 0 and settings.agent_radius >= 0 and settings.agent_height > 0):
         fail(path, None, f"implausible navmesh settings {settings}")
+    for k, (lo, hi) in SETTING_RANGES.items():  # a hostile header must not ask for a grid larger than memory
+        v = getattr(settings, k)
+        if not (math.isfinite(v) and lo <= v <= hi):
+            fail(path, f"settings.{k}", f"{v:g} m is outside the range a navmesh can have ({lo:g} to {hi:g} m)")
     nav = NavMesh(str(path), version, np.array(p[:3], float), float(p[3]), float(p[4]), int(p[5]), int(p[6]), settings, [])
     o = need
     for t in range(ntiles):
@@ -580,6 +584,11 @@ def _solid_surface(g: Grid, solids) -> tuple[dict, dict]:
     return parts, counts
 
 
+SETTING_RANGES = {"cell_size": (1e-3, 10.0), "cell_height": (1e-3, 10.0), "agent_radius": (0.0, 10.0),
+                  "agent_height": (1e-3, 20.0)}  # metres; habitat's defaults: 0.05, 0.2, 0.1, 1.5
+MAX_STANDIN_CELLS = 50_000_000  # the stand-in's floor grid (ReplicaCAD's apartment: ~0.1 M cells)
+
+
 def standin_stage(nav: NavMesh, spec: StandinSpec | None = None) -> Standin:
     """A stage that matches the navmesh: what an agent of the navmesh's radius could walk on is
     floor, and walls stand where it could not (see the module docstring of
@@ -600,6 +609,9 @@ def standin_stage(nav: NavMesh, spec: StandinSpec | None = None) -> Standin:
         margin = max(margin, nav.agent_radius + spec.keep_max + spec.keep_margin + (max(1, int(spec.wall_cells)) + 3) * cell)
     lo = np.floor((pts.min(axis=0) - margin) / cell) * cell
     shape = tuple(int(v) for v in np.ceil((pts.max(axis=0) + margin - lo) / cell))
+    if not np.isfinite(pts).all() or shape[0] * shape[1] > MAX_STANDIN_CELLS:
+        fail(nav.path, "settings.cell_size", f"the navmesh's extent at a {cell:g} m cell size needs a {shape[0]} x {shape[1]} "
+                                             f"grid; at most {MAX_STANDIN_CELLS:,} cells are built")
     walk = [lv.grid(lo, shape) for lv in levels]
     feet = [footprint_of(w, nav.agent_radius) for w in walk]
     U = np.zeros(shape, bool)
