@@ -415,3 +415,32 @@ def test_a_failed_standin_build_leaves_nothing_and_links_out_are_refused(tmp_pat
     assert not (tmp_path / "out.building").exists()
     p = subprocess.run(tool + [str(src), str(out), "--ceiling", "nan"], capture_output=True, text=True)
     assert p.returncode == 2 and "--ceiling" in p.stderr
+
+
+# ---------------------------------------------------------------------------------------------
+# the dataset's semantic lexicon
+
+
+@pytest.fixture(scope="module")
+def real_root(tmp_path_factory) -> Path:
+    from replicacad_real_fixture import write_real_fixture
+
+    return write_real_fixture(tmp_path_factory.mktemp("rc_real")).resolve()
+
+
+def test_a_duplicate_id_in_the_dataset_lexicon_is_refused(real_root, tmp_path, capsys):
+    import json
+    import shutil
+
+    root = tmp_path / "rc"
+    shutil.copytree(real_root, root)
+    lex = root / "configs/ssd/replicaCAD_semantic_lexicon.json"
+    doc = json.loads(lex.read_text())
+    names = {c["name"]: c["id"] for c in doc["classes"]}
+    doc["classes"].append({"name": "bed", "id": names["basket"]})  # apt_0's basket would import as a bed
+    lex.write_text(json.dumps(doc))
+    from synth.cli import main as synth_main
+
+    code = synth_main(["scene", "import-replicacad", str(root), "apt_0", "--out", str(tmp_path / "a.yaml")])
+    err = _one_line(capsys, code, f"id {names['basket']} ('bed') is already classes[")
+    assert str(lex) in err and "'basket'" in err and not (tmp_path / "a.yaml").exists()

@@ -68,6 +68,7 @@ from pathlib import Path
 import numpy as np
 from formats.boxes import MAX_OBJECT_ID
 from formats.errors import UnknownNameError
+from formats.fields import shown
 
 from ..scene.classes import ClassTable, LexiconTable, class_table, lexicon_table
 from .receptacles import read_receptacles, to_object_frame
@@ -286,7 +287,7 @@ def read_semantics(root: Path, scene_path: Path, doc: dict, classes: ClassTable)
     if key not in descs:
         fail(where, field, f"names '{key}', which semantic_scene_descriptor_instances in {cfg_path.name} lacks")
     rel = string(cfg_path, descs[key], f"semantic_scene_descriptor_instances.{key}")
-    lex = (root / rel).resolve()
+    lex = inside_root(cfg_path, f"semantic_scene_descriptor_instances.{key}", root / rel, root)
     if not lex.is_file():
         fail(cfg_path, f"semantic_scene_descriptor_instances.{key}", f"lexicon not found: {lex}")
     doc_l = mapping(lex, read_json(lex), None)
@@ -298,8 +299,12 @@ def read_semantics(root: Path, scene_path: Path, doc: dict, classes: ClassTable)
         c = mapping(lex, c, f"classes[{k}]")
         cid, nm = c.get("id"), c.get("name")
         if isinstance(cid, bool) or not isinstance(cid, int):
-            fail(lex, f"classes[{k}].id", f"expected an integer, got {cid!r}")
-        names[cid] = string(lex, nm, f"classes[{k}].name")
+            fail(lex, f"classes[{k}].id", f"expected an integer, got {shown(cid)}")
+        nm = string(lex, nm, f"classes[{k}].name")
+        if cid in names:  # which name would habitat use? not ours to guess: a basket must not import as a bed
+            first = next(j for j, c2 in enumerate(raw) if isinstance(c2, dict) and c2.get("id") == cid)
+            fail(lex, f"classes[{k}].id", f"id {cid} ({shown(nm)}) is already classes[{first}] ({shown(names[cid])})")
+        names[cid] = nm
     missing = sorted(set(names.values()) - set(table.lexicon))
     if missing:
         fail(lex, "classes", f"lexicon name(s) {', '.join(missing)} have no class in {table.source}")

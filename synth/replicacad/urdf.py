@@ -505,9 +505,11 @@ def _dataset_urdf_dirs(root: Path) -> list[Path]:
             if not isinstance(g, str):
                 continue
             g = g.replace("\\", "/").rstrip("/")
-            if Path(g).is_absolute() or ".." in Path(g).parts:  # ignored as habitat would not find it there either
-                hf.inside_root(cfg_path, "articulated_objects.paths", cfg_path.parent / g, root)
+            if Path(g).is_absolute() or ".." in Path(g).parts:
+                continue  # outside the dataset (ReplicaCAD's own names ../hab_fetch_1.0/robots, another dataset): not searched
             for hit in sorted(cfg_path.parent.glob(g)) if any(c in g for c in "*?[") else [cfg_path.parent / g]:
+                if not hit.resolve().is_relative_to(Path(root).resolve()):
+                    continue  # a link out of the dataset
                 if hit.is_dir():
                     dirs.append(hit)
                 elif hit.is_file() and hit.suffix == ".urdf":
