@@ -444,3 +444,18 @@ def test_a_duplicate_id_in_the_dataset_lexicon_is_refused(real_root, tmp_path, c
     code = synth_main(["scene", "import-replicacad", str(root), "apt_0", "--out", str(tmp_path / "a.yaml")])
     err = _one_line(capsys, code, f"id {names['basket']} ('bed') is already classes[")
     assert str(lex) in err and "'basket'" in err and not (tmp_path / "a.yaml").exists()
+
+
+# ---------------------------------------------------------------------------------------------
+# graded levels never merge silently
+
+
+@pytest.mark.parametrize("levels, says", [(["0.5", "0.5000001"], "same level to the percent"),
+                                          (["0.001", "0.004"], "same level to the percent"),
+                                          (["0.0149", "0.0151"], "both move")])
+def test_graded_levels_that_would_merge_are_refused(tmp_path, capsys, levels, says):
+    from synth.cli import main as synth_main
+
+    code = synth_main(["scene", "grade", "apt_0", "--levels", *levels, "--out", str(tmp_path / "g")])
+    _one_line(capsys, code, says)
+    assert not (tmp_path / "g").exists() or not any((tmp_path / "g").iterdir())

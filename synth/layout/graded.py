@@ -50,7 +50,12 @@ def check_strengths(strengths, what: str = "strength") -> list[float]:
         out.append(float(s))
     if len(set(out)) != len(out):
         raise UserError(f"{what}: a level is listed twice ({', '.join(map(str, out))})")
-    return sorted(out)
+    out = sorted(out)
+    for a, b in zip(out, out[1:]):  # level names are in whole percent (apt_0_g050): two levels must not share one
+        if level_name("x", a) == level_name("x", b):
+            raise UserError(f"{what}: {a:g} and {b:g} are the same level to the percent that names it "
+                            f"({level_name('x', a)[2:]}); levels must differ by at least 0.01")
+    return out
 
 
 def level_name(base: str, level) -> str:
@@ -109,7 +114,13 @@ def graded_variants(ref: Layout, strengths, seed: int, walkway: np.ndarray | Non
     ref_report = check_layout(ref) if is_imported(ref) else None
     units = _units(placer, pinned)
     order = [units[k].id for k in rng.permutation(len(units))]
-    want = {int(round(s * len(order))): s for s in levels}
+    want: dict[int, float] = {}
+    for s_ in levels:  # each level moves its own number of units, or it is not a level of its own
+        k = int(round(s_ * len(order)))
+        if k in want:
+            raise UserError(f"levels {want[k]:g} and {s_:g} both move {k} of the {len(order)} movable units of "
+                            f"'{ref.name}'; on this flat levels must differ by at least {1 / max(len(order), 1):.3g}")
+        want[k] = s_
     out: list[tuple[object, Layout]] = []
     moved = fixed_moved = 0
 
