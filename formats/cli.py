@@ -117,7 +117,9 @@ def run_command(prog: str, fn, args) -> int:
             return int(fn(args) or 0)
     except UserError as e:
         _end_progress_line()
-        print(f"{prog}: error: {e}", file=sys.stderr)
+        from .fields import terminal_safe
+
+        print(f"{prog}: error: {terminal_safe(e)}", file=sys.stderr)  # what a file says cannot drive the terminal
         return 2
     except KeyboardInterrupt as e:
         _end_progress_line()

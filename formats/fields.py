@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import reprlib
 from pathlib import Path
 from typing import NoReturn
@@ -57,6 +58,33 @@ def inside_root(file, field: str | None, path, root, what: str = "the dataset fo
         fail(file, field, f"{shown(str(path))} lies outside {what} {rr}; set {ALLOW_OUTSIDE_ENV}=1 to allow "
                           "paths outside it on purpose")
     return p
+
+
+MAX_NAME = 120  # characters of a name (a spec's, a preset's, a check's): names are printed on every progress refresh
+# control characters (C0, DEL, C1) and the bidirectional overrides and isolates (Trojan Source)
+_UNSAFE = re.compile("[\x00-\x1f\x7f-\x9f\u061c\u200e\u200f\u202a-\u202e\u2066-\u2069]")
+
+
+def terminal_safe(text) -> str:
+    """``text`` with control and bidi characters escaped (``\\x1b``, ``\\u202e``): what a file says can
+    be printed without driving the terminal (colours, cursor moves, a reversed line). The one home of
+    that rule: error lines (``formats.cli``) and progress bars go through it."""
+    t = str(text)
+    return _UNSAFE.sub(lambda m: m.group(0).encode("unicode_escape").decode("ascii"), t) if _UNSAFE.search(t) else t
+
+
+def clean_name(name: str, file, field: str | None) -> str:
+    """A name a user gave: text of at most ``MAX_NAME`` characters without control or bidi characters."""
+    if len(name) > MAX_NAME:
+        fail(file, field, f"a name of {len(name)} characters; at most {MAX_NAME}")
+    if _UNSAFE.search(name):
+        fail(file, field, f"{terminal_safe(shown(name))} holds control or bidirectional characters")
+    return name
+
+
+def name_text(file, v, field: str = "name") -> str:
+    """A spec's or preset's ``name``: non-empty text, ``clean_name``'s rules."""
+    return clean_name(string(file, v, field), file, field)
 
 
 def _is_number(v) -> bool:

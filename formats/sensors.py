@@ -318,8 +318,8 @@ def parse_sensor(doc, source: str, _chain: tuple = ()) -> Sensor:
         if extra:
             raise SceneFormatError(source, extra[0], "a scaled sensor holds name, base and noise_scale only")
         name = doc.get("name", Path(str(source)).stem)
-        if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9_-]+", name):
-            raise SceneFormatError(source, "name", f"expected a name of letters, digits, _ and -, got {name!r}")
+        if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9_-]{1,120}", name):
+            raise SceneFormatError(source, "name", f"expected a name of letters, digits, _ and - (at most 120), got {shown(name)}")
         base = doc["base"]
         if not isinstance(base, str) or not base:
             raise SceneFormatError(source, "base", f"expected the name of another sensor preset or file, got {shown(base)}")
@@ -340,9 +340,9 @@ def parse_sensor(doc, source: str, _chain: tuple = ()) -> Sensor:
         if k not in allowed:
             raise SceneFormatError(source, str(k), f"unknown key; known: {', '.join(sorted(allowed))}")
     name = doc.get("name", Path(str(source)).stem)
-    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9_-]+", name):
+    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9_-]{1,120}", name):
         raise SceneFormatError(source, "name", f"expected a name of letters, digits, _ and - (it names folders and "
-                                               f"check keys), got {name!r}")
+                                               f"check keys; at most 120), got {shown(name)}")
     cite = doc.get("source", str(source))
     if not isinstance(cite, str):
         raise SceneFormatError(source, "source", f"expected text, got {cite!r}")

@@ -459,3 +459,57 @@ def test_graded_levels_that_would_merge_are_refused(tmp_path, capsys, levels, sa
     code = synth_main(["scene", "grade", "apt_0", "--levels", *levels, "--out", str(tmp_path / "g")])
     _one_line(capsys, code, says)
     assert not (tmp_path / "g").exists() or not any((tmp_path / "g").iterdir())
+
+
+# ---------------------------------------------------------------------------------------------
+# names and text that reach the terminal
+
+
+@pytest.mark.parametrize("name, says", [("evil\x1b]0;pwned\x07\nname", "control or bidirectional"),
+                                        ("abc\u202eexe.fdp", "control or bidirectional"),
+                                        ("n" * 100_000, "a name of 100000 characters; at most 120"),
+                                        (["x"], "expected a non-empty string")])
+@pytest.mark.parametrize("where", ["render spec", "experiment spec", "lighting preset", "dimmer file", "layout"])
+def test_names_are_bounded_and_printable(tmp_path, capsys, name, says, where):
+    from formats.fields import MAX_NAME  # noqa: F401
+    from reloc.experiments.spec import load_experiment
+    from synth.jobs.spec import load_spec
+    from synth.scene.lighting import load_lighting
+    from synth.scene.model import load_layout
+
+    f = tmp_path / "x.yaml"
+    if where == "render spec":
+        doc = {"name": name, "out": str(tmp_path / "o"), "designs": [{"layouts": ["apt_0"], "path": "query"}]}
+        load = load_spec
+    elif where == "experiment spec":
+        doc = yaml.safe_load((Path(__file__).resolve().parents[1] / "reloc/specs/demo_experiment.yaml").read_text())
+        doc["name"] = name
+        load = load_experiment
+    elif where == "lighting preset":
+        doc, load = {"name": name, "sky": {"color": [0, 0, 0], "strength": 0}}, load_lighting
+    elif where == "dimmer file":
+        doc, load = {"name": name, "dimmer": 0.75}, load_lighting
+    else:
+        doc = yaml.safe_load((Path(__file__).resolve().parents[1] / "synth/data/layouts/apt_0.yaml").read_text())
+        doc["name"] = name
+        load = load_layout
+    f.write_text(yaml.safe_dump(doc, allow_unicode=True))
+    with pytest.raises(UserError) as e:
+        load(str(f))
+    msg = str(e.value)
+    assert says in msg and "name" in msg, msg
+    from formats.fields import terminal_safe
+
+    safe = terminal_safe(msg)
+    assert "\x1b" not in safe and "\x07" not in safe and "\u202e" not in safe and "\n" not in safe
+    assert len(msg) < 600
+
+
+def test_error_lines_escape_what_a_file_says(tmp_path, capsys):
+    from synth.cli import main as synth_main
+
+    f = tmp_path / "spec.yaml"
+    f.write_text(yaml.safe_dump({"name": "ok", "out": str(tmp_path / "o"), "designs": [{"layouts": ["\x1b[2J\x1b[31mgotcha"], "path": "query"}]}))
+    code = synth_main(["render", str(f), "--dry-run"])
+    err = capsys.readouterr().err
+    assert code == 2 and "\x1b" not in err and "\\x1b" in err and len(err.strip().splitlines()) == 1, err

@@ -61,6 +61,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from formats.errors import SceneFormatError, UserError
+from formats.fields import clean_name, shown
 from formats.cli import add_json
 
 from .tables import FACTOR_KEYS, METRICS, interval_figures, read_results
@@ -107,12 +108,20 @@ def parse_checks(path) -> list[Check]:
                 raise SceneFormatError(p, field, "expected {check: 'METRIC OP VALUE', name: ...}")
             name, it = it.get("name"), it["check"]
         if not isinstance(it, str):
-            raise SceneFormatError(p, field, f"expected an assertion like 'videoreloc.kept >= 0.75', got {it!r}")
+            raise SceneFormatError(p, field, f"expected an assertion like 'videoreloc.kept >= 0.75', got {shown(it)}")
         m = _EXPR.match(it)
         if not m:
-            raise SceneFormatError(p, field, f"cannot parse {it!r}: expected METRIC OP VALUE with OP one of "
+            raise SceneFormatError(p, field, f"cannot parse {shown(it)}: expected METRIC OP VALUE with OP one of "
                                    f"{', '.join(OPS)}")
-        out.append(Check(it.strip(), str(name or it.strip()), m.group(1), m.group(2), m.group(3)))
+        try:
+            bound = float(m.group(3))
+        except ValueError:
+            bound = None  # a metric name
+        if bound is not None and not math.isfinite(bound):  # '!= nan' would always pass, '>= nan' always fail
+            raise SceneFormatError(p, field, f"{shown(it)}: the bound must be a finite number, got {m.group(3)}")
+        if name is not None and not isinstance(name, str):
+            raise SceneFormatError(p, f"{field}.name", f"expected text, got {shown(name)}")
+        out.append(Check(it.strip(), clean_name(str(name or it.strip()), p, f"{field}.name"), m.group(1), m.group(2), m.group(3)))
     return out
 
 

@@ -24,6 +24,7 @@ import sys
 import time
 from pathlib import Path
 
+from formats.fields import terminal_safe
 from formats.atomic import write_json_atomic
 from formats.design import DESIGN_FILE, list_tours, read_design, tour_name
 from formats.errors import SceneFormatError, UserError, check_output_folder
@@ -146,7 +147,7 @@ class _Runner:
         from tqdm import tqdm
 
         self.pool = _pool(workers)
-        self.bar = tqdm(total=total, desc=desc, unit="task", file=sys.stderr, disable=not progress)
+        self.bar = tqdm(total=total, desc=terminal_safe(desc), unit="task", file=sys.stderr, disable=not progress)
         self.failed: dict[str, str] = {}
         self.seconds: dict[str, float] = {}
 

@@ -307,7 +307,7 @@ def load_experiment(path) -> ExperimentSpec:
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         _fail(src, "seed", f"expected a non-negative integer, got {seed!r}")
     return ExperimentSpec(
-        name=fields.string(src, doc["name"], "name"), source=src, render=render, tours_root=tours_root,
+        name=fields.name_text(src, doc["name"], "name"), source=src, render=render, tours_root=tours_root,
         out=Path(fields.out_folder(src, doc["out"])), mapping=mapping, query=fields.string(src, doc["query"], "query"),
         unchanged=fields.string(src, doc["unchanged"], "unchanged"), map=doc.get("map", "build"),
         methods=tuple(methods), tables=tuple(tables), one_frame_stride=int(doc.get("one_frame_stride", 15)),

@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from formats.fields import terminal_safe
 from formats import frames as fr
 from formats.boxes import STRUCTURE_CLASSES, STRUCTURE_ID_MAX, STRUCTURE_ID_MIN
 from formats.camera import Intrinsics
@@ -313,7 +314,7 @@ def _check_frames(tour: Tour, rep: dict, present: set[int], known, progress):
     rgb_p99: dict[int, float] = {}  # frame -> 99th-percentile linear luminance
     if progress is None:
         progress = sys.stderr.isatty()
-    for k, idx in enumerate(tqdm(tour.frame_indices, desc=f"checking {tour.name}", unit="frame", disable=not progress)):
+    for k, idx in enumerate(tqdm(tour.frame_indices, desc=terminal_safe(f"checking {tour.name}"), unit="frame", disable=not progress)):
         idx = int(idx)
         if idx not in present:
             continue

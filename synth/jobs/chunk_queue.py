@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from formats.fields import terminal_safe
+
 from ..render.chunks import run_chunk_process, stopping_workers
 from .plan import Chunk, Plan
 from .state import DONE, FAILED, PENDING, RUNNING, JobState
@@ -16,7 +18,7 @@ class ProgressBar:
     def __init__(self, total: int, done: int, enabled: bool, desc: str):
         from tqdm import tqdm
 
-        self.bar = tqdm(total=total, initial=done, desc=desc, unit="frame", disable=not enabled, dynamic_ncols=True,
+        self.bar = tqdm(total=total, initial=done, desc=terminal_safe(desc), unit="frame", disable=not enabled, dynamic_ncols=True,
                         smoothing=0.1)
         self.failures = 0
 

@@ -122,7 +122,7 @@ def parse_spec(doc, source: str) -> JobSpec:
             fail(source, f + ".rgb_every", "a geometry-only design renders no RGB: leave rgb_every out")
         designs.append(Design(layouts, lightings, str(p["name"]), frames, rgb_every))
     return JobSpec(
-        name=fields.string(source, doc["name"], "name"), out=fields.out_folder(source, doc["out"]), designs=designs, renderer=renderer, geometry=geometry, quality=q,
+        name=fields.name_text(source, doc["name"], "name"), out=fields.out_folder(source, doc["out"]), designs=designs, renderer=renderer, geometry=geometry, quality=q,
         width=w, height=h,
         hfov_deg=float(hfov), seed=seed, device=device,
         chunk_size=positive_int(source, doc.get("chunk_size", DEFAULTS.chunk_size), "chunk_size"), retries=retries,

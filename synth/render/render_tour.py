@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from formats.fields import terminal_safe
 from formats import frames as fr
 from formats.atomic import replacing, write_json_atomic
 from formats.camera import Intrinsics, camera_document, write_tum
@@ -203,7 +204,7 @@ class _Progress:
     def __init__(self, total: int, desc: str, enabled: bool):
         from tqdm import tqdm
 
-        self.bar = tqdm(total=total, desc=desc, unit="frame", disable=not enabled, dynamic_ncols=True)
+        self.bar = tqdm(total=total, desc=terminal_safe(desc), unit="frame", disable=not enabled, dynamic_ncols=True)
 
     def frame(self, n: int = 1) -> None:
         self.bar.update(n)

@@ -142,8 +142,9 @@ def parse_preset(doc, source: str) -> LightingPreset:
         extra = sorted(set(doc) - {"name", "description", "dimmer"})
         if extra:
             raise SceneFormatError(source, extra[0], "a dimmer preset holds name, description and dimmer only")
+        name = fields.name_text(source, doc["name"], "name") if "name" in doc else Path(source).stem
         try:
-            p = dimmed_preset(doc["dimmer"], name=doc.get("name") or Path(source).stem)
+            p = dimmed_preset(doc["dimmer"], name=name)
         except UserError as e:
             raise SceneFormatError(source, "dimmer", str(e).split(": ", 1)[1]) from None
         return replace(p, source=source)
@@ -183,9 +184,7 @@ def parse_preset(doc, source: str) -> LightingPreset:
         return FixtureSetting(on, number(source, d.get("color_temperature", 3000.0), f"fixtures.{kind}.color_temperature", lo=1000.0),
                               number(source, d.get("power", 60.0), f"fixtures.{kind}.power", lo=0.0), count)
 
-    name = doc.get("name") or Path(source).stem
-    if not isinstance(name, str):
-        raise SceneFormatError(source, "name", f"expected a name, got {name!r}")
+    name = fields.name_text(source, doc["name"], "name") if doc.get("name") is not None else Path(source).stem
     portals = fields.boolean(source, doc.get("window_portals", False), "window_portals")
     return LightingPreset(
         name=name, description=fields.text(source, doc.get("description", ""), "description"), sky_color=sky_color,

@@ -35,6 +35,7 @@ import yaml
 from formats.atomic import write_text_atomic
 from formats.boxes import BOXES_FORMAT, CEILING_ID_BASE, FLOOR_ID_BASE, FRAME_TEXT, MAX_OBJECT_ID, STRUCT_SLAB, WALL_ID_BASE
 from formats.errors import SceneFormatError, UnknownNameError
+from formats.fields import clean_name, shown
 from formats.yamlfile import read_yaml
 
 from . import geometry as geo
@@ -464,7 +465,7 @@ class _Reader:
 
     def number(self, v, field: str, positive: bool = False, nonneg: bool = False) -> float:
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
-            self.fail(field, f"expected a finite number, got {v!r}")
+            self.fail(field, f"expected a finite number, got {shown(v)}")
         v = float(v)
         if positive and v <= 0:
             self.fail(field, f"must be > 0, got {v}")
@@ -474,17 +475,17 @@ class _Reader:
 
     def vec(self, v, field: str, n: int, positive: bool = False) -> tuple[float, ...]:
         if not isinstance(v, (list, tuple)) or len(v) != n:
-            self.fail(field, f"expected a list of {n} numbers, got {v!r}")
+            self.fail(field, f"expected a list of {n} numbers, got {shown(v)}")
         return tuple(self.number(x, f"{field}[{i}]", positive=positive) for i, x in enumerate(v))
 
     def string(self, v, field: str) -> str:
         if not isinstance(v, str) or not v:
-            self.fail(field, f"expected a non-empty string, got {v!r}")
+            self.fail(field, f"expected a non-empty string, got {shown(v)}")
         return v
 
     def integer(self, v, field: str) -> int:
         if isinstance(v, bool) or not isinstance(v, int):
-            self.fail(field, f"expected an integer, got {v!r}")
+            self.fail(field, f"expected an integer, got {shown(v)}")
         return v
 
     def seq(self, v, field: str) -> list:
@@ -502,7 +503,7 @@ def layout_from_dict(doc, source: str = "<memory>", classes: ClassTable | None =
     fmt = doc.get("format", FORMAT)
     if fmt != FORMAT:
         rd.fail("format", f"expected '{FORMAT}', got {fmt!r}")
-    name = rd.string(doc["name"], "name")
+    name = clean_name(rd.string(doc["name"], "name"), source, "name")
     seed = None if doc.get("seed") is None else rd.integer(doc["seed"], "seed")
     reference = None if doc.get("reference") is None else rd.string(doc["reference"], "reference")
     meta = doc.get("meta") or {}
