@@ -513,3 +513,17 @@ def test_error_lines_escape_what_a_file_says(tmp_path, capsys):
     code = synth_main(["render", str(f), "--dry-run"])
     err = capsys.readouterr().err
     assert code == 2 and "\x1b" not in err and "\\x1b" in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_a_glb_with_a_deeply_nested_json_chunk_is_one_line(tmp_path):
+    import struct
+
+    from synth.replicacad.gltf import check_glb
+
+    body = ('{"asset": {"version": "2.0"}, "extras": ' + "[" * DEEP + "]" * DEEP + "}").encode()
+    body += b" " * (-len(body) % 4)
+    glb = tmp_path / "deep.glb"  # a valid GLB 2.0 container around a 100,000-level JSON chunk
+    glb.write_bytes(struct.pack("<III", 0x46546C67, 2, 12 + 8 + len(body)) + struct.pack("<II", len(body), 0x4E4F534A) + body)
+    with pytest.raises(SceneFormatError) as e:
+        check_glb(glb)
+    assert str(glb) in str(e.value) and "nested" in str(e.value) and "\n" not in str(e.value)

@@ -79,6 +79,7 @@ from trimesh.visual.material import PBRMaterial
 
 from formats.errors import SceneFormatError
 from formats.fields import inside_root, listing, shown
+from formats.yamlfile import check_shape
 from formats.lfs import LFS_HINT, LFS_POINTER_PREFIX, is_lfs_pointer  # noqa: F401 - re-exported for readers
 
 from ..scene.geometry import Y_UP_TO_Z_UP
@@ -141,6 +142,9 @@ def _read_container(path: Path) -> tuple[dict, bytes | None, int]:
                 doc = json.loads(chunk.decode("utf-8"))
             except (UnicodeDecodeError, ValueError) as e:
                 bad(f"malformed JSON chunk: {e}")
+            except RecursionError:
+                bad("JSON chunk nested too deeply")
+            check_shape(path, doc)  # the bounds of every reader (formats.yamlfile)
         elif ctype == _CHUNK_BIN and binary is None:
             binary, bin_at = chunk, off + 8
         off += 8 + clen + (-clen % 4)
