@@ -217,8 +217,8 @@ def check_not_a_render_folder(out: Path, what: str = "the experiment") -> None:
     out = Path(out)
     for d in (out, *out.parents):
         if (d / DESIGN_FILE).is_file():
-            raise UserError(f"{out}: {'holds' if d == out else 'lies inside'} a rendered design ({d / DESIGN_FILE}); "
-                            f"write {what} into another folder")
+            where = f"holds a rendered design ({DESIGN_FILE})" if d == out else f"lies inside a rendered design ({d / DESIGN_FILE})"
+            raise UserError(f"{out}: {where}; write {what} into another folder")
 
 
 def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int | None = None,
