@@ -547,9 +547,17 @@ def test_replicates_and_the_stability_benchmark_with_the_learned_detector(tiny_d
     assert fig["values"]["none"] == vals["values"][0]  # the unperturbed rerun gives the experiment's figure
     assert fig["spread"] == pytest.approx(abs(fig["values"]["none"] - fig["values"]["jitter-5"]))
     assert len(rep["tours"]) == 8 and (st / "stability.md").is_file() and (st / "jitter-5" / "results.json").is_file()
-    assert reloc_main(["bench", "stability", str(tiny_design / "exp_rep.yaml"), "--perturbation", "jitter:5",
-                       "--out", str(st), "--quiet", "--max-tour-loss", "-1"]) == 1
-    assert "unstable: a tour lost" in capsys.readouterr().err
+    # the thresholds are fractions 0..1 (issue 43: -1 could never pass); at 0 the run fails exactly when
+    # a tour lost something (or a recall moved), as the report says, and passes otherwise
+    base = ["bench", "stability", str(tiny_design / "exp_rep.yaml"), "--perturbation", "jitter:5", "--out", str(st), "--quiet"]
+    for opt, key, says in (("--max-tour-loss", "max_tour_loss", "unstable: a tour lost"),
+                           ("--max-spread", "max_spread", "unstable: a recall spread")):
+        assert rep[key] is not None, key
+        moved = rep[key] > 0
+        assert reloc_main(base + [opt, "0"]) == (1 if moved else 0), (key, rep[key])
+        assert (says in capsys.readouterr().err) == moved
+        assert reloc_main(base + [opt, "1"]) == 0  # nothing can lose or move more than everything
+        capsys.readouterr()
 
 
 def _tum_recall(path: Path, gt_path: Path, frames: list[int]) -> float:

@@ -298,7 +298,7 @@ def test_wrong_output_shape_at_run_time(tmp_path):
 
 
 @pytest.mark.parametrize("text, why", [
-    ("0: chair\n1: [sofa\n", "not valid YAML"),
+    ("0: chair\n1: [sofa\n", "malformed YAML"),
     ("0: [chair, sofa]\n", "expected a class name or null"),
     ("just a string\n", "expected a mapping"),
     ("0: chair\n'0': sofa\n", "given twice"),

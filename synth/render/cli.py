@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from formats.cli import add_quiet, add_workers, positive_int
+from formats.cli import add_quiet, add_workers
 from formats.errors import UserError
 
 from .settings import DEFAULTS, DEVICES, QUALITY
@@ -44,7 +44,7 @@ def register_cli(subparsers) -> None:
     a.add_argument("--renderer", choices=["blender", "fast"], default=DEFAULTS.renderer)
     a.add_argument("--quality", default=DEFAULTS.quality, help=f"{' | '.join(QUALITY)} (default {DEFAULTS.quality})")
     a.add_argument("--size", default=DEFAULTS.size, help=f"WIDTHxHEIGHT (default {DEFAULTS.size})")
-    a.add_argument("--frames", type=positive_int, help="render the first N frames of the path")
+    a.add_argument("--frames", type=int, help="render the first N frames of the path")
     a.add_argument("--seed", type=int, default=DEFAULTS.seed, help=f"Cycles seed (default {DEFAULTS.seed})")
     a.add_argument("--device", default=DEFAULTS.device, choices=list(DEVICES), help=f"GPU: OptiX, else CUDA (default {DEFAULTS.device})")
     a.add_argument("--previews", action="store_true", help="also write 8-bit PNG previews")
