@@ -329,7 +329,8 @@ def test_stability_benchmark_out_inside_a_render_folder_is_refused(tmp_path, cap
     (job / "design.json").write_text("{}")
     for out in (job, job / "sub"):
         code = _exit_code(["reloc", "bench", "stability", "demo_experiment", "--out", str(out)])
-        _one_line(capsys, code, "rendered design")
+        err = _one_line(capsys, code, "a rendered design (")
+        assert err.endswith("write the stability benchmark into another folder"), err
     assert sorted(p.name for p in job.iterdir()) == ["design.json"]  # nothing written into it
 
 
