@@ -24,7 +24,7 @@ $(VENV)/.installed-train: $(VENV)/.installed
 setup: $(VENV)/.installed
 	@bash tools/system_deps.sh $(VENV)
 
-# demo, demo_experiment, demo_checks: the shipped specs synth/specs/demo.yaml, reloc/specs/demo_experiment.yaml
+# demo, demo_experiment, demo_checks: the shipped specs render_jobs/demo.yaml, reloc/specs/demo_experiment.yaml
 # and reloc/specs/demo_checks.yaml (a bare name is a shipped spec; a path always wins)
 demo: setup
 	$(VENV)/bin/synth scene build --out $(OUT)/scenes

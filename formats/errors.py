@@ -12,7 +12,7 @@ class SceneFormatError(UserError):
     """A layout, class table or dataset file that does not parse or validate.
 
     The message always starts with the file and the field, e.g.
-    ``synth/data/layouts/apt_0.yaml: objects[3].position: expected 3 numbers, got 'abc'``.
+    ``scenes/layouts/apt_0.yaml: objects[3].position: expected 3 numbers, got 'abc'``.
     """
 
     def __init__(self, file, field: str | None, message: str):

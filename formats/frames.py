@@ -5,7 +5,7 @@ Channels (all optional, but a frame has at least one group):
     R, G, B     HALF    linear scene-referred RGB (Rec.709 primaries), as rendered by Cycles
     Z           FLOAT   planar depth in metres along the camera's +z (OpenCV), 0 = no surface
     instance    UINT    instance id: 0 = nothing, objects 1..999, walls 1000+k, floors 2000+k, ceilings 3000+k
-    semantic    UINT    semantic class id from synth/data/classes.yaml, 0 = nothing
+    semantic    UINT    semantic class id from scenes/classes.yaml, 0 = nothing
 
 ZIP compression, scanline image. A frame file becomes visible only when complete: it is written
 to a hidden temporary name in the same folder, then renamed.

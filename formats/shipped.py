@@ -2,8 +2,8 @@
 
 The toolkit is installed unzipped (from a wheel, or editable from a checkout), so the
 ``importlib.resources.files`` of one of its packages is a folder on disk: :func:`package_dir`
-returns it as a ``Path`` (``synth/data``, ``synth/specs``, ``reloc/models``, ``reloc/specs`` lie in
-it). :func:`resolve_spec` turns a spec argument into a file: a path that exists always wins; a bare
+returns it as a ``Path`` (``reloc/models``, ``reloc/specs`` lie in it); :func:`shipped_folder` finds
+synth's ``scenes/`` and ``render_jobs/``, at the checkout's root or inside the installed package. :func:`resolve_spec` turns a spec argument into a file: a path that exists always wins; a bare
 name (no folder, no suffix: ``synth render demo``, ``reloc check demo_checks``) is the shipped spec
 of that name; an unknown name is one line that lists the shipped names (exit status 2).
 """
@@ -28,6 +28,14 @@ def package_dir(package: str) -> Path:
     except TypeError:
         raise RuntimeError(f"{package} is not installed as a folder ({t!r}); the toolkit reads its shipped data "
                            "from files on disk: install it unzipped (pip install, or pip install -e .)") from None
+
+
+def shipped_folder(package_folder: Path, name: str) -> Path:
+    """A data folder the design card puts at the top level (``scenes``, ``render_jobs``): inside the
+    package when installed from a wheel (pyproject.toml's package-dir maps ``synth.NAME`` onto the root
+    folder ``NAME/``), else at the root of the checkout the package lies in."""
+    inside = Path(package_folder) / name
+    return inside if inside.is_dir() else Path(package_folder).resolve().parent / name
 
 
 def is_bare_name(arg) -> bool:

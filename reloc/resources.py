@@ -8,7 +8,7 @@ wheel finds them as a checkout does.
   ``reloc experiment reloc/specs/demo_experiment.yaml`` (:func:`experiment_spec`, :func:`check_spec`).
 
 An experiment spec's ``render`` names the render job whose tours it reads: a file relative to the
-spec, or the name of a render job spec synth ships (``render: demo``: ``synth/specs/demo.yaml``;
+spec, or the name of a render job spec synth ships (``render: demo``: ``render_jobs/demo.yaml``;
 :func:`render_spec_of`). That folder is found as package data; no code of synth is imported.
 """
 
@@ -17,7 +17,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from formats.errors import SceneFormatError, UnknownNameError
-from formats.shipped import is_bare_name, package_dir, resolve_spec, shipped_file, shipped_names
+from formats.shipped import is_bare_name, package_dir, resolve_spec, shipped_file, shipped_folder, shipped_names
 
 PACKAGE_DIR = package_dir("reloc")
 MODELS_DIR = PACKAGE_DIR / "models"
@@ -49,14 +49,14 @@ def check_spec(arg) -> Path:
 
 
 def synth_specs_dir() -> Path:
-    """synth's shipped render job specs (``synth/specs``), located like package data: the package
+    """synth's shipped render job specs (``render_jobs/``), located like package data: the package
     is found, not run (``importlib.util.find_spec`` imports nothing)."""
     import importlib.util
 
     spec = importlib.util.find_spec("synth")
     if spec is None or not spec.submodule_search_locations:
         raise UnknownNameError("the synth package is not installed: give render: as a file")
-    return Path(list(spec.submodule_search_locations)[0]) / "specs"
+    return shipped_folder(Path(list(spec.submodule_search_locations)[0]), "render_jobs")
 
 
 def render_spec_of(spec_file, value) -> Path:

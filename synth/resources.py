@@ -1,12 +1,13 @@
-"""Where synth's shipped data lives: inside the package (``importlib.resources``), so an installed
-wheel finds it as a checkout does.
+"""Where synth's shipped data lives: the design card's top-level folders ``scenes/`` and
+``render_jobs/``, which the wheel ships inside the package as ``synth/scenes`` and
+``synth/render_jobs`` (pyproject.toml's package-dir), so an installed wheel finds them as a checkout does.
 
-- ``synth/data/``: the layouts (``layouts/``), lighting presets (``lighting/``), camera paths
+- ``scenes/``: the layouts (``layouts/``), lighting presets (``lighting/``), camera paths
   (``paths/``), the class table (``classes.yaml``) and the ReplicaCAD lexicon
   (``replicacad_lexicon.yaml``). ``SYNTH_SCENES_DIR`` overrides the whole folder (a user's own
   scenes, or the scratch folder a Ray task materialises).
-- ``synth/specs/``: the shipped render job and trainset specs; ``synth render demo`` is
-  ``synth render synth/specs/demo.yaml`` (:func:`render_spec`, :func:`trainset_spec`).
+- ``render_jobs/``: the shipped render job and trainset specs; ``synth render demo`` is
+  ``synth render render_jobs/demo.yaml`` (:func:`render_spec`, :func:`trainset_spec`).
 
 ``REPO_ROOT`` is the folder above the package: a source checkout when run from one
 (:func:`checkout_root`), used only for the git commit and the Ray working_dir, never for data.
@@ -17,12 +18,12 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from formats.shipped import package_dir, resolve_spec, shipped_names
+from formats.shipped import package_dir, resolve_spec, shipped_folder, shipped_names
 
 PACKAGE_DIR = package_dir("synth")
-DATA_DIR = PACKAGE_DIR / "data"  # the shipped scenes
-SPECS_DIR = PACKAGE_DIR / "specs"  # the shipped render job and trainset specs
 REPO_ROOT = PACKAGE_DIR.resolve().parent  # a checkout, or site-packages when installed
+DATA_DIR = shipped_folder(PACKAGE_DIR, "scenes")  # the shipped scenes
+SPECS_DIR = shipped_folder(PACKAGE_DIR, "render_jobs")  # the shipped render job and trainset specs
 
 
 def checkout_root() -> Path | None:
@@ -32,7 +33,7 @@ def checkout_root() -> Path | None:
 
 
 def scenes_dir() -> Path:
-    """The scenes folder: ``$SYNTH_SCENES_DIR``, else the shipped ``synth/data``."""
+    """The scenes folder: ``$SYNTH_SCENES_DIR``, else the shipped ``scenes/``."""
     env = os.environ.get("SYNTH_SCENES_DIR")
     return Path(env) if env else DATA_DIR
 

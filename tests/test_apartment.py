@@ -27,7 +27,7 @@ def test_generation_is_deterministic_and_matches_shipped_file(apt0):
     a = generate_apartment(DEFAULT_SEED, "apt_0")
     b = generate_apartment(DEFAULT_SEED, "apt_0")
     assert layout_to_dict(a) == layout_to_dict(b)
-    # the shipped synth/data/layouts/apt_0.yaml is what the generator makes (no drift)
+    # the shipped scenes/layouts/apt_0.yaml is what the generator makes (no drift)
     assert layout_to_dict(a) == layout_to_dict(apt0)
     c = generate_apartment(DEFAULT_SEED + 1, "apt_0")
     assert layout_to_dict(c) != layout_to_dict(a)

@@ -82,7 +82,7 @@ def _check_surfaces(cls, size, surfs):
 
 def test_known_classes_match_class_table():
     yaml = pytest.importorskip("yaml")
-    table = yaml.safe_load((REPO / "synth" / "data" / "classes.yaml").read_text())["classes"]
+    table = yaml.safe_load((REPO / "scenes" / "classes.yaml").read_text())["classes"]
     wanted = {name for name, row in table.items() if not row.get("structure", False) and not row.get("imported", False)}
     assert set(CLASSES) == wanted  # every class but structure and those only imported datasets have has a generator
     assert len(CLASSES) == len(set(CLASSES))

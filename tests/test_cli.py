@@ -26,7 +26,7 @@ def test_list_and_show(capsys):
 
 
 def test_a_bare_name_is_a_shipped_spec_and_a_file_wins(tmp_path, monkeypatch, capsys):
-    """synth render NAME, synth trainset render NAME: a bare name is a spec of synth/specs, a file of
+    """synth render NAME, synth trainset render NAME: a bare name is a spec of render_jobs, a file of
     that name wins, and an unknown name is one line listing the shipped ones of that kind (exit 2)."""
     import yaml
 
@@ -50,7 +50,7 @@ def test_a_bare_name_is_a_shipped_spec_and_a_file_wins(tmp_path, monkeypatch, ca
 
 
 def test_a_user_scenes_folder_overrides_the_shipped_one(tmp_path, monkeypatch, capsys):
-    """SYNTH_SCENES_DIR replaces synth/data as a whole (class table included): its layouts are the
+    """SYNTH_SCENES_DIR replaces scenes as a whole (class table included): its layouts are the
     ones listed and found by name."""
     import shutil
 
@@ -132,7 +132,7 @@ def test_scene_build_is_the_main_job(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "paper" in text and "apt_5" in text and "FAIL" not in text
     for n in range(6):
-        assert (out / "layouts" / f"apt_{n}.yaml").read_bytes() == (REPO / "synth" / "data" / "layouts" / f"apt_{n}.yaml").read_bytes()
+        assert (out / "layouts" / f"apt_{n}.yaml").read_bytes() == (REPO / "scenes" / "layouts" / f"apt_{n}.yaml").read_bytes()
         assert (out / "previews" / f"apt_{n}.png").stat().st_size > 10_000
         assert json.loads((out / "boxes" / f"apt_{n}.json").read_text())["layout"] == f"apt_{n}"
 

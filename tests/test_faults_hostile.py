@@ -491,7 +491,7 @@ def test_names_are_bounded_and_printable(tmp_path, capsys, name, says, where):
     elif where == "dimmer file":
         doc, load = {"name": name, "dimmer": 0.75}, load_lighting
     else:
-        doc = yaml.safe_load((Path(__file__).resolve().parents[1] / "synth/data/layouts/apt_0.yaml").read_text())
+        doc = yaml.safe_load((Path(__file__).resolve().parents[1] / "scenes/layouts/apt_0.yaml").read_text())
         doc["name"] = name
         load = load_layout
     f.write_text(yaml.safe_dump(doc, allow_unicode=True))

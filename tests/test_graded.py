@@ -178,7 +178,7 @@ def test_noise_scale_multiplies_every_noise_and_0_is_ideal(tmp_path):
 
 @pytest.mark.slow
 def test_the_shipped_levels_come_from_the_command_they_name():
-    """synth/data/layouts/apt_0_g025 .. apt_0_gbeyond are what `synth scene grade apt_0 --levels 0 0.25
+    """scenes/layouts/apt_0_g025 .. apt_0_gbeyond are what `synth scene grade apt_0 --levels 0 0.25
     0.5 0.75 1 --beyond --seed 0` makes (compared by class, pose to 1 mm and id, not byte for byte:
     placement is floating point, and another processor may differ in the last bit)."""
     import numpy as np

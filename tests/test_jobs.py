@@ -31,9 +31,9 @@ from jobspecs import SMOKE  # noqa: E402  (one home: tests/jobspecs.py)
 @pytest.mark.slow
 def test_shipped_specs_validate_and_expand():
     for name in ("smoke", "demo", "replicacad_6x3"):
-        plan = jobs.expand(jobs.load_spec(REPO_ROOT / "synth" / "specs" / f"{name}.yaml"), out=Path("/nonexistent/x"))
+        plan = jobs.expand(jobs.load_spec(REPO_ROOT / "render_jobs" / f"{name}.yaml"), out=Path("/nonexistent/x"))
         assert plan.tours and plan.chunks
-    paper = jobs.expand(jobs.load_spec(REPO_ROOT / "synth" / "specs" / "replicacad_6x3.yaml"), out=Path("/nonexistent/x"))
+    paper = jobs.expand(jobs.load_spec(REPO_ROOT / "render_jobs" / "replicacad_6x3.yaml"), out=Path("/nonexistent/x"))
     # the paper's design: 6 layouts x 3 lightings on the 4,000-frame query path + the 6,000-frame mapping tour
     assert len(paper.tours) == 19
     query = [p for n, p in paper.tours.items() if n.endswith("__query")]
@@ -240,7 +240,7 @@ def test_spec_document_of_a_plain_spec_is_unchanged_by_the_replicacad_key():
     without replicacad: holds no such key (job_state.json compares documents)."""
     from synth.jobs import spec_document
 
-    plain = spec_document(jobs.load_spec(REPO_ROOT / "synth" / "specs" / "demo.yaml"))
+    plain = spec_document(jobs.load_spec(REPO_ROOT / "render_jobs" / "demo.yaml"))
     assert "replicacad" not in plain
-    rc = spec_document(jobs.load_spec(REPO_ROOT / "synth" / "specs" / "replicacad_apt_6x3.yaml"))
+    rc = spec_document(jobs.load_spec(REPO_ROOT / "render_jobs" / "replicacad_apt_6x3.yaml"))
     assert rc["replicacad"] == {"root": None, "allow_unknown": False, "obstacles": "band"}

@@ -183,7 +183,7 @@ def test_plan_work_of_a_real_plan(tmp_path):
 
 
 def paper_design_work() -> list[ce.Work]:
-    """The chunks of synth/specs/replicacad_6x3.yaml as ``expand`` makes them (test_jobs checks the plan
+    """The chunks of render_jobs/replicacad_6x3.yaml as ``expand`` makes them (test_jobs checks the plan
     itself; expanding it takes seconds): geometry once per layout + path, rgb per tour, 100 frames each."""
     work = []
     for layout, path, lightings, n in [(f"apt_{k}", "query", ("day", "evening", "night"), 40) for k in range(6)] + [

@@ -109,9 +109,9 @@ def test_runtime_env_ships_code_scenes_and_pinned_requirements(tmp_path):
     assert ray_backend.runtime_env("auto", None) is None  # the local instance: the code is here
     assert ray_backend.runtime_env("none", "10.0.0.1:6379") is None
     env = ray_backend.runtime_env("auto", "10.0.0.1:6379", out=REPO_ROOT / "out" / "x", renderer="blender")
-    assert env["working_dir"] == str(REPO_ROOT) and (REPO_ROOT / "synth" / "data" / "layouts").is_dir()
+    assert env["working_dir"] == str(REPO_ROOT) and (REPO_ROOT / "scenes" / "layouts").is_dir()
     assert ".git" in env["excludes"] and "tests" in env["excludes"] and "/out/x" in env["excludes"]
-    assert "data" not in env["excludes"] and "/data" in env["excludes"]  # synth/data travels with the code
+    assert "data" not in env["excludes"] and "/data" in env["excludes"]  # scenes travels with the code
     pins = env["pip"]["packages"]
     assert f"numpy=={metadata.version('numpy')}" in pins and any(p.startswith("bpy") for p in pins)
     fast = ray_backend.runtime_env("full", "10.0.0.1:6379", renderer="fast")

@@ -24,7 +24,7 @@ from synth.replicacad.importer import load_replicacad
 from synth.scene.lighting import DARK_MIN_FRAMES, chosen_lamps, dark_tour_problem, lamp_visibility, load_lighting
 from synth.scene.model import dump_yaml, layout_to_dict, load_layout, object_box, resolve_layout_path
 
-QUERY = Path(__file__).resolve().parents[1] / "synth" / "data" / "paths" / "query.txt"
+QUERY = Path(__file__).resolve().parents[1] / "scenes" / "paths" / "query.txt"
 
 
 @pytest.fixture(scope="module")

@@ -124,7 +124,7 @@ REAL = os.environ.get("SYNTH_REPLICACAD_ROOT")
 
 @pytest.mark.skipif(not REAL or not Path(REAL).is_dir(), reason="SYNTH_REPLICACAD_ROOT (a full ReplicaCAD folder) not set")
 def test_real_apartments_query_and_mapping():
-    # as synth/specs/replicacad_apt_6x3.yaml plans them (replicacad.obstacles: band): keeping 0.3 m from
+    # as render_jobs/replicacad_apt_6x3.yaml plans them (replicacad.obstacles: band): keeping 0.3 m from
     # every object of all six authored flats leaves too little shared floor for a walk
     lays = [load_replicacad(REAL, f"apt_{i}") for i in range(6)]
     q = plan_query_path(lays, frames=400, seed=0, obstacles="band")

@@ -228,7 +228,7 @@ def test_a_failing_command_is_a_failed_run_with_its_stderr(design, capsys):
 ])
 def test_bad_external_method_is_one_line(tmp_path, capsys, entry, field, message):
     doc = yaml.safe_load((REPO / "reloc" / "specs" / "demo_experiment.yaml").read_text())
-    doc["render"] = str(REPO / "synth" / "specs" / "demo.yaml")
+    doc["render"] = str(REPO / "render_jobs" / "demo.yaml")
     doc["methods"] = ["videoreloc", entry]
     doc["out"] = str(tmp_path / "out")
     spec = tmp_path / "exp.yaml"

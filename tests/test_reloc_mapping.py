@@ -170,7 +170,7 @@ def test_ground_truth_map_equals_the_layout_by_hand(tmp_path, capsys, tour):
     code, stdout, _ = run_cli(["map", "ground-truth", str(tour.root), "--out", str(out)], capsys)
     assert code == 0 and "apt_0" in stdout
     m = BoxMap.load(out)
-    want = _boxes_by_hand(REPO / "synth" / "data" / "layouts" / "apt_0.yaml")
+    want = _boxes_by_hand(REPO / "scenes" / "layouts" / "apt_0.yaml")
     assert sorted(m.ids.tolist()) == sorted(want) and len(want) == 123
     kinds = m.kinds
     for j, i in enumerate(m.ids.tolist()):

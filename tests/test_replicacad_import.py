@@ -295,17 +295,17 @@ def test_bad_replicacad_spec_is_one_line(root, tmp_path, capsys, monkeypatch, ed
 
 
 def test_replicacad_root_option_needs_a_replicacad_spec(root, capsys):
-    smoke = Path(__file__).resolve().parents[1] / "synth" / "specs" / "smoke.yaml"
+    smoke = Path(__file__).resolve().parents[1] / "render_jobs" / "smoke.yaml"
     assert synth_main(["render", str(smoke), "--dry-run", "--replicacad-root", str(root)]) == 2
     assert "has no replicacad: section" in capsys.readouterr().err
 
 
 @pytest.mark.slow
 def test_shipped_replicacad_spec_plans_the_paper_design(root, tmp_path):
-    """synth/specs/replicacad_apt_6x3.yaml on the fixture: 18 query tours of 4,000 frames + the 6,000-frame mapping tour."""
+    """render_jobs/replicacad_apt_6x3.yaml on the fixture: 18 query tours of 4,000 frames + the 6,000-frame mapping tour."""
     from synth.jobs import expand
 
-    spec = load_spec(Path(__file__).resolve().parents[1] / "synth" / "specs" / "replicacad_apt_6x3.yaml")
+    spec = load_spec(Path(__file__).resolve().parents[1] / "render_jobs" / "replicacad_apt_6x3.yaml")
     ready = prepare(spec, tmp_path / "job", cli_root=str(root), progress=lambda m: None)
     plan = expand(ready, tmp_path / "job")
     frames = {name: len(p.frame_ids) for name, p in plan.tours.items()}

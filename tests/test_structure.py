@@ -228,3 +228,18 @@ def test_bpy_is_imported_only_by_the_blender_package():
             if any(n == "bpy" or n.startswith("bpy.") for n in names) and not m.startswith("synth.blender"):
                 bad.append(m)
     assert bad == []
+
+
+def test_pyproject_lists_every_package_on_disk():
+    """pyproject.toml lists its packages by hand (``synth.scenes`` and ``synth.render_jobs`` are the root
+    folders ``scenes/`` and ``render_jobs/``, mapped by package-dir): a new subpackage missing from the
+    list would be left out of the wheel."""
+    import tomllib
+
+    conf = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]
+    on_disk = {p.parent.relative_to(REPO).as_posix().replace("/", ".") for pkg in PACKAGES
+               for p in (REPO / pkg).rglob("__init__.py")}
+    mapped = conf["package-dir"]
+    assert mapped == {"synth.scenes": "scenes", "synth.render_jobs": "render_jobs"}
+    assert all((REPO / d).is_dir() and not (REPO / d / "__init__.py").exists() for d in mapped.values())
+    assert set(conf["packages"]) == on_disk | set(mapped)

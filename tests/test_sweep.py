@@ -105,7 +105,7 @@ def test_an_experiment_spec_with_a_sweep_is_refused_in_one_line_before_anything_
 
     doc = yaml.safe_load(experiment_spec("sweep_rearrangement_experiment").read_text())
     doc["out"] = str(tmp_path / "exp")
-    doc["render"] = str(experiment_spec("sweep_rearrangement_experiment").parents[1].parent / "synth" / "specs" /
+    doc["render"] = str(experiment_spec("sweep_rearrangement_experiment").parents[1].parent / "render_jobs" /
                         "sweep_rearrangement.yaml")
     doc["sweep"] = {"factor": "sensor", "levels": {0: "ideal", 1: "structured_light"}}
     f = tmp_path / "e.yaml"

@@ -27,8 +27,10 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 PACKAGES = ("formats", "synth", "reloc")
-# the shipped files that must be in the wheel (besides every file under synth/data)
-SHIPPED = ("synth/specs/demo.yaml", "synth/specs/smoke.yaml", "synth/specs/detector_train.yaml", "synth/specs/README.md",
+# the design card's top-level data folders, shipped inside synth (pyproject.toml's package-dir)
+DATA_FOLDERS = {"scenes": "synth/scenes", "render_jobs": "synth/render_jobs"}
+# the shipped files that must be in the wheel, as they lie in the checkout (besides every file under scenes/)
+SHIPPED = ("render_jobs/demo.yaml", "render_jobs/smoke.yaml", "render_jobs/detector_train.yaml", "render_jobs/README.md",
            "reloc/models/detector_v2_160x120.onnx", "reloc/models/detector_v2_160x120.md",
            "reloc/models/detector_160x120.onnx", "reloc/models/detector_160x120.md", "reloc/specs/demo_experiment.yaml",
            "reloc/specs/demo_checks.yaml", "reloc/specs/README.md", "formats/sensor_presets/tof.yaml")
@@ -55,8 +57,14 @@ def _run(log, argv, cwd, env, timeout=300) -> str:
 def _copy_sources(dst: Path) -> None:
     for name in ("pyproject.toml", "README.md"):
         shutil.copy2(REPO / name, dst / name)
-    for pkg in PACKAGES:
+    for pkg in PACKAGES + tuple(DATA_FOLDERS):
         shutil.copytree(REPO / pkg, dst / pkg, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+
+
+def in_wheel(checkout_path: str) -> str:
+    """Where a checkout file lies in the wheel: scenes/x is synth/scenes/x, render_jobs/x synth/render_jobs/x."""
+    top, _, rest = checkout_path.partition("/")
+    return f"{DATA_FOLDERS[top]}/{rest}" if top in DATA_FOLDERS else checkout_path
 
 
 @pytest.fixture(scope="module")
@@ -92,17 +100,18 @@ def installed(tmp_path_factory):
 def test_the_wheel_ships_the_data_and_specs(installed):
     venv, env, log, wheel = installed
     names = set(zipfile.ZipFile(wheel).namelist())
-    data = {p.relative_to(REPO).as_posix() for p in (REPO / "synth" / "data").rglob("*") if p.is_file()}
-    assert {"synth/data/layouts/apt_0.yaml", "synth/data/lighting/day.yaml", "synth/data/paths/query.txt",
-            "synth/data/classes.yaml", "synth/data/replicacad_lexicon.yaml"} <= data
-    missing = sorted((data | set(SHIPPED)) - names)
+    data = {p.relative_to(REPO).as_posix() for p in (REPO / "scenes").rglob("*") if p.is_file()}
+    assert {"scenes/layouts/apt_0.yaml", "scenes/lighting/day.yaml", "scenes/paths/query.txt",
+            "scenes/classes.yaml", "scenes/replicacad_lexicon.yaml"} <= data
+    missing = sorted({in_wheel(f) for f in data | set(SHIPPED)} - names)
     assert missing == [], missing
-    specs = {p.relative_to(REPO).as_posix() for d in ("synth/specs", "reloc/specs") for p in (REPO / d).glob("*.yaml")}
-    assert specs <= names
-    # the data folders are package data, not packages
-    assert not any(n.startswith(("synth/data/", "synth/specs/", "reloc/models/", "reloc/specs/")) and n.endswith(".py")
+    specs = {p.relative_to(REPO).as_posix() for d in ("render_jobs", "reloc/specs") for p in (REPO / d).glob("*.yaml")}
+    assert {in_wheel(f) for f in specs} <= names
+    # the data folders are package data, not packages; nothing lands at the wheel's top level but the packages
+    assert {n.split("/")[0] for n in names} == set(PACKAGES) | {wheel.name.split("-")[0] + "-" + wheel.name.split("-")[1] + ".dist-info"}
+    assert not any(n.startswith(tuple(DATA_FOLDERS.values()) + ("reloc/models/", "reloc/specs/")) and n.endswith(".py")
                    for n in names)
-    _say(log, f"{wheel.name}: {len(names)} files, {len(data)} under synth/data, {len(specs)} specs, "
+    _say(log, f"{wheel.name}: {len(names)} files, {len(data)} under scenes, {len(specs)} specs, "
               f"reloc/models/detector_v2_160x120.onnx {zipfile.ZipFile(wheel).getinfo('reloc/models/detector_v2_160x120.onnx').file_size} bytes")
 
 
@@ -149,6 +158,6 @@ def test_installed_commands_find_the_shipped_data_outside_the_checkout(installed
     frames = sorted((tour / "frames").glob("*.exr"))
     meta = json.loads((tour / "meta.json").read_text())
     assert len(frames) == 6 and meta["complete"] and meta["lighting"] == "day", meta
-    assert Path(meta["layout_file"]).is_relative_to(venv) and meta["layout_file"].endswith("synth/data/layouts/apt_0.yaml")
+    assert Path(meta["layout_file"]).is_relative_to(venv) and meta["layout_file"].endswith("synth/scenes/layouts/apt_0.yaml")
     _say(log, f"rendered: {len(frames)} frames in {tour.relative_to(tmp_path)}; layout_file {meta['layout_file']}")
     (tmp_path / "wheel_test.log").write_text("\n".join(log) + "\n")

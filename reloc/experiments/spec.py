@@ -6,7 +6,7 @@ Read and validated here before anything runs (every error names the file and the
 the optional tables::
 
     name: demo
-    render: demo                       # render job spec: a file relative to this one, or a shipped name (synth/specs)
+    render: demo                       # render job spec: a file relative to this one, or a shipped name (render_jobs)
     out: out/demo/experiment           # results folder
     mapping: {layout: apt_0, lighting: day, path: mapping}
     query: query                       # every layout x lighting tour of this path is a query tour
@@ -236,7 +236,7 @@ def load_experiment(path) -> ExperimentSpec:
     for k in ("name", "render", "out", "mapping", "query", "unchanged"):
         if doc.get(k) in (None, ""):
             _fail(src, k, "missing")
-    render = render_spec_of(src, doc["render"])  # a file relative to the spec, or a shipped name (synth/specs)
+    render = render_spec_of(src, doc["render"])  # a file relative to the spec, or a shipped name (render_jobs)
     if not render.is_file():
         _fail(src, "render", f"render job spec {render} not found")
     render_doc = read_yaml(render)

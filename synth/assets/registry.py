@@ -1,6 +1,6 @@
 """The one table of procedural object classes, and the public entry points that use it.
 
-``REGISTRY`` maps each class name (``synth/data/classes.yaml``: every class but the structure ones and
+``REGISTRY`` maps each class name (``scenes/classes.yaml``: every class but the structure ones and
 those only imported datasets have) to its ``AssetClass``: the generator that lays out its parts, the
 sampler that draws a realistic size and style, and whether things may be placed on it. Generators
 and samplers live side by side in the family modules (``seating``, ``tables``, ``storage``,
@@ -107,7 +107,7 @@ NO_SURFACE_CLASSES: frozenset[str] = frozenset(cls for cls, a in REGISTRY.items(
 
 
 def known_classes() -> list[str]:
-    """Classes with a mesh generator (every non-structure class of synth/data/classes.yaml)."""
+    """Classes with a mesh generator (every non-structure class of scenes/classes.yaml)."""
     return list(REGISTRY)
 
 

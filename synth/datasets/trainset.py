@@ -1,6 +1,6 @@
 """Detector training data (``synth trainset render SPEC``): apartments the experiments never see.
 
-A trainset spec (``synth/specs/detector_train.yaml``, shipped as ``detector_train``) names generator seeds, how many rearranged
+A trainset spec (``render_jobs/detector_train.yaml``, shipped as ``detector_train``) names generator seeds, how many rearranged
 variants of each apartment, the lighting presets and how many seeded jitters of each, and how many
 random views per (layout, lighting)::
 
@@ -18,7 +18,7 @@ random views per (layout, lighting)::
                                 # colours and materials are redrawn (synth.datasets.appearance)
     lighting_jitter: {}         # optional: LightingJitter fields to override (strength_log2: 1.0, ...)
 
-A trainset from a ReplicaCAD folder names scenes instead of seeds (``synth/specs/detector_train_replicacad.yaml``)::
+A trainset from a ReplicaCAD folder names scenes instead of seeds (``render_jobs/detector_train_replicacad.yaml``)::
 
     replicacad:
       root: null                # the dataset folder; null: --replicacad-root, else $REPLICACAD_ROOT
@@ -210,7 +210,7 @@ def _replicacad_section(doc, source: str) -> dict:
 
 
 def load_trainset(path) -> TrainsetSpec:
-    """A trainset spec: a file, or the name of a shipped one (``detector_train``: synth/specs)."""
+    """A trainset spec: a file, or the name of a shipped one (``detector_train``: render_jobs)."""
     p = trainset_spec(path)
     if not p.is_file():
         raise UserError(f"{p}: trainset spec not found")
@@ -373,7 +373,7 @@ def register_cli(subparsers) -> None:
     g = subparsers.add_parser("trainset", help="detector training data from apartments the experiments never use")
     ts = g.add_subparsers(dest="cmd", required=True)
     a = ts.add_parser("render", help="prepare layouts, jittered lights and random views, then render them (resumable)")
-    a.add_argument("spec", metavar="SPEC.yaml", help="trainset spec, or a shipped name (detector_train: synth/specs/detector_train.yaml)")
+    a.add_argument("spec", metavar="SPEC.yaml", help="trainset spec, or a shipped name (detector_train: render_jobs/detector_train.yaml)")
     a.add_argument("--out", help="output folder (default: the spec's out)")
     add_workers(a, "chunk processes")
     a.add_argument("--prepare-only", action="store_true", help="write the scenes and render.yaml, render nothing")

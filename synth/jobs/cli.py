@@ -148,7 +148,7 @@ def cmd_render(args) -> int:
 
 def register_cli(subparsers) -> None:
     a = subparsers.add_parser("render", help="render a job spec: every tour of its design")
-    a.add_argument("spec", help="job spec YAML, or the name of a shipped one (synth/specs: demo, smoke, ...)")
+    a.add_argument("spec", help="job spec YAML, or the name of a shipped one (render_jobs: demo, smoke, ...)")
     a.add_argument("--out", help="the job folder (default: the spec's out): a path, or with --backend ray a storage URI "
                    "(file://, memory://, or another fsspec scheme: the driver writes the job there; docs/cluster.md)")
     add_workers(a, "chunks rendered (local backend)")

@@ -52,7 +52,7 @@ BATCH_SECONDS = 1.0  # ... or what finished within this long, whichever comes fi
 CONNECT_TIMEOUT_S = 5.0  # the TCP check of --ray-address
 RUNTIME_ENV_MODES = ("auto", "full", "code", "none")
 # gitignore patterns; the checkout's data folder is anchored ("/data"): the packages' shipped data
-# (synth/data) travels
+# (scenes) travels
 _EXCLUDES = [".git", ".venv", "**/__pycache__", "*.egg-info", ".pytest_cache", "build", "dist", "out", "renders",
              "/data", ".gl", ".whl", "tests"]
 _FRAME = re.compile(r"^\d{6,}\.exr$")  # synth frame names (formats.frames.frame_name)

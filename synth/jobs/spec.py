@@ -141,7 +141,7 @@ def _replicacad_section(doc: dict, source: str) -> dict | None:
 
 
 def load_spec(path) -> JobSpec:
-    """A render job spec: a file, or the name of a shipped one (``demo``: synth/specs/demo.yaml)."""
+    """A render job spec: a file, or the name of a shipped one (``demo``: render_jobs/demo.yaml)."""
     from ..resources import render_spec
 
     p = render_spec(path)

@@ -56,7 +56,7 @@ The built-in layouts and 0.3 m
     when empty (no point ``clearance`` + ``MARGIN`` from its walls: a niche, a strip of floor, a
     rect inside another room's) is not required; ``stats.rooms_skipped`` names it.
 
-Files: ``synth/data/paths/NAME.txt`` (TUM, ``t = frame / fps``) and ``NAME.yaml``
+Files: ``scenes/paths/NAME.txt`` (TUM, ``t = frame / fps``) and ``NAME.yaml``
 (``format: synth-camera-path/1``: name, kind, fps, frames, seed, layouts, planner parameters,
 summary stats).
 

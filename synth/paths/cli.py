@@ -140,7 +140,7 @@ def _cmd_check(args) -> int:
             if args.layout:
                 raise
             raise UserError(f"camera path '{path.name}' was planned on layout '{n}', which is not in "
-                            f"synth/data/layouts; give its file with --layout") from None
+                            f"scenes/layouts; give its file with --layout") from None
     reps = [clearance_report(path, lay, args.clearance) for lay in lays]
     ok = all(r["ok"] for r in reps)
     if args.json:
@@ -206,12 +206,12 @@ def register_cli(subparsers) -> None:
     a.add_argument("--layout", required=True)
     common(a, 6000)
     a.set_defaults(fn=_cmd_plan_mapping)
-    a = sub.add_parser("generate", help="rewrite the shipped paths (synth/data/paths: query, mapping)")
-    a.add_argument("--out-dir", help="default: synth/data/paths")
+    a = sub.add_parser("generate", help="rewrite the shipped paths (scenes/paths: query, mapping)")
+    a.add_argument("--out-dir", help="default: scenes/paths")
     a.add_argument("--only", nargs="*", choices=sorted(SHIPPED))
     a.set_defaults(fn=_cmd_generate)
     a = sub.add_parser("show", help="frames, length, duration, speed, heights, rooms visited")
-    a.add_argument("path", help="path name (synth/data/paths/NAME.txt) or file")
+    a.add_argument("path", help="path name (scenes/paths/NAME.txt) or file")
     a.add_argument("--layout", help="layout for rooms and clearance (default: the first it was planned on)")
     add_json(a)
     a.set_defaults(fn=_cmd_show)

@@ -1,4 +1,4 @@
-"""Path files: ``synth/data/paths/NAME.txt`` (TUM, ``t = frame / fps``) plus the ``NAME.yaml`` sidecar
+"""Path files: ``scenes/paths/NAME.txt`` (TUM, ``t = frame / fps``) plus the ``NAME.yaml`` sidecar
 (``format: synth-camera-path/1``: name, kind, fps, frames, seed, layouts, planner parameters,
 summary stats); saving, loading (by name or file) and listing them.
 """
@@ -16,7 +16,7 @@ from formats.atomic import write_text_atomic
 from formats.errors import SceneFormatError, UnknownNameError, UserError
 from formats.yamlfile import MAX_DEPTH, check_shape, read_text
 
-from ..resources import paths_dir  # $SYNTH_SCENES_DIR/paths, else synth/data/paths
+from ..resources import paths_dir  # $SYNTH_SCENES_DIR/paths, else scenes/paths
 from .model import FORMAT, CameraPath
 
 __all__ = ["paths_dir", "list_paths", "save_path", "load_path"]
@@ -76,7 +76,7 @@ def _resolve(name_or_file) -> Path:
 
 
 def load_path(name_or_file) -> CameraPath:
-    """A saved path: a name (``synth/data/paths/<name>.txt`` + ``.yaml``) or a file."""
+    """A saved path: a name (``scenes/paths/<name>.txt`` + ``.yaml``) or a file."""
     txt = _resolve(name_or_file)
     side = txt.with_suffix(".yaml")
     fps, meta, name, n_expect = camera.DEFAULT_FPS, {}, txt.stem, None

@@ -1,4 +1,4 @@
-"""The shipped paths (``SHIPPED``, written to synth/data/paths by ``generate_shipped``), planning by kind
+"""The shipped paths (``SHIPPED``, written to scenes/paths by ``generate_shipped``), planning by kind
 (``plan_path``) and replanning a saved path from the inputs it records (``replan``).
 """
 
@@ -18,7 +18,7 @@ from .query import plan_query_path
 
 __all__ = ["SHIPPED", "plan_path", "replan", "generate_shipped"]
 
-# The paths under synth/data/paths/ (``synth path generate`` rewrites them). The query path cannot keep
+# The paths under scenes/paths/ (``synth path generate`` rewrites them). The query path cannot keep
 # 0.3 m in all six built-in layouts: floor lamps of different variants leave a hallway bottleneck
 # in front of the bathroom door where at most ~0.29 m is possible (see ``synth.paths``), so it is
 # planned with 0.25 m.
@@ -55,7 +55,7 @@ def replan(path: CameraPath) -> CameraPath:
 
 
 def generate_shipped(out_dir=None, names=None) -> list[Path]:
-    """(Re)write the shipped paths (``SHIPPED``) into ``out_dir`` (default synth/data/paths)."""
+    """(Re)write the shipped paths (``SHIPPED``) into ``out_dir`` (default scenes/paths)."""
     from ..scene.model import load_layout
 
     out_dir = Path(out_dir) if out_dir else paths_dir()

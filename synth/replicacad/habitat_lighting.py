@@ -51,7 +51,7 @@ From lights to fixtures (``fixtures_for_imported``)
       ``CEILING_DROP`` below the ceiling: ReplicaCAD puts some lights above the ceiling mesh).
     * Every other light is not a fixture: point lights lower down and not at a lamp (habitat's fill
       lights), lights with negative intensity, lights following the camera or an object, and
-      directional lights -- the lighting presets (``synth/data/lighting``) provide sun and sky.
+      directional lights -- the lighting presets (``scenes/lighting``) provide sun and sky.
     * A lamp-class object without a light gets one at 85 % of its height over its box centre, and
       every window opening a window fixture, as ``synth.scene.fixtures.layout_fixtures`` does for the
       procedural apartment (it builds the final list).

@@ -126,7 +126,7 @@ class _Instance:
     scale: np.ndarray  # habitat object axes, all factors
     motion_type: str
     asset_local: bool
-    soft: bool = False  # a soft furnishing (synth/data/replicacad_lexicon.yaml: soft)
+    soft: bool = False  # a soft furnishing (scenes/replicacad_lexicon.yaml: soft)
 
 
 def _object_template(root: Path, config: Path) -> _Template:
@@ -253,7 +253,7 @@ def _parse_instances(root: Path, scene_path: Path, doc: dict, classes: ClassTabl
 @dataclass(frozen=True)
 class Semantics:
     """What names an imported object's class: the dataset's lexicon (semantic id -> name, from the
-    file the scene dataset config names) and the toolkit's table (``synth/data/replicacad_lexicon.yaml``)."""
+    file the scene dataset config names) and the toolkit's table (``scenes/replicacad_lexicon.yaml``)."""
 
     names: dict[int, str] | None  # None: the dataset has no lexicon (name rules only)
     source: Path | None
@@ -313,7 +313,7 @@ def read_semantics(root: Path, scene_path: Path, doc: dict, classes: ClassTable)
 
 def object_class(template_name: str, semantic_id: int | None, config: Path | None, semantics: Semantics,
                  classes: ClassTable) -> str | None:
-    """An imported object's class (synth/data/replicacad_lexicon.yaml says the order): a template override,
+    """An imported object's class (scenes/replicacad_lexicon.yaml says the order): a template override,
     else the lexicon name of its ``semantic_id``, else the name rules of the class table; None when
     nothing maps it. A semantic id that the dataset's lexicon lacks is an error naming the config."""
     name = None

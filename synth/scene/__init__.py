@@ -5,7 +5,7 @@ imports another ``synth`` subpackage (only ``synth.resources`` and ``formats``).
 
 ``model``      Layout / Stage / ObjectInstance / LightFixture, YAML I/O, layout lookup
 ``geometry``   oriented boxes, quaternions, polygon helpers (Z-up world, metres)
-``classes``    the semantic class table (``synth/data/classes.yaml``)
+``classes``    the semantic class table (``scenes/classes.yaml``)
 ``lighting``   lighting presets (day / evening / night), their validation and jitter
 ``fixtures``   the light fixtures a layout's objects and windows imply
 ``openings``   the volumes doors and windows keep free

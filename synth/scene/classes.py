@@ -1,4 +1,4 @@
-"""The class table (``synth/data/classes.yaml``): class names, semantic ids, support and mobility."""
+"""The class table (``scenes/classes.yaml``): class names, semantic ids, support and mobility."""
 
 from __future__ import annotations
 
@@ -123,7 +123,7 @@ LEXICON_FORMAT = "synth-replicacad-lexicon/1"
 
 @dataclass(frozen=True)
 class LexiconTable:
-    """``synth/data/replicacad_lexicon.yaml``: ReplicaCAD lexicon names and template overrides -> classes."""
+    """``scenes/replicacad_lexicon.yaml``: ReplicaCAD lexicon names and template overrides -> classes."""
 
     lexicon: dict[str, str]  # lexicon class name -> toolkit class
     templates: dict[str, str]  # template base name -> toolkit class (lexicon errors, articulated objects)

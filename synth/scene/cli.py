@@ -354,7 +354,7 @@ def register_cli(subparsers) -> None:
     sc = subparsers.add_parser("scene", help="layouts: list, show, check, stats, preview, export boxes")
     ss = sc.add_subparsers(dest="cmd", required=True)
 
-    a = ss.add_parser("list", help="list the layouts in synth/data/layouts")
+    a = ss.add_parser("list", help="list the layouts in scenes/layouts")
     a.set_defaults(fn=cmd_list)
     a = ss.add_parser("show", help="summary of a layout")
     a.add_argument("name", help="layout name (apt_0) or file")
@@ -379,7 +379,7 @@ def register_cli(subparsers) -> None:
     a.add_argument("--out", required=True)
     a.set_defaults(fn=cmd_preview)
     a = ss.add_parser("generate", help="regenerate the built-in layouts apt_0..apt_5")
-    a.add_argument("--out-dir", help="default: synth/data/layouts")
+    a.add_argument("--out-dir", help="default: scenes/layouts")
     a.add_argument("--only", nargs="*", help="variant names to regenerate (apt_0 is always written)")
     add_quiet(a)
     a.set_defaults(fn=cmd_generate)

@@ -1,4 +1,4 @@
-"""Lighting presets (``synth/data/lighting/NAME.yaml``) and their resolution against a layout.
+"""Lighting presets (``scenes/lighting/NAME.yaml``) and their resolution against a layout.
 
 A preset says what is on: the sky (world background), the sun, and per fixture kind (ceiling
 lights, lamps) whether they shine, how warm and how strong. ``resolve_lighting`` turns it into
@@ -23,7 +23,7 @@ from formats.errors import SceneFormatError, UnknownNameError, UserError
 from formats.fields import number
 from formats.yamlfile import read_yaml
 
-from ..resources import lighting_dir  # $SYNTH_SCENES_DIR/lighting, else synth/data/lighting
+from ..resources import lighting_dir  # $SYNTH_SCENES_DIR/lighting, else scenes/lighting
 from .model import Layout
 
 

@@ -1,7 +1,7 @@
 """The scene model: plain Python data for a layout (stage + objects + light fixtures).
 
 No Blender here. A layout is what the renderers translate and what the relocalizer's map is
-derived from. Files are YAML (``synth/data/layouts/NAME.yaml``), written so that a person can edit
+derived from. Files are YAML (``scenes/layouts/NAME.yaml``), written so that a person can edit
 them: one object a block, vectors on one line. ``save_layout`` followed by ``load_layout`` gives
 back an equal layout, and saving that again gives the same bytes.
 

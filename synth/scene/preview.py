@@ -52,7 +52,7 @@ BIG_MOVE = 0.5  # m: moves counted separately in the title
 # --------------------------------------------------------------------------------------------
 # colours
 
-# One fixed colour per class of synth/data/classes.yaml (Tableau 20 / ColorBrewer qualitative
+# One fixed colour per class of scenes/classes.yaml (Tableau 20 / ColorBrewer qualitative
 # colours). Classes that are usually seen together (a living room, a kitchen, a bedroom, a
 # bathroom) get clearly different hues.
 CLASS_COLORS: dict[str, str] = {
