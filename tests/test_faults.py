@@ -318,6 +318,29 @@ def test_an_experiment_into_a_render_folder_is_refused(fault_design, capsys):
     assert sorted(p.name for p in tours.iterdir()) == before
 
 
+def test_results_beside_the_tours_are_allowed_and_inside_a_tour_refused(tmp_path):
+    """make demo writes its experiment to out/demo/experiment, beside the tours of out/demo: allowed.
+    The design's folder itself, a tour folder and anything below a tour are refused."""
+    from formats.errors import UserError
+    from reloc.experiments.runner import check_not_a_render_folder
+
+    demo = tmp_path / "demo"
+    tour = demo / "apt_0_day"
+    (tour / "frames").mkdir(parents=True)
+    (demo / "design.json").write_text("{}")
+    (tour / "meta.json").write_text("{}")
+    (tour / "poses.txt").write_text("")
+    check_not_a_render_folder(demo / "experiment")  # the Makefile's demo recipe
+    check_not_a_render_folder(tmp_path / "elsewhere")
+    with pytest.raises(UserError, match="holds a rendered design"):
+        check_not_a_render_folder(demo)
+    for bad in (tour, tour / "frames", tour / "frames" / "exp"):
+        with pytest.raises(UserError, match=r"lies inside a rendered tour \(.*apt_0_day\)"):
+            check_not_a_render_folder(bad)
+    make = (Path(__file__).resolve().parents[1] / "Makefile").read_text()
+    assert "--tours $(OUT)/demo --out $(OUT)/demo/experiment" in make  # the layout this test allows
+
+
 def test_an_unknown_key_in_a_check_spec_is_refused(tmp_path, capsys):
     from reloc.cli import main as reloc_main
 

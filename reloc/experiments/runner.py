@@ -31,7 +31,7 @@ from formats.errors import SceneFormatError, UserError, check_output_folder
 from formats.yamlfile import read_json
 from formats.lifetime import folder_lock, stop_processes, worker_init
 from formats.sensors import load_sensor
-from formats.tour import Tour
+from formats.tour import META_FILE, POSES_FILE, Tour
 from formats.cli import add_quiet, add_workers
 
 from . import tables
@@ -213,12 +213,17 @@ class _Runner:
 
 
 def check_not_a_render_folder(out: Path, what: str = "the experiment") -> None:
-    """Results written among a render job's tours would mix two kinds of folder: refused, one line."""
+    """Results written among a render job's tours would mix two kinds of folder: refused, one line.
+
+    The folder that holds a rendered design (``design.json``) and every tour folder (and below) are
+    refused; a folder of its own inside the design's folder is not (``make demo`` writes the
+    experiment to ``out/demo/experiment``, beside the tours)."""
     out = Path(out)
+    if (out / DESIGN_FILE).is_file():
+        raise UserError(f"{out}: holds a rendered design ({DESIGN_FILE}); write {what} into another folder")
     for d in (out, *out.parents):
-        if (d / DESIGN_FILE).is_file():
-            where = f"holds a rendered design ({DESIGN_FILE})" if d == out else f"lies inside a rendered design ({d / DESIGN_FILE})"
-            raise UserError(f"{out}: {where}; write {what} into another folder")
+        if (d / META_FILE).is_file() and (d / POSES_FILE).is_file():
+            raise UserError(f"{out}: lies inside a rendered tour ({d}); write {what} into another folder")
 
 
 def run_experiment(spec: ExperimentSpec, out: Path | None = None, workers: int | None = None,
