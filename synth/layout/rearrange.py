@@ -50,6 +50,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from formats.camera import wrap_angle
 from formats.errors import UserError
 
 from ..scene import geometry as geo
@@ -289,7 +290,7 @@ def _wall_relation(stage, box) -> float | None:
             n, side = -n, -side
         gap = side - w.thickness / 2 - _extent_along(box.yaw, box.size, n)
         if gap <= WALL_NEAR and (best is None or gap < best[0]):
-            best = (gap, geo.wrap_angle(box.yaw - math.atan2(n[1], n[0])))
+            best = (gap, wrap_angle(box.yaw - math.atan2(n[1], n[0])))
     return None if best is None else best[1]
 
 
@@ -309,7 +310,7 @@ def _against_stage_wall(placer: Placer, obj: ObjectInstance, size, tmpl, room: R
         d = w.direction
         t = placer.rng.uniform(0.0, w.length)
         n = np.array([-d[1], d[0]]) * (1.0 if placer.rng.random() < 0.5 else -1.0)
-        yaw = geo.wrap_angle(math.atan2(n[1], n[0]) + rel)
+        yaw = wrap_angle(math.atan2(n[1], n[0]) + rel)
         xy = np.asarray(w.start, float) + t * d + n * (w.thickness / 2 + _extent_along(yaw, size, n) + GAP)
         if not room.contains(xy)[0]:
             continue
@@ -350,7 +351,7 @@ def _nudge(placer: Placer, obj: ObjectInstance, rests: dict[int, list[int]] | No
         ang = placer.rng.uniform(-math.pi, math.pi)
         dist = placer.rng.uniform(0.15, 0.45)
         xy = (x0 + dist * math.cos(ang), y0 + dist * math.sin(ang))
-        yaw = geo.wrap_angle(yaw0 + math.radians(placer.rng.uniform(-20, 20)))
+        yaw = wrap_angle(yaw0 + math.radians(placer.rng.uniform(-20, 20)))
         return placer.floor_at(obj.id, obj.cls, size, obj.params, xy, yaw, ignore=ids, template=tmpl)
 
     over = _flat_ids(placer, obj)
@@ -501,7 +502,7 @@ def _nudge_on_surface(placer: Placer, obj: ObjectInstance, tries: int = 12) -> O
     Rp = geo.rot_z(parent.yaw)[:2, :2]
     l0 = (np.asarray(b.center[:2]) - np.asarray(parent.position[:2])) @ Rp
     yaw0 = b.yaw if tmpl is not None else obj.yaw
-    dyaw = geo.wrap_angle(yaw0 - parent.yaw)
+    dyaw = wrap_angle(yaw0 - parent.yaw)
     c, sn = abs(math.cos(dyaw)), abs(math.sin(dyaw))
     hx, hy = 0.5 * (c * size[0] + sn * size[1]), 0.5 * (sn * size[0] + c * size[1])
     saved = placer.boxes.pop(obj.id)
