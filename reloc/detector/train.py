@@ -32,7 +32,7 @@ from formats.errors import UserError, one_line
 
 from .augment import camera_augment, srgb_decode, srgb_encode
 from .data import boundaries, load
-from .settings import AugmentConfig, TrainConfig
+from .settings import INPUT_HEIGHT, INPUT_WIDTH, AugmentConfig, TrainConfig
 from .model import build, parameter_count
 
 MODEL_FORMAT = "videoreloc-segnet/1"
@@ -294,7 +294,7 @@ def load_checkpoint(path, device: str = "cpu") -> dict:
     return state
 
 
-def export_onnx(checkpoint, out_onnx, height: int = 120, width: int = 160) -> Path:
+def export_onnx(checkpoint, out_onnx, height: int = INPUT_HEIGHT, width: int = INPUT_WIDTH) -> Path:
     """The checkpoint's model as ONNX (input ``image``: N x 3 x H x W sRGB in [0, 1], H and W
     multiples of the metadata's ``stride``; outputs ``semantic`` and ``boundary`` logits), with its
     classes, format, stride and training resolution in the metadata."""
