@@ -53,6 +53,7 @@ import numpy as np
 from formats.camera import wrap_angle
 from formats.errors import UserError
 
+from ..paths.model import DEFAULTS
 from ..scene import geometry as geo
 from ..scene.fixtures import is_light_source, layout_fixtures
 from .validity import CheckReport, check_layout
@@ -96,7 +97,7 @@ class RearrangePlan:
 # The query camera path of an experiment must keep 0.3 m from every object in every layout
 # (it is planned on the free space they share). Variants therefore keep out of the reference
 # layout's own walkway: a tour through every room of the reference, planned with this clearance.
-WALKWAY_CLEARANCE = 0.35  # 0.3 m for the camera + 5 cm margin
+WALKWAY_CLEARANCE = DEFAULTS.clearance + 0.05  # 0.35 m: the planners' 0.3 m for the camera + 5 cm margin
 WALKWAY_FRAMES = 1500
 
 
