@@ -1,4 +1,4 @@
-"""Read speed of a tour through each sensor model (``python -m formats.bench_sensors TOUR``).
+"""Read speed of a tour through each sensor model (``reloc bench sensors TOUR``).
 
 Every sensor model runs when a frame is read (``Tour(root, sensor=...)``), so its cost is paid by
 every method on every frame. For each sensor (default: every preset) this reads the same frames of
@@ -85,16 +85,14 @@ def format_table(r: dict) -> str:
     return "\n".join(lines)
 
 
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m formats.bench_sensors", description=__doc__.split("\n\n")[0])
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of ``reloc bench sensors``."""
     p.add_argument("tour", help="a rendered tour with RGB")
     p.add_argument("--sensors", nargs="*", help="presets or sensor YAML files (default: every preset)")
     p.add_argument("--frames", type=positive_int, default=60, help="frames with RGB to read (spread over the tour)")
     p.add_argument("--seed", type=int, default=0)
-    a = p.parse_args(argv)
+
+
+def run(a) -> int:
     print(format_table(bench(a.tour, a.sensors, a.frames, a.seed, progress=sys.stderr.isatty())))
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

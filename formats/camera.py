@@ -160,6 +160,17 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
     return T
 
 
+def wrap_angle(a):
+    """An angle (radians; a number or an array) wrapped to (-pi, pi]: pi stays pi, -pi becomes pi.
+
+    The one wrap of the toolkit (yaw of objects and cameras). The half-open end is +pi because the
+    layout code wraps yaws with it and saved layouts keep what it gave (an object turned by exactly
+    half a turn has yaw pi, not -pi). A number gives a float, an array an array."""
+    r = np.fmod(np.asarray(a, dtype=float) + np.pi, 2 * np.pi)
+    r = np.where(r <= 0, r + 2 * np.pi, r) - np.pi
+    return float(r) if r.ndim == 0 else r
+
+
 def pose_from_ypr(position, yaw: float, pitch: float = 0.0, roll: float = 0.0) -> np.ndarray:
     """Camera-to-world pose (OpenCV axes) from a position and heading angles.
 

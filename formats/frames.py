@@ -51,17 +51,6 @@ class FrameImages:
         raise ValueError("empty frame")
 
 
-def srgb_encode(x: np.ndarray) -> np.ndarray:
-    """Linear [0, 1] -> sRGB-encoded [0, 1] (IEC 61966-2-1), the one transfer function of the toolkit."""
-    x = np.clip(x, 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
-
-
-def srgb8(x: np.ndarray) -> np.ndarray:
-    """Linear [0, 1] -> 8-bit sRGB (rounded)."""
-    return (srgb_encode(x) * 255.0 + 0.5).astype(np.uint8)
-
-
 def write_frame(path, rgb=None, depth=None, instance=None, semantic=None) -> Path:
     """Write one frame EXR atomically (temporary name, then rename)."""
     path = Path(path)

@@ -27,6 +27,7 @@ import numpy as np
 from . import frames as fr
 from .atomic import write_json_atomic
 from .camera import DEFAULT_FPS, Intrinsics, camera_document, read_tum, write_tum
+from .color import srgb_encode
 from .errors import SceneFormatError, UserError
 from .fields import fail, number
 from .yamlfile import read_json
@@ -379,7 +380,7 @@ def tonemap(rgb: np.ndarray, exposure: float | None = None) -> tuple[np.ndarray,
         scale = 0.9 / p if p > 1e-8 else 1.0
     else:
         scale = float(exposure)
-    return fr.srgb_encode(rgb * scale).astype(np.float32), scale
+    return srgb_encode(rgb * scale).astype(np.float32), scale
 
 
 def write_tour(root, poses, intrinsics: Intrinsics, frames: dict | None = None, *, fps: float = DEFAULT_FPS,

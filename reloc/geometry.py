@@ -139,10 +139,6 @@ def yaw_of(R: np.ndarray) -> float:
     return math.atan2(R[1, 0], R[0, 0])
 
 
-def wrap_angle(a):
-    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
-
-
 def level(R: np.ndarray, u_clip: np.ndarray) -> np.ndarray:
     """Rotate R about the smallest axis so that R u_clip points along +Z (tilt removed)."""
     up = R @ (u_clip / np.linalg.norm(u_clip))

@@ -30,7 +30,7 @@ def build_parser() -> argparse.ArgumentParser:
     jobs.register_cli(sub)  # synth render SPEC.yaml
     trainset.register_cli(sub)  # synth trainset render SPEC.yaml (detector training data)
     dataset.register_cli(sub)  # synth dataset check|show|export
-    bench.register_cli(sub)  # synth bench
+    bench.register_cli(sub)  # synth bench render
     return p
 
 

@@ -336,3 +336,29 @@ def test_deterministic_given_seed(layouts):
     c = plan_query_path(layouts[:1], frames=120, seed=6)
     assert np.array_equal(a.poses, b.poses)
     assert not np.allclose(a.poses, c.poses)
+
+
+def test_planner_defaults_have_one_home():
+    """synth.paths.model.DEFAULTS is what the planners, synth path plan and the shipped paths use."""
+    import inspect
+
+    from synth.cli import build_parser
+    from synth.paths.model import DEFAULTS
+    from synth.paths.shipped import SHIPPED, plan_path
+    from synth.paths.views import plan_views
+
+    d = DEFAULTS
+    want = {"seed": d.seed, "fps": d.fps, "speed": d.speed, "clearance": d.clearance, "obstacles": d.obstacles}
+    for fn, frames in ((plan_query_path, d.query_frames), (plan_mapping_path, d.mapping_frames), (plan_path, None),
+                       (plan_views, d.views_frames)):
+        ps = inspect.signature(fn).parameters
+        for k, v in want.items():
+            assert k not in ps or ps[k].default == v, (fn.__name__, k)
+        if frames is not None:
+            assert ps["frames"].default == frames, fn.__name__
+    p = build_parser()
+    for kind, frames, lay in (("query", d.query_frames, ["--layouts", "apt_0"]), ("mapping", d.mapping_frames, ["--layout", "apt_0"])):
+        a = p.parse_args(["path", "plan", kind, *lay, "--out", "x.txt"])
+        assert (a.frames, a.seed, a.fps, a.speed, a.clearance, a.obstacles) == (frames, d.seed, d.fps, d.speed, d.clearance,
+                                                                                d.obstacles)
+    assert SHIPPED["query"]["frames"] == d.query_frames and SHIPPED["mapping"]["frames"] == d.mapping_frames

@@ -10,6 +10,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from formats import color
 from formats.camera import Intrinsics
 from formats.sensors import apply_sensor, exposure, load_sensor
 from formats.tour import tonemap
@@ -23,6 +24,22 @@ from reloc.detector.settings import AugmentConfig  # noqa: E402
 def _hdr(seed: int, level: float, h: int = 24, w: int = 32) -> np.ndarray:
     rng = np.random.default_rng(seed)
     return (rng.gamma(1.5, 1.0, (h, w, 3)) * level).astype(np.float32)
+
+
+def test_srgb_curve_on_tensors_is_formats_color():
+    """The tensor ports of the sRGB curve give formats.color's values (float64 and float32, knees
+    and clipping included; up to the last bits of the two libraries' powers), and decode inverts
+    encode."""
+    x = np.concatenate([np.linspace(-0.5, 1.5, 2001), [0.0, color.ENCODE_KNEE, color.DECODE_KNEE, 1.0, 1e-9]])
+    for dt in (np.float64, np.float32):
+        v = x.astype(dt)
+        got = A.srgb_encode(torch.from_numpy(v)).numpy()
+        assert got.dtype == dt and np.abs(got - color.srgb_encode(v)).max() < 1e-6
+        c = np.clip(v, 0.0, 1.0)
+        assert np.abs(A.srgb_decode(torch.from_numpy(c)).numpy() - color.srgb_decode(c)).max() < 1e-6
+    lin = np.linspace(0.0, 1.0, 1001)
+    assert np.abs(color.srgb_decode(color.srgb_encode(lin)) - lin).max() < 1e-12
+    assert color.srgb8(np.array([0.0, 1.0, 2.0, -1.0])).tolist() == [0, 255, 255, 0]
 
 
 def test_tonemap_matches_formats_tour():

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
+from formats.camera import wrap_angle
 from formats.errors import SceneFormatError, UnknownNameError
 from synth.scene import geometry as geo
 from synth.cli import main as synth_main
@@ -214,6 +215,33 @@ def test_geometry_quaternion_round_trip():
         R = geo.quat_to_matrix(q)
         assert np.allclose(R @ R.T, np.eye(3), atol=1e-12)
         assert np.allclose(geo.matrix_to_quat(R), q, atol=1e-9)
+
+
+def test_wrap_angle_range_is_minus_pi_exclusive_to_pi_inclusive():
+    """formats.camera.wrap_angle, the one wrap (layout yaws): (-pi, pi], so half a turn is always
+    +pi whichever way it was reached, and the old scalar code's values are kept bit for bit."""
+    pi = math.pi
+    assert wrap_angle(pi) == pi and wrap_angle(-pi) == pi
+    assert wrap_angle(3 * pi) == pi and wrap_angle(-3 * pi) == pi
+    assert wrap_angle(0.0) == 0.0 and wrap_angle(2 * pi) == 0.0
+    assert isinstance(wrap_angle(1.0), float) and isinstance(wrap_angle(np.float64(1.0)), float)
+    a = np.array([pi, -pi, 3 * pi, -3 * pi, 0.0, 2 * pi, 1.0, -1.0, 7.5, -7.5])
+    got = wrap_angle(a)
+    assert isinstance(got, np.ndarray) and got.shape == a.shape
+    assert got[:4].tolist() == [pi] * 4 and ((got > -pi) & (got <= pi)).all()
+    assert np.allclose(np.cos(got), np.cos(a)) and np.allclose(np.sin(got), np.sin(a))
+
+    def old(x):  # the layout code's scalar wrap before it moved here
+        x = math.fmod(x + pi, 2 * pi)
+        if x <= 0:
+            x += 2 * pi
+        return x - pi
+
+    rng = np.random.default_rng(0)
+    xs = list(rng.uniform(-20, 20, 2000)) + [pi, -pi, 3 * pi, -3 * pi, 1e-300, -1e-300]
+    assert [wrap_angle(float(x)) for x in xs] == [old(float(x)) for x in xs]
+    assert wrap_angle(np.array(xs)).tolist() == [old(float(x)) for x in xs]
+    assert wrap_angle(np.array(xs).reshape(-1, 2)).shape == (len(xs) // 2, 2)
 
 
 def test_boxes_overlap_is_symmetric_and_respects_touching():

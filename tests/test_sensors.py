@@ -684,8 +684,8 @@ def test_read_speed_benchmark_reports_every_preset(small_tour, tmp_path, capsys)
     import shutil
 
     from formats import frames as fr
-    from formats.bench_sensors import main as bench_main
     from formats.tour import Tour
+    from reloc.cli import main as reloc_main
 
     root = tmp_path / small_tour.name
     shutil.copytree(small_tour, root)
@@ -707,7 +707,7 @@ def test_read_speed_benchmark_reports_every_preset(small_tour, tmp_path, capsys)
     sl = load_sensor("structured_light").color  # grey 0.3: exposure = target * full well / (e/ms * 0.3)
     assert rows["structured_light"]["exposure_ms"] == pytest.approx(sl.exposure_target * sl.full_well_e
                                                                     / (sl.electrons_per_ms * 0.3), rel=1e-3)
-    assert bench_main([str(root), "--frames", "2", "--sensors", "tof"]) == 0
+    assert reloc_main(["bench", "sensors", str(root), "--frames", "2", "--sensors", "tof"]) == 0
     out = capsys.readouterr().out
     assert "ideal" in out and "tof" in out and "structured_light" not in out
 

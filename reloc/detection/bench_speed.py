@@ -1,4 +1,4 @@
-"""Speed of learned-detector models side by side (``python -m reloc.detection.bench_speed TOUR -m A.onnx B.onnx``).
+"""Speed of learned-detector models side by side (``reloc bench detector-speed TOUR -m A.onnx B.onnx``).
 
 Each model runs on one onnxruntime thread (the experiments' setting) over the same RGB frames of a
 tour, round robin (frame i through every model, then frame i + 1, ...), so the machine's drifts hit
@@ -59,20 +59,18 @@ def bench(tour_dir, models, frames: int = 40, repeats: int = 3) -> list[dict]:
     return rows
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m reloc.detection.bench_speed", description=__doc__.split("\n\n")[0])
+def add_arguments(ap: argparse.ArgumentParser) -> None:
+    """The options of ``reloc bench detector-speed``."""
     ap.add_argument("tour", help="a rendered tour with RGB frames")
     ap.add_argument("-m", "--models", nargs="+", required=True, help="ONNX models (the first is the reference)")
     ap.add_argument("--frames", type=positive_int, default=40)
     ap.add_argument("--repeats", type=int, default=3)
-    args = ap.parse_args(argv)
+
+
+def run(args) -> int:
     rows = bench(args.tour, args.models, args.frames, args.repeats)
     print("| model | network ms (median) | ratio | detect ms (median) | ratio | frames |")
     print("|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['model']} | {r['network_ms']} | {r['network_ratio']} | {r['detect_ms']} | {r['detect_ratio']} | {r['frames']} |")
     return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -24,7 +24,7 @@ import yaml
 
 from formats.errors import UserError, one_line
 from formats.yamlfile import read_yaml
-from formats.frames import srgb8
+from formats.color import srgb8
 
 from .base import Detection, FrameData
 

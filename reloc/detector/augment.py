@@ -34,6 +34,8 @@ import math
 import torch
 import torch.nn.functional as F
 
+from formats import color
+
 LUMA = (0.2126, 0.7152, 0.0722)
 # the JPEG standard's luminance quantisation table (ITU-T T.81, Annex K.1)
 JPEG_LUMA = (
@@ -44,12 +46,16 @@ JPEG_LUMA = (
 
 
 def srgb_decode(x: torch.Tensor) -> torch.Tensor:
-    return torch.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
+    """``formats.color.srgb_decode`` on tensors (their dtype kept)."""
+    return torch.where(x <= color.DECODE_KNEE, x / color.SLOPE, ((x + color.OFFSET) / (1.0 + color.OFFSET)) ** color.GAMMA)
 
 
 def srgb_encode(x: torch.Tensor) -> torch.Tensor:
+    """``formats.color.srgb_encode`` on tensors (clipped to [0, 1] first; the power's input kept
+    above 1e-8, where the linear segment is taken anyway, so that its gradient stays finite)."""
     x = x.clamp(0.0, 1.0)
-    return torch.where(x <= 0.0031308, x * 12.92, 1.055 * x.clamp_min(1e-8) ** (1 / 2.4) - 0.055)
+    return torch.where(x <= color.ENCODE_KNEE, x * color.SLOPE,
+                       (1.0 + color.OFFSET) * x.clamp_min(1e-8) ** (1.0 / color.GAMMA) - color.OFFSET)
 
 
 def luminance(lin: torch.Tensor) -> torch.Tensor:

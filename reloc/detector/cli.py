@@ -12,7 +12,7 @@ from pathlib import Path
 from formats.design import list_tours
 from formats.errors import UserError, check_output_file, check_output_folder
 
-from .settings import TrainConfig
+from .settings import INPUT_HEIGHT, INPUT_WIDTH, TrainConfig
 from formats.cli import add_json, add_quiet, positive_int
 
 
@@ -124,8 +124,8 @@ def register_cli(subparsers) -> None:
     a = ds.add_parser("export", help="a checkpoint as ONNX (needs PyTorch)")
     a.add_argument("checkpoint")
     a.add_argument("--out", required=True, help="model file (.onnx)")
-    a.add_argument("--height", type=int, default=120)
-    a.add_argument("--width", type=int, default=160)
+    a.add_argument("--height", type=int, default=INPUT_HEIGHT, help=f"input height in pixels (default {INPUT_HEIGHT})")
+    a.add_argument("--width", type=int, default=INPUT_WIDTH, help=f"input width in pixels (default {INPUT_WIDTH})")
     a.set_defaults(fn=cmd_export)
     a = ds.add_parser("eval", help="per-lighting class IoU, instance recall/precision, confusions, ms/frame")
     a.add_argument("tours", nargs="+", help="tour folders, or design folders holding tours")

@@ -5,6 +5,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+# The detector's input size (pixels): the size the training set is rendered at (docs/detector.md),
+# what ``reloc detector export`` fixes the ONNX model's example input to by default, and the size in
+# the shipped models' names (reloc/models/detector_v2_160x120.onnx).
+INPUT_WIDTH, INPUT_HEIGHT = 160, 120
+
 
 @dataclass
 class AugmentConfig:

@@ -30,9 +30,9 @@ import torch.nn.functional as F
 from formats.atomic import replacing, write_json_atomic
 from formats.errors import UserError, one_line
 
-from .augment import camera_augment
+from .augment import camera_augment, srgb_decode, srgb_encode
 from .data import boundaries, load
-from .settings import AugmentConfig, TrainConfig
+from .settings import INPUT_HEIGHT, INPUT_WIDTH, AugmentConfig, TrainConfig
 from .model import build, parameter_count
 
 MODEL_FORMAT = "videoreloc-segnet/1"
@@ -50,9 +50,7 @@ def _weights(sem: np.ndarray, n: int) -> torch.Tensor:
 def _augment(x: torch.Tensor, g: torch.Generator, exposure_log2: float) -> torch.Tensor:
     """x: (B, 3, H, W) sRGB in [0, 1]: an exposure change in linear light, per image."""
     gain = 2.0 ** ((torch.rand(x.shape[0], 1, 1, 1, generator=g, device=x.device) * 2 - 1) * exposure_log2)
-    lin = torch.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4) * gain
-    lin = lin.clamp(0, 1)
-    return torch.where(lin <= 0.0031308, lin * 12.92, 1.055 * lin.clamp_min(1e-8) ** (1 / 2.4) - 0.055)
+    return srgb_encode(srgb_decode(x) * gain)
 
 
 def pad_to(x: torch.Tensor, stride: int) -> torch.Tensor:
@@ -296,7 +294,7 @@ def load_checkpoint(path, device: str = "cpu") -> dict:
     return state
 
 
-def export_onnx(checkpoint, out_onnx, height: int = 120, width: int = 160) -> Path:
+def export_onnx(checkpoint, out_onnx, height: int = INPUT_HEIGHT, width: int = INPUT_WIDTH) -> Path:
     """The checkpoint's model as ONNX (input ``image``: N x 3 x H x W sRGB in [0, 1], H and W
     multiples of the metadata's ``stride``; outputs ``semantic`` and ``boundary`` logits), with its
     classes, format, stride and training resolution in the metadata."""

@@ -1,5 +1,11 @@
-"""``reloc bench``: front-end throughput by stage, the odometry speed/accuracy trade-off, and the
-stability of an experiment's figures under last-bit perturbations (:mod:`reloc.experiments.stability`).
+"""``reloc bench``: every benchmark of the relocalizer's side, one subcommand each:
+
+- ``frontend``: front-end throughput by stage (here);
+- ``odometry``: the odometry speed/accuracy trade-off (:mod:`reloc.experiments.bench_odometry`);
+- ``stability``: an experiment's figures under last-bit perturbations (:mod:`reloc.experiments.stability`);
+- ``detector-speed``: learned-detector models side by side (:mod:`reloc.detection.bench_speed`);
+- ``map-rules``: what each map-building rule costs (:mod:`reloc.map.bench_rules`);
+- ``sensors``: a tour's read speed through each sensor model (:mod:`formats.bench_sensors`).
 
 ``reloc bench frontend`` streams a tour through the front-end (adaptive clips, registration and
 refinement at every clip closure) and reports milliseconds per frame for each stage: reading the
@@ -94,8 +100,27 @@ def cmd_odometry(args) -> int:
     return bench_odometry.run(args)
 
 
+def cmd_detector_speed(args) -> int:
+    from ..detection import bench_speed
+
+    return bench_speed.run(args)
+
+
+def cmd_map_rules(args) -> int:
+    from ..map import bench_rules
+
+    return bench_rules.run(args)
+
+
+def cmd_sensors(args) -> int:
+    from formats import bench_sensors
+
+    return bench_sensors.run(args)
+
+
 def register_cli(subparsers) -> None:
-    p = subparsers.add_parser("bench", help="benchmarks that print figures (front-end stages, odometry trade-off, stability)")
+    p = subparsers.add_parser("bench", help="benchmarks that print figures (front-end stages, odometry trade-off, stability, "
+                                            "detector speed, map rules, sensor read speed)")
     sub = p.add_subparsers(dest="cmd", required=True)
     a = sub.add_parser("frontend", help="front-end frames per second by stage")
     a.add_argument("--tour", required=True)
@@ -116,4 +141,18 @@ def register_cli(subparsers) -> None:
 
     bench_odometry.add_arguments(a)
     a.set_defaults(fn=cmd_odometry)
+    from formats import bench_sensors
+
+    from ..detection import bench_speed
+    from ..map import bench_rules
+
+    a = sub.add_parser("detector-speed", help="learned-detector models side by side: median ms per frame")
+    bench_speed.add_arguments(a)
+    a.set_defaults(fn=cmd_detector_speed)
+    a = sub.add_parser("map-rules", help="what each map-building rule costs: boxes matched, missing, extra per relaxed rule")
+    bench_rules.add_arguments(a)
+    a.set_defaults(fn=cmd_map_rules)
+    a = sub.add_parser("sensors", help="a tour's read speed, valid depth and exposure through each sensor model")
+    bench_sensors.add_arguments(a)
+    a.set_defaults(fn=cmd_sensors)
 

@@ -1,4 +1,4 @@
-"""Odometry speed/drift trade-off (``python -m reloc.experiments.bench_odometry TOUR``).
+"""Odometry speed/drift trade-off (``reloc bench odometry TOUR``).
 
 For each setting (odometry width, frame stride, method) the frames of a rendered tour are fed
 through :class:`reloc.frontend.odometry.OdometryChain` in windows of a clip-like length (300 frames by
@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from formats.atomic import write_json_atomic
-from formats.cli import add_json, add_out, positive_int, run_command
+from formats.cli import add_json, add_out, positive_int
 from formats.errors import check_output_file
 
 from ..config import OdometryConfig
@@ -191,7 +191,7 @@ def format_table(rows: list[dict]) -> str:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    """The options of ``reloc bench odometry`` (declared once: the ``python -m`` entry point is the same command)."""
+    """The options of ``reloc bench odometry``."""
     p.add_argument("tour", help="tour directory")
     p.add_argument("--frames", type=positive_int, default=900, help="frames to load (default 900)")
     p.add_argument("--start", type=int, default=0, help="first frame position (default 0)")
@@ -218,13 +218,3 @@ def run(a) -> int:
         write_json_atomic(a.out, rows, indent=1)
     return 0
 
-
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m reloc.experiments.bench_odometry",
-                                description="odometry speed / drift trade-off on a rendered tour (= reloc bench odometry)")
-    add_arguments(p)
-    return run_command("reloc", run, p.parse_args(argv))
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -23,6 +23,8 @@ from itertools import combinations
 
 import numpy as np
 
+from formats.camera import wrap_angle
+
 from .clip_rigid import consensus_fit, within_sum
 from .clips import Node
 from ..config import RegistrationConfig
@@ -403,7 +405,7 @@ def fallback_candidates(nodes: list[Node], bmap: BoxMap, cfg: RegistrationConfig
     for k in range(4):
         R = rot_z(psi0 + k * math.pi / 2) @ R_level
         if yaw_prior is not None:
-            dy = abs((yaw_of(R) - yaw_prior + math.pi) % (2 * math.pi) - math.pi)
+            dy = abs(wrap_angle(yaw_of(R) - yaw_prior))
             if dy > math.radians(cfg.fallback_yaw_window_deg):
                 continue
         # every class-compatible pair proposes t = y - R x

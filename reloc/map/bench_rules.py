@@ -1,4 +1,4 @@
-"""What each map-building rule costs (``python -m reloc.map.bench_rules TOUR --model M``).
+"""What each map-building rule costs (``reloc bench map-rules TOUR --model M``).
 
 A map built with a learned detector misses ground-truth boxes and adds extra ones. This builds the
 map of one mapping tour once with the defaults (``MapBuildSettings``, the detector's own minimum
@@ -101,16 +101,14 @@ def format_rows(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m reloc.map.bench_rules", description=__doc__.split("\n\n")[0])
+def add_arguments(ap: argparse.ArgumentParser) -> None:
+    """The options of ``reloc bench map-rules``."""
     ap.add_argument("tour", help="a rendered mapping tour with RGB and ground truth")
     ap.add_argument("--model", required=True, help="the learned detector's ONNX model")
     ap.add_argument("--stride", type=int, help="every N-th frame (default: MapBuildSettings')")
-    args = ap.parse_args(argv)
+
+
+def run(args) -> int:
     rows = bench(args.tour, args.model, args.stride, progress=True)
     print(format_rows(rows))
     return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from formats import frames as fr
+from formats.color import srgb8
 from formats.atomic import replacing
 
 from ..render.chunks import emit, worker_main
@@ -113,7 +114,7 @@ def run(job: dict) -> int:
                 import cv2
 
                 previews.mkdir(parents=True, exist_ok=True)
-                ok, png = cv2.imencode(".png", fr.srgb8(rgb)[..., ::-1])
+                ok, png = cv2.imencode(".png", srgb8(rgb)[..., ::-1])
                 if not ok:
                     raise RuntimeError(f"frame {i}: the preview could not be encoded as PNG")
                 with replacing(previews / f"{i:06d}.png") as tmp:

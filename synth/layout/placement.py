@@ -30,6 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from formats.camera import wrap_angle
+
 from ..assets import registry as assets
 from ..replicacad.surfaces import mesh_surfaces
 from ..scene import geometry as geo
@@ -327,7 +329,7 @@ class Placer:
         xmin, ymin, xmax, ymax = room.rect
         for _ in range(tries):
             y = yaw if yaw is not None else self.rng.integers(4) * math.pi / 2
-            y = geo.wrap_angle(y + math.radians(self.rng.uniform(-jitter_deg, jitter_deg)))
+            y = wrap_angle(y + math.radians(self.rng.uniform(-jitter_deg, jitter_deg)))
             if xmax - xmin < 2 * margin or ymax - ymin < 2 * margin:
                 return None
             xy = (self.rng.uniform(xmin + margin, xmax - margin), self.rng.uniform(ymin + margin, ymax - margin))
@@ -356,7 +358,7 @@ class Placer:
         yaw = parent.yaw
         c, s = math.cos(yaw), math.sin(yaw)
         xy = (parent.position[0] + c * dxy[0] - s * dxy[1], parent.position[1] + s * dxy[0] + c * dxy[1])
-        return self.floor_at(oid, cls, size, params, xy, geo.wrap_angle(yaw + dyaw), ignore, template)
+        return self.floor_at(oid, cls, size, params, xy, wrap_angle(yaw + dyaw), ignore, template)
 
     def on_surface(self, oid, cls, size, params, parents: list[ObjectInstance], tries: int = 40,
                    yaw_mode: str = "aligned", ignore=frozenset(), template=None) -> ObjectInstance | None:
@@ -396,7 +398,7 @@ class Placer:
         c, sn = math.cos(pyaw), math.sin(pyaw)
         xy = (parent.position[0] + c * lxy[0] - sn * lxy[1], parent.position[1] + sn * lxy[0] + c * lxy[1])
         z = parent.position[2] + s.z
-        yaw = geo.wrap_angle(pyaw + dyaw)
+        yaw = wrap_angle(pyaw + dyaw)
         box = self._box(oid, cls, size, xy, z, yaw)
         if box.zmax > self.ceiling_z - CEILING_GAP or self.in_keepout(box) or self.collides(box, ignore | {parent.id}):
             return None

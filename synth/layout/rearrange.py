@@ -50,8 +50,10 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from formats.camera import wrap_angle
 from formats.errors import UserError
 
+from ..paths.model import DEFAULTS
 from ..scene import geometry as geo
 from ..scene.fixtures import is_light_source, layout_fixtures
 from .validity import CheckReport, check_layout
@@ -95,7 +97,7 @@ class RearrangePlan:
 # The query camera path of an experiment must keep 0.3 m from every object in every layout
 # (it is planned on the free space they share). Variants therefore keep out of the reference
 # layout's own walkway: a tour through every room of the reference, planned with this clearance.
-WALKWAY_CLEARANCE = 0.35  # 0.3 m for the camera + 5 cm margin
+WALKWAY_CLEARANCE = DEFAULTS.clearance + 0.05  # 0.35 m: the planners' 0.3 m for the camera + 5 cm margin
 WALKWAY_FRAMES = 1500
 
 
@@ -289,7 +291,7 @@ def _wall_relation(stage, box) -> float | None:
             n, side = -n, -side
         gap = side - w.thickness / 2 - _extent_along(box.yaw, box.size, n)
         if gap <= WALL_NEAR and (best is None or gap < best[0]):
-            best = (gap, geo.wrap_angle(box.yaw - math.atan2(n[1], n[0])))
+            best = (gap, wrap_angle(box.yaw - math.atan2(n[1], n[0])))
     return None if best is None else best[1]
 
 
@@ -309,7 +311,7 @@ def _against_stage_wall(placer: Placer, obj: ObjectInstance, size, tmpl, room: R
         d = w.direction
         t = placer.rng.uniform(0.0, w.length)
         n = np.array([-d[1], d[0]]) * (1.0 if placer.rng.random() < 0.5 else -1.0)
-        yaw = geo.wrap_angle(math.atan2(n[1], n[0]) + rel)
+        yaw = wrap_angle(math.atan2(n[1], n[0]) + rel)
         xy = np.asarray(w.start, float) + t * d + n * (w.thickness / 2 + _extent_along(yaw, size, n) + GAP)
         if not room.contains(xy)[0]:
             continue
@@ -350,7 +352,7 @@ def _nudge(placer: Placer, obj: ObjectInstance, rests: dict[int, list[int]] | No
         ang = placer.rng.uniform(-math.pi, math.pi)
         dist = placer.rng.uniform(0.15, 0.45)
         xy = (x0 + dist * math.cos(ang), y0 + dist * math.sin(ang))
-        yaw = geo.wrap_angle(yaw0 + math.radians(placer.rng.uniform(-20, 20)))
+        yaw = wrap_angle(yaw0 + math.radians(placer.rng.uniform(-20, 20)))
         return placer.floor_at(obj.id, obj.cls, size, obj.params, xy, yaw, ignore=ids, template=tmpl)
 
     over = _flat_ids(placer, obj)
@@ -501,7 +503,7 @@ def _nudge_on_surface(placer: Placer, obj: ObjectInstance, tries: int = 12) -> O
     Rp = geo.rot_z(parent.yaw)[:2, :2]
     l0 = (np.asarray(b.center[:2]) - np.asarray(parent.position[:2])) @ Rp
     yaw0 = b.yaw if tmpl is not None else obj.yaw
-    dyaw = geo.wrap_angle(yaw0 - parent.yaw)
+    dyaw = wrap_angle(yaw0 - parent.yaw)
     c, sn = abs(math.cos(dyaw)), abs(math.sin(dyaw))
     hx, hy = 0.5 * (c * size[0] + sn * size[1]), 0.5 * (sn * size[0] + c * size[1])
     saved = placer.boxes.pop(obj.id)

@@ -7,14 +7,13 @@ from pathlib import Path
 
 import numpy as np
 
-from formats import camera
 from formats.errors import UnknownNameError, UserError
 from formats.cli import add_json, positive_int
 
 from .clearance import CLEARANCE_TOL, _range_text, _what, clearance_report, declared_clearance, replan_command
 from .files import load_path, save_path
 from .mapping import plan_mapping_path
-from .model import CameraPath
+from .model import DEFAULTS, CameraPath
 from .query import plan_query_path
 from .shipped import SHIPPED, generate_shipped
 from .summary import path_summary, plot_path
@@ -187,24 +186,26 @@ def register_cli(subparsers) -> None:
     plan = sub.add_parser("plan", help="plan a camera path and write it (TUM + .yaml)")
     ps = plan.add_subparsers(dest="kind", required=True)
 
+    d = DEFAULTS
+
     def common(a, frames):
-        a.add_argument("--frames", type=positive_int, default=frames)
-        a.add_argument("--seed", type=int, default=0)
-        a.add_argument("--fps", type=float, default=camera.DEFAULT_FPS)
-        a.add_argument("--speed", type=float, default=1.0, help="m/s (default 1)")
-        a.add_argument("--clearance", type=float, default=0.3, help="m from obstacles and walls (default 0.3)")
-        a.add_argument("--obstacles", choices=("band", "all"), default="all",
+        a.add_argument("--frames", type=positive_int, default=frames, help=f"default {frames}")
+        a.add_argument("--seed", type=int, default=d.seed)
+        a.add_argument("--fps", type=float, default=d.fps, help=f"default {d.fps:g}")
+        a.add_argument("--speed", type=float, default=d.speed, help=f"m/s (default {d.speed:g})")
+        a.add_argument("--clearance", type=float, default=d.clearance, help=f"m from obstacles and walls (default {d.clearance:g})")
+        a.add_argument("--obstacles", choices=("band", "all"), default=d.obstacles,
                        help="all: every object but ceiling-mounted ones (default); band: objects reaching the camera height band")
         a.add_argument("--name", help="path name (default: the output file's stem)")
         a.add_argument("--out", required=True, help="trajectory file (.txt); the .yaml sidecar goes next to it")
 
     a = ps.add_parser("query", help="a walk through every room, clear of the objects of every layout given")
     a.add_argument("--layouts", nargs="+", required=True, metavar="LAYOUT")
-    common(a, 4000)
+    common(a, d.query_frames)
     a.set_defaults(fn=_cmd_plan_query)
     a = ps.add_parser("mapping", help="a cross-hatch tour of one layout")
     a.add_argument("--layout", required=True)
-    common(a, 6000)
+    common(a, d.mapping_frames)
     a.set_defaults(fn=_cmd_plan_mapping)
     a = sub.add_parser("generate", help="rewrite the shipped paths (scenes/paths: query, mapping)")
     a.add_argument("--out-dir", help="default: scenes/paths")

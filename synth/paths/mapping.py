@@ -8,12 +8,11 @@ import math
 
 import numpy as np
 
-from formats import camera
 from formats.errors import UserError
 
 from ..scene.model import Layout
 from .curves import _arc, _continuous, _final_yaw, _poses, _rate_limit, _resample_track, _smooth_noise, _smooth_valid, _travel_yaw, _turn_loops
-from .model import BOB, DS, M_HEIGHT_VAR, M_HEIGHTS, M_LOOK, M_MIN_RUN, M_PITCH, M_PITCH_VAR, M_ROLL, M_SMOOTH, M_SPACING, MARGIN, STEP_HZ, CameraPath
+from .model import BOB, DEFAULTS, DS, M_HEIGHT_VAR, M_HEIGHTS, M_LOOK, M_MIN_RUN, M_PITCH, M_PITCH_VAR, M_ROLL, M_SMOOTH, M_SPACING, MARGIN, STEP_HZ, CameraPath
 from .space import Space, _check_args, _line, _meta, _require_rooms, _start_cell
 
 __all__ = ["plan_mapping_path"]
@@ -101,8 +100,9 @@ def _room_pattern(space: Space, k: int, spacing: float, offset: float, flip: int
     return out
 
 
-def plan_mapping_path(layout: Layout, frames: int = 6000, seed: int = 0, fps: float = camera.DEFAULT_FPS,
-                      speed: float = 1.0, clearance: float = 0.3, obstacles: str = "all", name: str = "mapping") -> CameraPath:
+def plan_mapping_path(layout: Layout, frames: int = DEFAULTS.mapping_frames, seed: int = DEFAULTS.seed,
+                      fps: float = DEFAULTS.fps, speed: float = DEFAULTS.speed, clearance: float = DEFAULTS.clearance,
+                      obstacles: str = DEFAULTS.obstacles, name: str = "mapping") -> CameraPath:
     """Cross-hatch tour of one layout: lawnmower sweeps along x and y in every room, rooms chained through doors."""
     from scipy import ndimage
 

@@ -15,7 +15,7 @@ import numpy as np
 from formats import camera
 
 
-__all__ = ["CameraPath", "FORMAT", "BAND"]
+__all__ = ["CameraPath", "FORMAT", "BAND", "PlannerDefaults", "DEFAULTS"]
 
 FORMAT = "synth-camera-path/1"
 BAND = 0.3  # m: objects reaching within this height of the camera's height range obstruct it
@@ -39,6 +39,25 @@ M_SMOOTH = 0.25
 M_SPACING = 1.0  # m: nominal distance between sweep lines
 M_MIN_RUN = 0.5  # m: shorter free runs on a sweep line are skipped
 STEP_HZ = 1.8  # steps per second at 1 m/s
+
+
+@dataclass(frozen=True)
+class PlannerDefaults:
+    """The planners' input defaults, in one place: the ``plan_*_path`` functions' keyword defaults,
+    ``synth path plan``'s option defaults and the shipped paths (``synth.paths.shipped.SHIPPED``)
+    read them from :data:`DEFAULTS`."""
+
+    fps: float = camera.DEFAULT_FPS  # frames per second (the cameras' default, formats.camera)
+    speed: float = 1.0  # m/s along the path
+    clearance: float = 0.3  # m the camera centre keeps from obstacles and walls
+    obstacles: str = "all"  # "all": every object but ceiling-mounted ones; "band": those in the height band
+    seed: int = 0
+    query_frames: int = 4000  # the paper's query tour
+    mapping_frames: int = 6000  # the paper's mapping tour
+    views_frames: int = 200  # random views (synth.paths.views)
+
+
+DEFAULTS = PlannerDefaults()
 
 
 # --------------------------------------------------------------------------------------------

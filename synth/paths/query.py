@@ -8,12 +8,11 @@ import math
 
 import numpy as np
 
-from formats import camera
 from formats.errors import UserError
 
 from ..scene.model import Layout
 from .curves import _arc, _final_yaw, _polyline_resample, _poses, _resample_track, _smooth_noise, _smooth_valid, _travel_yaw, _turn_loops
-from .model import BOB, DS, Q_HEIGHT, Q_HEIGHT_VAR, Q_LOOK, Q_PITCH, Q_PITCH_VAR, Q_ROLL, Q_SMOOTH, STEP_HZ, CameraPath
+from .model import BOB, DEFAULTS, DS, Q_HEIGHT, Q_HEIGHT_VAR, Q_LOOK, Q_PITCH, Q_PITCH_VAR, Q_ROLL, Q_SMOOTH, STEP_HZ, CameraPath
 from .space import Space, _check_args, _meta, _require_rooms, _start_cell
 
 __all__ = ["plan_query_path"]
@@ -79,8 +78,9 @@ def _tour(D: np.ndarray, start: int) -> list[int]:
     return order
 
 
-def plan_query_path(layouts: list[Layout], frames: int = 4000, seed: int = 0, fps: float = camera.DEFAULT_FPS,
-                    speed: float = 1.0, clearance: float = 0.3, obstacles: str = "all", name: str = "query") -> CameraPath:
+def plan_query_path(layouts: list[Layout], frames: int = DEFAULTS.query_frames, seed: int = DEFAULTS.seed,
+                    fps: float = DEFAULTS.fps, speed: float = DEFAULTS.speed, clearance: float = DEFAULTS.clearance,
+                    obstacles: str = DEFAULTS.obstacles, name: str = "query") -> CameraPath:
     """The shared query walk: every room, ``clearance`` from the objects of every layout given."""
     from scipy import ndimage
 

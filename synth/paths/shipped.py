@@ -7,13 +7,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from formats import camera
 from formats.errors import UserError
 
 from ..scene.model import Layout
 from .files import paths_dir, save_path
 from .mapping import plan_mapping_path
-from .model import CameraPath
+from .model import DEFAULTS, CameraPath
 from .query import plan_query_path
 
 __all__ = ["SHIPPED", "plan_path", "replan", "generate_shipped"]
@@ -23,13 +22,16 @@ __all__ = ["SHIPPED", "plan_path", "replan", "generate_shipped"]
 # in front of the bathroom door where at most ~0.29 m is possible (see ``synth.paths``), so it is
 # planned with 0.25 m.
 SHIPPED: dict[str, dict[str, Any]] = {
-    "query": {"kind": "query", "layouts": [f"apt_{i}" for i in range(6)], "frames": 4000, "seed": 0, "clearance": 0.3},
-    "mapping": {"kind": "mapping", "layouts": ["apt_0"], "frames": 6000, "seed": 0, "clearance": 0.3},
+    "query": {"kind": "query", "layouts": [f"apt_{i}" for i in range(6)], "frames": DEFAULTS.query_frames,
+              "seed": DEFAULTS.seed, "clearance": DEFAULTS.clearance},
+    "mapping": {"kind": "mapping", "layouts": ["apt_0"], "frames": DEFAULTS.mapping_frames, "seed": DEFAULTS.seed,
+                "clearance": DEFAULTS.clearance},
 }
 
 
-def plan_path(kind: str, layouts: list[Layout], frames: int, seed: int = 0, fps: float = camera.DEFAULT_FPS,
-              speed: float = 1.0, clearance: float = 0.3, obstacles: str = "all", name: str | None = None) -> CameraPath:
+def plan_path(kind: str, layouts: list[Layout], frames: int, seed: int = DEFAULTS.seed, fps: float = DEFAULTS.fps,
+              speed: float = DEFAULTS.speed, clearance: float = DEFAULTS.clearance, obstacles: str = DEFAULTS.obstacles,
+              name: str | None = None) -> CameraPath:
     """``plan_query_path`` or ``plan_mapping_path`` by kind."""
     if kind == "query":
         return plan_query_path(layouts, frames, seed, fps, speed, clearance, obstacles, name or "query")
@@ -49,7 +51,7 @@ def replan(path: CameraPath) -> CameraPath:
     try:
         lays = [load_layout(n) for n in m["layouts"]]
         return plan_path(m["kind"], lays, int(pl["frames"]), int(m["seed"]), float(pl["fps"]), float(pl["speed_mps"]),
-                         float(pl["clearance_m"]), str(pl.get("obstacles", "all")), path.name)
+                         float(pl["clearance_m"]), str(pl.get("obstacles", DEFAULTS.obstacles)), path.name)
     except KeyError as e:
         raise UserError(f"camera path '{path.name}' does not record its planner input {e}") from None
 

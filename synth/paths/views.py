@@ -23,14 +23,15 @@ from formats.errors import UserError
 
 from ..scene.model import Layout
 from .curves import _poses
-from .model import BOB, Q_HEIGHT, Q_HEIGHT_VAR, Q_PITCH, Q_PITCH_VAR, Q_ROLL, CameraPath
+from .model import BOB, DEFAULTS, Q_HEIGHT, Q_HEIGHT_VAR, Q_PITCH, Q_PITCH_VAR, Q_ROLL, CameraPath
 from .space import Space, _require_rooms
 
 VIEWS_SPREAD = 1.5  # the query's height, pitch and roll ranges, widened by this factor
 MIN_PER_ROOM = 3
 
 
-def plan_views(layouts: list[Layout], frames: int = 200, seed: int = 0, clearance: float = 0.3, spread: float = VIEWS_SPREAD,
+def plan_views(layouts: list[Layout], frames: int = DEFAULTS.views_frames, seed: int = DEFAULTS.seed,
+               clearance: float = DEFAULTS.clearance, spread: float = VIEWS_SPREAD,
                min_per_room: int = MIN_PER_ROOM, name: str = "views") -> CameraPath:
     """``frames`` random views in the free space that all ``layouts`` share (see the module doc)."""
     if isinstance(frames, bool) or not isinstance(frames, int) or frames <= 0:

@@ -1,4 +1,4 @@
-"""``synth bench``: seconds per frame of every renderer on this machine, on apt_0.
+"""``synth bench render``: seconds per frame of every renderer on this machine, on apt_0.
 
 Rows: geometry passes with Blender (Cycles, one sample per pixel) and with the fast Open3D
 renderer, and RGB per quality preset (Cycles, day lighting), at 320x240 and 640x480. Each figure
@@ -134,7 +134,10 @@ def cmd_bench(args) -> int:
 
 
 def register_cli(subparsers) -> None:
-    a = subparsers.add_parser("bench", help="seconds per frame of each renderer and quality on this machine")
+    """Add the ``bench`` group (one subcommand per benchmark; the renderers' is the only one) to ``synth``."""
+    p = subparsers.add_parser("bench", help="benchmarks that print figures (renderers' seconds per frame)")
+    sub = p.add_subparsers(dest="cmd", required=True)
+    a = sub.add_parser("render", help="seconds per frame of each renderer and quality on this machine")
     a.add_argument("--frames", type=positive_int, default=5, help="frames per measurement (median reported)")
     a.add_argument("--quality", action="append", choices=list(QUALITY), help="RGB presets to time (default: all)")
     add_json(a)

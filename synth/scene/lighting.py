@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from formats import fields
+from formats.color import srgb_decode
 from formats.errors import SceneFormatError, UnknownNameError, UserError
 from formats.fields import number
 from formats.yamlfile import read_yaml
@@ -47,7 +48,7 @@ def kelvin_to_rgb(kelvin: float) -> tuple[float, float, float]:
         g = 288.1221695283 * (t - 60) ** -0.0755148492
         b = 255.0
     srgb = np.clip(np.array([r, g, b]) / 255.0, 0.0, 1.0)
-    lin = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+    lin = srgb_decode(srgb)
     lin = lin / lin.max()
     return tuple(float(v) for v in lin)
 
