@@ -1,5 +1,7 @@
-"""Tour datasets as a whole: checking rendered tour folders and building detector training sets.
+"""Detector training sets: layouts, lightings and views that are never apt_0..apt_5, and their render job.
 
-``check``     ``synth dataset check``: every frame, pose and ground-truth file of a tour
-``trainset``  the detector's training data (layouts and tours that are never apt_0..apt_5)
+``trainset``    ``synth trainset render SPEC``: the detector's training data
+``appearance``  training layouts' colours and materials redrawn
+
+A single tour (render, check, show, export) is ``synth.tour``.
 """
