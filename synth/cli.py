@@ -14,7 +14,7 @@ from formats.cli import ArgumentParser, run_command
 
 def build_parser() -> argparse.ArgumentParser:
     # one module per command group, imported when the parser is built
-    from .datasets import trainset
+    from .trainset import trainset
     from .jobs import cli as jobs
     from .paths import cli as paths_cli
     from .render import bench
