@@ -24,11 +24,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = ArgumentParser(prog="synth", description="Build, check and render controlled-change indoor scenes.")
     sub = p.add_subparsers(dest="group", required=True)
     scene_cli.register_cli(sub)  # synth scene list|show|check|stats|preview|export-boxes|generate|build|rearrange|...
-    tour_cli.register_cli(sub)  # synth tour render|check|show|export (and synth dataset check|show|export, old names)
+    tour_cli.register_cli(sub)  # synth tour render|check|show|export
     paths_cli.register_cli(sub)  # synth path plan|show|check|preview|generate
     jobs.register_cli(sub)  # synth render SPEC.yaml
     trainset.register_cli(sub)  # synth trainset render SPEC.yaml (detector training data)
     bench.register_cli(sub)  # synth bench
+    tour_cli.register_old_names(sub)  # synth dataset check|show|export: old names of synth tour ..., warn
     return p
 
 

@@ -80,12 +80,16 @@ def _size(text: str) -> tuple[int, int]:
 
 
 def register_cli(subparsers) -> None:
-    """Add the ``tour`` command group, and its old name ``dataset`` (check|show|export), to ``synth``."""
+    """Add the ``tour`` command group to ``synth``."""
     tr = subparsers.add_parser("tour", help="one tour (a layout x a lighting x a camera path): render it, check it, "
                                             "look at a frame, export it")
     ts = tr.add_subparsers(dest="cmd", required=True)
     _add_render(ts)
     _add_check_show_export(ts)
+
+
+def register_old_names(subparsers) -> None:
+    """Add ``dataset`` (check|show|export), the old name of ``synth tour check|show|export``, to ``synth``."""
     old = subparsers.add_parser("dataset", help="old name of synth tour check|show|export (warns; will be removed)")
     _add_check_show_export(old.add_subparsers(dest="cmd", required=True), old_name=True)
 
