@@ -2,7 +2,7 @@
 
 A file is written under a hidden temporary name in its own folder (``.NAME.PID.tmp``: the process
 id keeps two writers of the same file apart), then renamed into place; on failure the temporary
-file is removed. ``synth dataset check`` reports stray ``.*.tmp`` files left by a killed process.
+file is removed. ``synth tour check`` reports stray ``.*.tmp`` files left by a killed process.
 
 Links: no file the toolkit creates or overwrites is reached through a symbolic link it did not make
 (a job folder may come from someone else). Atomic writes replace a link at the target instead of

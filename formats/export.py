@@ -1,7 +1,9 @@
-"""``synth dataset export``: a tour in the layouts other relocalizers already read.
+"""``synth tour export``: a tour in the layouts other relocalizers already read.
 
-It lives in ``formats`` (no Blender, no scene model) because both sides use it: the ``synth dataset
-export`` command and ``reloc experiment``'s external methods (``reloc.experiments.external``).
+It lives in ``formats`` (no Blender, no scene model) because both sides use it: the ``synth tour
+export`` command (``synth.tour.cli``) and ``reloc experiment``'s external methods
+(``reloc.experiments.external``). With ``formats.tour`` (the reader and the tour folder's
+conventions) it is the tour's only format-side home; the tour's synth-side code is ``synth.tour``.
 
 Other people's relocalizers (ACE, DSAC*, hloc, RGB-D SLAM systems) get our tours through four
 layouts, each written the way its own loader reads it (sources below). Every export folder holds

@@ -80,7 +80,7 @@ from .yamlfile import read_json
 
 CONVENTIONS = ("tum", "ace", "colmap", "mapfree")
 NAMED = ("ace", "colmap", "mapfree")
-MANIFEST = "export.json"  # synth dataset export's manifest; its "frames": file name -> tour frame index
+MANIFEST = "export.json"  # synth tour export's manifest; its "frames": file name -> tour frame index
 
 TUM_TIME_TOL = 1e-3  # s: a TUM time further than this from frame / fps is not a frame time
 QUAT_NORM_TOL = 1e-3

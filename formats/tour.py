@@ -11,8 +11,13 @@ A tour directory, as the renderers write it::
       frames/NNNNNN.exr   one per frame (formats.frames: R, G, B half; Z; instance; semantic)
       previews/NNNNNN.png optional 8-bit sRGB previews
 
-``Tour`` reads the small files up front and the frames lazily, one EXR at a time. The checker
-(``synth dataset check``) and the contact sheet (``synth dataset show``) are in ``synth.datasets.check``.
+``Tour`` reads the small files up front and the frames lazily, one EXR at a time.
+
+The tour's format has two homes here, this reader with its conventions and ``formats.export`` (the
+other methods' formats a tour is exported to), both in the format layer because reloc reads tours
+and imports nothing of synth. The tour's synth-side code is ``synth.tour``: rendering a tour
+(``synth tour render``, ``synth.tour.render``), the checker (``synth tour check``,
+``synth.tour.check``) and the contact sheet (``synth tour show``, ``synth.tour.show``).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""``synth``: build, inspect and check scene layouts, render tours and render jobs, check datasets.
+"""``synth``: build, inspect and check scene layouts, render, check and export tours, run render jobs.
 
 Command groups register themselves (``register_cli``) from the module of their stage, as in
 ``reloc.cli``. Every user error (bad file, unknown name) is one line on stderr and exit status 2.
@@ -14,23 +14,22 @@ from formats.cli import ArgumentParser, run_command
 
 def build_parser() -> argparse.ArgumentParser:
     # one module per command group, imported when the parser is built
-    from .datasets import check as dataset
-    from .datasets import trainset
+    from .trainset import trainset
     from .jobs import cli as jobs
     from .paths import cli as paths_cli
     from .render import bench
-    from .render import cli as tour_cli
     from .scene import cli as scene_cli
+    from .tour import cli as tour_cli
 
     p = ArgumentParser(prog="synth", description="Build, check and render controlled-change indoor scenes.")
     sub = p.add_subparsers(dest="group", required=True)
     scene_cli.register_cli(sub)  # synth scene list|show|check|stats|preview|export-boxes|generate|build|rearrange|...
-    tour_cli.register_cli(sub)  # synth tour render
+    tour_cli.register_cli(sub)  # synth tour render|check|show|export
     paths_cli.register_cli(sub)  # synth path plan|show|check|preview|generate
     jobs.register_cli(sub)  # synth render SPEC.yaml
     trainset.register_cli(sub)  # synth trainset render SPEC.yaml (detector training data)
-    dataset.register_cli(sub)  # synth dataset check|show|export
     bench.register_cli(sub)  # synth bench render
+    tour_cli.register_old_names(sub)  # synth dataset check|show|export: old names of synth tour ..., warn
     return p
 
 

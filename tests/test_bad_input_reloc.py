@@ -21,7 +21,7 @@ from formats.frames import FrameFileError, read_channels
 from formats.tour import Tour
 from synth.cli import main as synth_main
 from synth.scene.model import boxes_document, load_layout
-from synth.render.render_tour import TourSpec, render_tour
+from synth.tour.render import TourSpec, render_tour
 from cli_errors import nothing_left, one_line_error
 
 

@@ -1,7 +1,7 @@
 """Bad input found in a user trial (issue 12): each test failed before its fix.
 
 1. a poses.txt shorter than the frame files was read as a shorter tour (exit 0);
-2. `synth dataset check` counted displayed lines as problems;
+2. `synth tour check` counted displayed lines as problems;
 3. a layout without rooms and walls checked OK;
 4. render specs named neither the spec file nor the field of an unknown name or unwritable `out`;
 5. no command made a new rearranged variant;
@@ -28,13 +28,13 @@ from formats.frames import FrameFileError, write_frame
 from formats.tour import Tour
 from synth.layout.validity import check_layout
 from synth.cli import main as synth_main
-from synth.datasets.check import check_tour
+from synth.tour.check import check_tour
 from synth.paths.clearance import path_clearance
 from synth.paths.files import load_path, save_path
 from synth.paths.model import CameraPath
 from synth.scene.model import load_layout, object_box, save_layout
 from synth.scene.stats import PAPER_RANGES, change_stats
-from synth.render.render_tour import TourSpec, render_tour
+from synth.tour.render import TourSpec, render_tour
 from cli_errors import one_line_error
 
 W, H = 32, 24
@@ -72,7 +72,7 @@ def test_poses_cut_short_is_refused_by_every_reader(tour, tmp_path, capsys):
     _cut_poses(tour, 10)  # 10 poses, 24 frame files
     with pytest.raises(SceneFormatError, match=r"poses\.txt: 10 poses for 24 frame files"):
         Tour(tour)
-    assert synth_main(["dataset", "show", str(tour), "--out", str(tmp_path / "s.png")]) == 2
+    assert synth_main(["tour", "show", str(tour), "--out", str(tmp_path / "s.png")]) == 2
     err = one_line_error(capsys)
     assert "poses.txt" in err and "10 poses for 24 frame files" in err
     # reloc reads tours through formats.tour.Tour: no silently shortened map
@@ -81,7 +81,7 @@ def test_poses_cut_short_is_refused_by_every_reader(tour, tmp_path, capsys):
     assert "poses.txt" in err and "10 poses for 24 frame files" in err
     assert not (tmp_path / "m.json").exists()
     # the check reports it, and its first line counts the frame files on disk
-    assert synth_main(["dataset", "check", str(tour)]) == 1
+    assert synth_main(["tour", "check", str(tour)]) == 1
     out = capsys.readouterr().out
     assert out.splitlines()[0].startswith(f"{tour}: 10 poses for 24 frame files")
     assert "frames not in poses.txt (14): 10-23" in out
@@ -112,13 +112,13 @@ def test_partly_rendered_tour_is_readable_and_resumes(tmp_path, capsys):
     assert len(t) == 8 and t.frame_files() == [0, 1, 2, 3, 4]
     with pytest.raises(FrameFileError, match="000006.exr"):
         t.frame(6)
-    assert synth_main(["dataset", "check", str(root)]) == 1
+    assert synth_main(["tour", "check", str(root)]) == 1
     out = capsys.readouterr().out
     assert out.splitlines()[0].startswith(f"{root}: 8 poses for 5 frame files")
     assert "missing frames (3 of 8, no EXR in frames/): 5-7" in out
     meta = render_tour(spec, progress=False)  # resume
     assert meta["complete"] and meta["geometry_frames_rendered_now"] == 3
-    assert synth_main(["dataset", "check", str(root)]) == 0
+    assert synth_main(["tour", "check", str(root)]) == 0
     assert "8/8 frames" in capsys.readouterr().out
     assert len(Tour(root)) == 8
 
@@ -136,7 +136,7 @@ def test_problem_count_is_problems_not_displayed_lines(tour, capsys):
     assert rep["problem_total"] == 24
     assert rep["problem_counts"] == {"frames with all-zero depth": 24}
     assert len(rep["problems"]) == 21  # 20 lines + "... and 4 more like the above"
-    assert synth_main(["dataset", "check", str(tour)]) == 1
+    assert synth_main(["tour", "check", str(tour)]) == 1
     last = capsys.readouterr().out.strip().splitlines()[-1]
     assert last.strip() == "PROBLEMS FOUND (24): 24 frames with all-zero depth"
 

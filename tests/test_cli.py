@@ -30,7 +30,7 @@ def test_a_bare_name_is_a_shipped_spec_and_a_file_wins(tmp_path, monkeypatch, ca
     that name wins, and an unknown name is one line listing the shipped ones of that kind (exit 2)."""
     import yaml
 
-    from synth.datasets.trainset import load_trainset
+    from synth.trainset.trainset import load_trainset
     from synth.jobs import load_spec
     from synth.resources import SPECS_DIR, render_specs
 

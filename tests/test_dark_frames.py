@@ -1,4 +1,4 @@
-"""`synth dataset check` fails a lit tour whose RGB frames are nearly black (issue 25, item 7).
+"""`synth tour check` fails a lit tour whose RGB frames are nearly black (issue 25, item 7).
 
 A scene lit only through windows that it does not have (a stand-in stage without openings), or a
 night preset without lamps, renders black; the check must say so, not a person looking at frames.
@@ -17,7 +17,7 @@ from formats import camera as cam
 from formats.tour import tonemap
 from formats.tour import write_tour
 from synth.cli import main as synth_main
-from synth.datasets.check import DARK_P99_LUMINANCE, check_tour, format_report, frame_brightness
+from synth.tour.check import DARK_P99_LUMINANCE, check_tour, format_report, frame_brightness
 
 W, H = 48, 36
 INTR = cam.Intrinsics.from_fov(W, H, 70.0)
@@ -85,7 +85,7 @@ def test_nearly_black_tour_fails_with_one_line_naming_tour_and_lighting(tmp_path
     assert rep["brightness"]["dark"] and rep["brightness"]["median_p99_luminance"] < DARK_P99_LUMINANCE
     assert rep["problem_counts"] == {"nearly black tours": 1}
     # the command: exit 1, the line printed
-    assert synth_main(["dataset", "check", str(root)]) == 1
+    assert synth_main(["tour", "check", str(root)]) == 1
     out = capsys.readouterr().out
     assert "nearly black" in out and "apt_0__night__query" in out and "PROBLEMS FOUND (1)" in out
 

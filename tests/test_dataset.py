@@ -1,4 +1,4 @@
-"""Tour directories: reading (lazy), `synth dataset check` and `synth dataset show`.
+"""Tour directories: reading (lazy), `synth tour check` and `synth tour show`.
 
 The tests build their own tours: a closed box room (floor, ceiling, four walls) with one box-shaped
 "sofa" in it, rendered exactly by ray casting (planar depth from camera.Intrinsics.pixel_rays and
@@ -18,18 +18,10 @@ import formats.frames as frames_mod
 from formats import camera as cam
 from formats.errors import SceneFormatError, UserError
 from formats.frames import FrameFileError, write_frame
-from formats.tour import write_tour
+from formats.tour import Tour, tonemap, write_tour
 from synth.cli import main as synth_main
-from synth.datasets.check import (
-    Tour,
-    check_tour,
-    choose_pairs,
-    contact_sheet,
-    depth_consistency,
-    format_report,
-    id_colors,
-    tonemap,
-)
+from synth.tour.check import check_tour, choose_pairs, depth_consistency, format_report
+from synth.tour.show import contact_sheet, id_colors
 
 ROOM_LO = np.array([0.0, 0.0, 0.0])
 ROOM_HI = np.array([6.0, 5.0, 2.6])
@@ -203,7 +195,7 @@ def test_unusable_tour_is_a_user_error(tour_dir, capsys, edit, match):
     edit(root)
     with pytest.raises(UserError, match=match):
         Tour(root)
-    assert synth_main(["dataset", "check", str(root)]) == 2
+    assert synth_main(["tour", "check", str(root)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and err.startswith("synth: error: ")
 
@@ -215,9 +207,26 @@ def _edit_json(path, **changes):
 
 
 def test_missing_directory_exit_2(tmp_path, capsys):
-    assert synth_main(["dataset", "check", str(tmp_path / "nope")]) == 2
+    assert synth_main(["tour", "check", str(tmp_path / "nope")]) == 2
     assert "tour directory not found" in capsys.readouterr().err
-    assert synth_main(["dataset", "show", str(tmp_path / "nope"), "--out", str(tmp_path / "x.png")]) == 2
+    assert synth_main(["tour", "show", str(tmp_path / "nope"), "--out", str(tmp_path / "x.png")]) == 2
+
+
+
+def test_old_dataset_names_warn_and_do_the_same(tour_dir, capsys):
+    """`synth dataset check|show` are the old names of `synth tour check|show`: one line on stderr, then the same."""
+    root, _, _ = tour_dir
+    sheet = root.parent / "old_name.png"
+    for argv in (["check", str(root)], ["check", str(root), "--json"],
+                 ["show", str(root), "--frame", "2", "--out", str(sheet)], ["check", str(root.parent / "nope")]):
+        new_rc = synth_main(["tour", *argv])
+        new = capsys.readouterr()
+        old_rc = synth_main(["dataset", *argv])
+        old = capsys.readouterr()
+        assert old_rc == new_rc and old.out == new.out
+        first, _, rest = old.err.partition("\n")
+        assert first == f"synth dataset {argv[0]} is an old name: use synth tour {argv[0]}; it will be removed"
+        assert rest == new.err and "old name" not in new.err
 
 
 # ---------------------------------------------------------------------------------------------
@@ -243,10 +252,10 @@ def test_check_clean_tour(tour_dir, capsys, monkeypatch):
     assert len(calls) <= N_FRAMES + 2 * len(pairs)  # each frame once, plus the depth of the pairs
     json.dumps(rep)  # JSON-serialisable
 
-    assert synth_main(["dataset", "check", str(root)]) == 0
+    assert synth_main(["tour", "check", str(root)]) == 0
     out = capsys.readouterr().out
     assert "8/8 frames" in out and "OK" in out
-    assert synth_main(["dataset", "check", str(root), "--json"]) == 0
+    assert synth_main(["tour", "check", str(root), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["ok"] is True
 
 
@@ -263,7 +272,7 @@ def test_perturbed_pose_fails_consistency(tour_dir, capsys):
     for p in rep["consistency"]["pairs"]:
         if 3 not in p["frames"]:
             assert p["agreement"] > 0.99
-    assert synth_main(["dataset", "check", str(root)]) == 1
+    assert synth_main(["tour", "check", str(root)]) == 1
     out = capsys.readouterr().out
     assert "frames 2 -> 3: depth inconsistent with poses" in out and "PROBLEMS FOUND" in out
 
@@ -286,7 +295,7 @@ def test_missing_frame(tour_dir, capsys):
     assert not rep["ok"] and rep["missing"] == [5] and rep["frames_found"] == N_FRAMES - 1
     assert all(5 not in p["frames"] for p in rep["consistency"]["pairs"])
     assert any("missing frames" in p and "5" in p for p in rep["problems"])
-    assert synth_main(["dataset", "check", str(root)]) == 1
+    assert synth_main(["tour", "check", str(root)]) == 1
     assert "missing frames (1 of 8, no EXR in frames/): 5" in capsys.readouterr().out
     with pytest.raises(FrameFileError, match="000005.exr"):
         Tour(root).frame(5)
@@ -371,7 +380,7 @@ def test_shape_and_channel_problems(tour_dir):
 
 
 def test_bad_pose_rotation_is_flagged():
-    from synth.datasets.check import _pose_problem
+    from synth.tour.check import _pose_problem
 
     T = cam.pose_from_ypr((1, 2, 1.5), 0.3)
     assert _pose_problem(T) is None
@@ -425,16 +434,16 @@ def test_depth_consistency_handles_occlusion():
 def test_show_writes_contact_sheet(tour_dir, capsys):
     root, _, _ = tour_dir
     out = root.parent / "sheets" / "f3.png"
-    assert synth_main(["dataset", "show", str(root), "--frame", "3", "--out", str(out)]) == 0
+    assert synth_main(["tour", "show", str(root), "--frame", "3", "--out", str(out)]) == 0
     assert str(out) in capsys.readouterr().out
     img = mpimg.imread(out)
     assert img.shape[0] > 500 and img.shape[1] > 800
     assert img[..., :3].std() > 0.1  # not blank
     assert not list(out.parent.glob(".*"))  # no temporary file left
     # default frame: the first
-    assert synth_main(["dataset", "show", str(root), "--out", str(out)]) == 0
+    assert synth_main(["tour", "show", str(root), "--out", str(out)]) == 0
     # a frame that is not in the tour
-    assert synth_main(["dataset", "show", str(root), "--frame", "42", "--out", str(out)]) == 2
+    assert synth_main(["tour", "show", str(root), "--frame", "42", "--out", str(out)]) == 2
     assert "frame 42 is not in this tour" in capsys.readouterr().err
 
 

@@ -1,4 +1,4 @@
-"""`synth dataset export`: tours in the 7-Scenes, ACE, TUM RGB-D and COLMAP layouts.
+"""`synth tour export`: tours in the 7-Scenes, ACE, TUM RGB-D and COLMAP layouts.
 
 The tests build a tiny tour by hand (formats.frames.write_frame: random HDR RGB on every other
 frame, random planar depth with holes and far surfaces, known poses), export it, and read every
@@ -455,12 +455,27 @@ def test_geometry_only_tour(tmp_path):
 def test_cli_summary(tour, tmp_path, capsys):
     root, _ = tour
     out = tmp_path / "cli"
-    assert synth_main(["dataset", "export", str(root), "--format", "7scenes", "--out", str(out),
+    assert synth_main(["tour", "export", str(root), "--format", "7scenes", "--out", str(out),
                        "--role", "mapping", "--exposure", "fixed"]) == 0
     line = capsys.readouterr().out.strip()
     assert "\n" not in line
     assert "3 frames" in line and "3 geometry-only frames skipped" in line and "fixed" in line and str(out) in line
     assert read_manifest(out)["role"] == "mapping" and (out / "seq-01").is_dir()
+
+
+
+def test_cli_old_name_warns_and_exports_the_same(tour, tmp_path, capsys):
+    """`synth dataset export` is the old name of `synth tour export`: one line on stderr, then the same export."""
+    root, _ = tour
+    argv = [str(root), "--format", "ace", "--role", "query"]
+    assert synth_main(["tour", "export", *argv, "--out", str(tmp_path / "new")]) == 0
+    new = capsys.readouterr()
+    assert synth_main(["dataset", "export", *argv, "--out", str(tmp_path / "old")]) == 0
+    old = capsys.readouterr()
+    assert old.out == new.out.replace(str(tmp_path / "new"), str(tmp_path / "old"))
+    assert old.err == "synth dataset export is an old name: use synth tour export; it will be removed\n" + new.err
+    assert sorted(p.relative_to(tmp_path / "old") for p in (tmp_path / "old").rglob("*")) == \
+        sorted(p.relative_to(tmp_path / "new") for p in (tmp_path / "new").rglob("*"))
 
 
 @pytest.mark.parametrize("argv, match", [
@@ -472,7 +487,7 @@ def test_cli_summary(tour, tmp_path, capsys):
 def test_cli_bad_options_exit_2(tour, tmp_path, capsys, argv, match):
     root, _ = tour
     out = tmp_path / "bad"
-    assert synth_main(["dataset", "export", str(root), "--out", str(out), *argv]) == 2
+    assert synth_main(["tour", "export", str(root), "--out", str(out), *argv]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and all(s in err for s in match)
     assert not out.exists()
@@ -481,7 +496,7 @@ def test_cli_bad_options_exit_2(tour, tmp_path, capsys, argv, match):
 def test_cli_not_a_tour_exit_2(tmp_path, capsys):
     (tmp_path / "empty").mkdir()
     out = tmp_path / "o"
-    assert synth_main(["dataset", "export", str(tmp_path / "empty"), "--format", "ace", "--out", str(out)]) == 2
+    assert synth_main(["tour", "export", str(tmp_path / "empty"), "--format", "ace", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "camera.json" in err
     assert not out.exists()
@@ -491,7 +506,7 @@ def test_cli_unwritable_folder_exit_2(tour, tmp_path, capsys):
     root, _ = tour
     (tmp_path / "afile").write_text("x")
     out = tmp_path / "afile" / "sub"
-    assert synth_main(["dataset", "export", str(root), "--format", "ace", "--out", str(out)]) == 2
+    assert synth_main(["tour", "export", str(root), "--format", "ace", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "cannot write" in err
 
@@ -500,7 +515,7 @@ def test_cli_different_export_exit_2(tour, tmp_path, capsys):
     root, _ = tour
     out = tmp_path / "o"
     export_tour(root, "ace", out)
-    assert synth_main(["dataset", "export", str(root), "--format", "colmap", "--out", str(out)]) == 2
+    assert synth_main(["tour", "export", str(root), "--format", "colmap", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "export.json" in err and "export_format" in err
 

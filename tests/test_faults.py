@@ -485,7 +485,7 @@ def test_lighting_presets_are_type_checked(changes, field):
                                            ({"quality": 3}, "quality: expected text")])
 def test_trainset_specs_are_type_checked(changes, says):
     from formats.errors import SceneFormatError
-    from synth.datasets.trainset import parse_trainset
+    from synth.trainset.trainset import parse_trainset
 
     doc = {"name": "t", "out": "o", "seeds": [103], **changes}
     with pytest.raises(SceneFormatError, match=re.escape(says)):

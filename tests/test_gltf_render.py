@@ -701,7 +701,7 @@ def renders(tmp_path_factory, dataset, layout):
     renders: the pipeline, the old plain materials, Blender's glTF importer; and timings."""
     from synth.render.fast_render import FastRenderer
     from synth.render.meshes import layout_parts
-    from synth.render.render_tour import TourSpec, render_tour
+    from synth.tour.render import TourSpec, render_tour
 
     base = tmp_path_factory.mktemp("gltf_renders")
     layout_file = save_layout(layout, base / f"{SCENE}.yaml")
@@ -920,7 +920,7 @@ def test_fixture_stage_split_matches_its_construction(rcad):
 
 @pytest.fixture(scope="module")
 def rcad_tours(tmp_path_factory, rcad):
-    from synth.render.render_tour import TourSpec, render_tour
+    from synth.tour.render import TourSpec, render_tour
 
     F, root, lay = rcad
     base = tmp_path_factory.mktemp("rcad_tours")

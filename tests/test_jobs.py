@@ -204,10 +204,10 @@ def test_ray_backend_on_loopback_renders_the_smoke_spec(tmp_path, smoke_referenc
 @pytest.mark.blender
 def test_fast_geometry_with_sparse_rgb_renders_a_checked_tour(tmp_path):
     """Depth and ids of every frame from the fast renderer, Cycles RGB on every 3rd frame only."""
-    from synth.datasets.check import check_tour
+    from synth.tour.check import check_tour
     from synth.render.fast_render import FastRenderer
     from synth.scene.model import load_layout
-    from synth.render.render_tour import resolve_layout_path
+    from synth.tour.render import resolve_layout_path
 
     spec = write_spec(tmp_path, geometry="fast", chunk_size=4, designs=[
         {"layouts": ["apt_0"], "lightings": ["night"], "path": {"name": "query", "frames": 7}, "rgb_every": 3}])

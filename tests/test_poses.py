@@ -55,7 +55,7 @@ def _gt(tour) -> dict[int, np.ndarray]:
     return {int(i): T for i, T in zip(tour.frame_indices, tour.poses)}
 
 
-# export manifests as synth dataset export writes them ("frames": file name -> tour frame index)
+# export manifests as synth tour export writes them ("frames": file name -> tour frame index)
 def _ace_manifest(n=N) -> dict:
     return {"format": "ace", "frames": {f"test/rgb/frame-{i:06d}.color.png": i for i in range(n)}}
 

@@ -27,7 +27,7 @@ from test_reloc_core import nodes_from_map, room_map, yaw_T
 
 from formats.tour import Tour
 from synth.scene.model import boxes_document, load_layout
-from synth.render.render_tour import TourSpec, render_tour
+from synth.tour.render import TourSpec, render_tour
 
 
 W, H = 160, 120

@@ -20,7 +20,7 @@ from reloc.experiments.localization_units import format_units, run_units
 
 from formats.tour import Tour
 from synth.scene.model import boxes_document, load_layout
-from synth.render.render_tour import TourSpec, render_tour
+from synth.tour.render import TourSpec, render_tour
 
 
 W, H = 160, 120

@@ -16,7 +16,7 @@ import pytest
 
 from reloc.config import OdometryConfig
 from formats.tour import Tour
-from synth.render.render_tour import TourSpec, render_tour
+from synth.tour.render import TourSpec, render_tour
 from reloc.frontend.odometry import (
     ChainPose,
     Odometry,

@@ -18,11 +18,11 @@ from formats import frames as fr
 from formats.camera import Intrinsics, pose_from_ypr, read_tum, write_tum
 from formats.tour import Tour
 from synth.cli import main as synth_main
-from synth.datasets.check import check_tour
+from synth.tour.check import check_tour
 from synth.render.fast_render import FastRenderer
 from synth.paths.files import load_path
 from synth.scene.model import load_layout
-from synth.render.render_tour import TourSpec, render_tour
+from synth.tour.render import TourSpec, render_tour
 
 
 

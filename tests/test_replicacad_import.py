@@ -374,7 +374,7 @@ def test_pipeline_render_map_run_eval_on_the_fixture(root, tmp_path, capsys):
     """Blender RGB + fast geometry from a ReplicaCAD root, a map built from the mapping tour, VideoReloc
     on the query tours of the reference and of the authored variant apt_1, recall from reloc eval."""
     from reloc.cli import main as reloc_main
-    from synth.datasets.check import check_tour
+    from synth.tour.check import check_tour
 
     job = tmp_path / "job"
     spec = tmp_path / "spec.yaml"

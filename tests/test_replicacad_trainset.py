@@ -17,7 +17,7 @@ import yaml
 
 from formats.errors import SceneFormatError
 from replicacad_real_fixture import write_real_fixture
-from synth.datasets.trainset import HELD_OUT_SCENES, load_trainset, parse_trainset, prepare
+from synth.trainset.trainset import HELD_OUT_SCENES, load_trainset, parse_trainset, prepare
 from synth.layout.rearrange import RearrangePlan, VariantSpec, clutter, make_variant, new_problems, reference_walkway, template_pool
 from synth.layout.validity import check_layout
 from synth.replicacad.importer import load_replicacad

@@ -584,7 +584,7 @@ def test_user_file_and_round_trip_of_presets(tmp_path):
 
 @pytest.fixture(scope="module")
 def small_tour(tmp_path_factory):
-    from synth.render.render_tour import TourSpec, render_tour
+    from synth.tour.render import TourSpec, render_tour
 
     out = tmp_path_factory.mktemp("tour") / "apt_0__geometry__query"
     render_tour(TourSpec(layout="apt_0", path="query", out=str(out), renderer="fast", width=64, height=48, frames=4),

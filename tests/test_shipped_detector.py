@@ -22,7 +22,7 @@ from reloc.resources import MODELS_DIR, SHIPPED_MODEL
 from synth.paths.files import save_path
 from synth.paths.views import plan_views
 from synth.scene.model import load_layout
-from synth.render.render_tour import TourSpec, render_tour
+from synth.tour.render import TourSpec, render_tour
 
 MODEL = SHIPPED_MODEL
 FIRST_MODEL = MODELS_DIR / "detector_160x120.onnx"

@@ -166,7 +166,7 @@ def test_the_format_layer_is_the_only_bridge():
 # synth's layers, lowest first: a module may import its own layer and the layers below it, never
 # one above. ``synth.resources`` (where the shipped data lives) and the package root (its version)
 # are below everything; every command-line module (``synth.cli``, ``synth.<layer>.cli``) is the top.
-SYNTH_LAYERS = ("scene", "assets", "paths", "replicacad", "layout", "render", "blender", "jobs", "datasets", "cli")
+SYNTH_LAYERS = ("scene", "assets", "paths", "replicacad", "layout", "render", "blender", "tour", "jobs", "trainset", "cli")
 SYNTH_BASE = {"synth", "synth.resources"}
 
 
@@ -198,7 +198,7 @@ def synth_upward_imports(mods) -> list[tuple[str, str]]:
 
 
 def test_synth_layers_import_downwards():
-    """scene < assets < paths < replicacad < layout < render < blender < jobs < datasets < cli."""
+    """scene < assets < paths < replicacad < layout < render < blender < tour < jobs < trainset < cli."""
     mods = _modules()
     assert synth_upward_imports(mods) == []
     # every synth module is in a layer, and the layers are the subpackages on disk

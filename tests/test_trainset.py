@@ -24,7 +24,7 @@ from synth.scene.lighting import LightingJitter, jitter_preset, load_lighting, p
 from synth.paths.model import BOB, Q_HEIGHT, Q_HEIGHT_VAR, Q_PITCH, Q_PITCH_VAR
 from synth.paths.views import plan_views
 from synth.scene.model import boxes_document, load_layout
-from synth.datasets.trainset import parse_trainset, prepare
+from synth.trainset.trainset import parse_trainset, prepare
 
 # ---------------------------------------------------------------------------------------------
 # views
@@ -118,11 +118,11 @@ def test_wide_jitter_reaches_one_lamp_and_more_power():
 
 
 # ---------------------------------------------------------------------------------------------
-# appearance randomisation (synth.datasets.appearance) and the room finishes it writes
+# appearance randomisation (synth.trainset.appearance) and the room finishes it writes
 
 
 def test_appearance_redraws_colours_and_materials_but_not_geometry():
-    from synth.datasets.appearance import FAMILIES, randomize_appearance
+    from synth.trainset.appearance import FAMILIES, randomize_appearance
     from synth.layout.apartment import generate_apartment
     from synth.render.meshes import stage_finishes, stage_parts
 

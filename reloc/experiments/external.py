@@ -8,7 +8,7 @@ An experiment spec's ``methods`` list takes, beside the built-in names, mappings
       - videoreloc
       - name: my_ace                                   # a row name and check key: my_ace.causal
         command: "python run_ace.py {scene} {out}"     # run once per query tour
-        export: ace                                    # synth dataset export format the command reads
+        export: ace                                    # synth tour export format the command reads
         poses: ace                                     # the convention of the pose file it writes
         poses_file: "{out}/poses.txt"                  # where (default)
         map_command: "python train_ace.py {mapping} {map_out}"   # optional: once, before the queries

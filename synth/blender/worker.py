@@ -1,6 +1,6 @@
 """Render one chunk of frames in this (fresh) Blender process: ``python -m synth.blender.worker JOB.json``.
 
-A job is a JSON file (see ``synth.render.render_tour.ChunkJob``)::
+A job is a JSON file (``synth.render.chunks.chunk_job`` writes it)::
 
     {"pass": "geometry" | "rgb", "layout": "<layout file>", "lighting": "<preset name or file>",
      "poses": "<TUM file>", "frames": [i, ...], "intrinsics": {...}, "quality": "preview",

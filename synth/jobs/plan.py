@@ -25,7 +25,7 @@ from formats.errors import SceneFormatError, UserError, check_output_folder
 from formats.fields import fail
 
 from ..render.chunks import chunk_job
-from ..render.render_tour import TourSpec, prepare
+from ..tour.render import TourSpec, prepare
 from .spec import JobSpec
 
 
@@ -51,7 +51,7 @@ class Chunk:
 class Plan:
     spec: JobSpec
     out: Path
-    tours: dict  # tour name -> synth.render.render_tour.Prepared
+    tours: dict  # tour name -> synth.tour.render.Prepared
     chunks: list[Chunk] = field(default_factory=list)
     store: object = None  # synth.jobs.storage.Storage bound to ``out`` (a staging folder), or None: out is the job folder
     warnings: list = field(default_factory=list)  # one line each: tours that would render nearly black (check_light)

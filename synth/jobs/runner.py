@@ -15,7 +15,7 @@ from formats.design import write_design
 from formats.errors import UserError, check_output_folder
 from formats.lifetime import folder_lock
 
-from ..render.render_tour import make_output_folder, tour_meta, write_static_files
+from ..tour.render import make_output_folder, tour_meta, write_static_files
 from ..render.settings import quality
 from .plan import Chunk, Plan, expand, out_error
 from .chunk_queue import ProgressBar, run_local
@@ -224,7 +224,7 @@ def _run_plan(plan: Plan, old: dict | None, backend: str, workers: int, progress
 
 
 def job_tour_meta(p, spec: JobSpec, render_devices: dict | None = None) -> dict:
-    """meta.json of a job's tour (``synth.render.render_tour.tour_meta``). Deterministic (a resumed job writes the
+    """meta.json of a job's tour (``synth.tour.render.tour_meta``). Deterministic (a resumed job writes the
     same file); timing and progress of the job are in ``job_summary.json``.
 
     ``render_devices``: pass -> the devices its chunks reported rendering on (``CPU``, ``OPTIX``,

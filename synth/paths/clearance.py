@@ -2,7 +2,7 @@
 
 ``path_clearance`` measures (the clearance rule is in ``synth.paths``); ``clearance_report``,
 ``render_clearance_problem`` and ``replan_command`` serve ``synth path check`` and the refused
-renders (``synth.render.render_tour``, ``synth.jobs.plan``). The free space is defined here once (``inside_free``,
+renders (``synth.tour.render``, ``synth.jobs.plan``). The free space is defined here once (``inside_free``,
 ``wall_segments``, ``wall_clearance``, ``room_index``: rooms by ``Room.outline`` / ``Room.contains``, so
 polygon rooms and rect rooms alike); the planning grid (``synth.paths.space``) uses exactly these
 functions and the footprints and distances defined here, so a planned path checks as planned.

@@ -37,7 +37,7 @@ def split(ids: list[int], size: int) -> list[list[int]]:
 
 
 def chunk_job(p, kind: str, frames: list[int], out_dir: Path | None = None) -> dict:
-    """The job of one chunk of pass ``kind`` of the prepared tour ``p`` (``synth.render.render_tour.Prepared``).
+    """The job of one chunk of pass ``kind`` of the prepared tour ``p`` (``synth.tour.render.Prepared``).
 
     ``out_dir`` defaults to the tour's frames (the geometry cache for ``geometry``). Paths are
     absolute, so a worker can run anywhere the files are."""

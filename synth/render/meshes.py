@@ -133,7 +133,7 @@ FINISH_MATERIALS = {"floor_material": ("floor_wood", "floor_tile")}
 
 
 def stage_finishes(layout: Layout) -> dict:
-    """The layout's ``meta.finishes`` (training layouts, ``synth.datasets.appearance``): optional
+    """The layout's ``meta.finishes`` (training layouts, ``synth.trainset.appearance``): optional
     ``wall_color``, ``ceiling_color``, ``floor_color`` (linear RGB in [0, 1]) and ``floor_material``
     (floor_wood | floor_tile) for a procedural stage; {} when absent. A bad value is a
     SceneFormatError naming the layout and the key."""

@@ -2,7 +2,7 @@
 quality presets and devices.
 
 ``DEFAULTS`` is the one home of what a tour or a job renders with when nothing says otherwise:
-``synth.render.render_tour.TourSpec``, ``synth.jobs.spec.JobSpec`` and its parser, and the options
+``synth.tour.render.TourSpec``, ``synth.jobs.spec.JobSpec`` and its parser, and the options
 of ``synth tour render`` read it."""
 
 from __future__ import annotations

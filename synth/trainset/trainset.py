@@ -15,7 +15,7 @@ random views per (layout, lighting)::
     quality: preview
     seed: 0                     # views and jitter seeds derive from it
     appearance: 0.0             # optional: per object (and per layout's finishes), the chance that
-                                # colours and materials are redrawn (synth.datasets.appearance)
+                                # colours and materials are redrawn (synth.trainset.appearance)
     lighting_jitter: {}         # optional: LightingJitter fields to override (strength_log2: 1.0, ...)
 
 A trainset from a ReplicaCAD folder names scenes instead of seeds (``render_jobs/detector_train_replicacad.yaml``)::

@@ -1,4 +1,4 @@
-"""Rendered tours on disk: check them, look at one frame (the reader is ``formats.tour.Tour``).
+"""``synth tour check``: a rendered tour on disk, checked (the reader is ``formats.tour.Tour``).
 
 A tour directory, as the renderers write it (the format is ``formats.tour``)::
 
@@ -12,22 +12,21 @@ A tour directory, as the renderers write it (the format is ``formats.tour``)::
       previews/NNNNNN.png optional 8-bit sRGB previews
 
 ``check_tour``
-is ``synth dataset check``: completeness, readability, channels, sizes, depth values, ids against
+is ``synth tour check``: completeness, readability, channels, sizes, depth values, ids against
 objects.json, pose sanity and a multi-view depth consistency test between neighbouring frames
 (it catches shifted or wrong poses, camera axes in the wrong convention and depth stored as ray
 length instead of planar z; it does not catch a wrong focal length, which small camera motions
 hardly reveal), and a brightness test: a lit tour whose RGB frames are nearly black fails (the
 median over its RGB frames of each frame's 99th-percentile luminance, in linear RGB at exposure 1
 as ``formats.tour.tonemap(rgb, 1.0)`` shows it, below ``DARK_P99_LUMINANCE``; a scene lit only
-through windows it does not have, or a night preset without lamps, renders like that). ``contact_sheet`` is
-``synth dataset show``: RGB, depth, instance and semantic images of one frame in one PNG.
+through windows it does not have, or a night preset without lamps, renders like that). The
+contact sheet of one frame (``synth tour show``) is ``synth.tour.show``.
 
 No Blender here; this module imports without bpy.
 """
 
 from __future__ import annotations
 
-import json
 import math
 import sys
 from pathlib import Path
@@ -40,8 +39,7 @@ from formats.boxes import STRUCTURE_CLASSES, STRUCTURE_ID_MAX, STRUCTURE_ID_MIN
 from formats.camera import Intrinsics
 from formats.errors import UserError
 from formats.tour import (CAMERA_FILE, FRAMES_DIR, META_FILE, OBJECTS_FILE, POSES_FILE, PREVIEWS_DIR, Tour,
-                          images_from_channels, ranges_text, read_split_channels, scan_dir, tonemap)
-from formats.cli import add_json, add_quiet, add_sensor
+                          images_from_channels, ranges_text, read_split_channels, scan_dir)
 
 # depth consistency between neighbouring frames
 CONSISTENCY_ABS_TOL_M = 0.02  # a pixel agrees within max(2 cm, 1 % of its depth)
@@ -203,7 +201,7 @@ def depth_consistency(depth_i, T_i, depth_j, T_j, intr: Intrinsics, rays: np.nda
 
 
 def check_tour(root, consistency_pairs: int = 8, progress: bool | None = None) -> dict:
-    """Check a rendered tour (``synth dataset check``); returns a JSON-serialisable report.
+    """Check a rendered tour (``synth tour check``); returns a JSON-serialisable report.
 
     Unusable input (no directory, no or bad camera.json / poses.txt / meta.json) raises
     ``UserError``; everything else is reported: ``ok`` is True when ``problems`` is empty, and
@@ -260,7 +258,7 @@ def _check_files(tour: Tour, rep: dict) -> set[int]:
             if e.name.startswith(".") and e.name.endswith(".tmp"):
                 rep["stray_temp_files"].append(str(Path(e.path).relative_to(tour.root)))
             elif d == tour.root and e.name.startswith(".jobs_") and e.is_dir():
-                rep["warnings"].append(f"{e.name}/: render jobs and logs left by a failed render (see synth.render.render_tour)")
+                rep["warnings"].append(f"{e.name}/: render jobs and logs left by a failed render (see synth.tour.render)")
             elif d == tour.frames_dir and e.name.endswith(".exr") and e.name[:-4].isdigit():
                 present.add(int(e.name[:-4]))
     rep["stray_temp_files"].sort()
@@ -582,221 +580,3 @@ def format_report(rep: dict) -> str:
         lines.append(f"  PROBLEMS FOUND ({total}): " + ", ".join(f"{v} {k}" for k, v in counts.items())
                      if counts else f"  PROBLEMS FOUND ({len(rep['problems'])})")
     return "\n".join(lines)
-
-
-# ---------------------------------------------------------------------------------------------
-# contact sheet
-
-
-def id_colors(ids, salt: int = 0) -> np.ndarray:
-    """A stable pseudo-random colour per integer id ((n, 3) in [0, 1]); id 0 is black."""
-    from matplotlib.colors import hsv_to_rgb
-
-    ids = np.asarray(ids, dtype=np.uint64)
-    h = (ids + np.uint64(salt)) * np.uint64(0x9E3779B97F4A7C15)
-    h ^= h >> np.uint64(29)
-    h *= np.uint64(0xBF58476D1CE4E5B9)
-    h ^= h >> np.uint64(32)
-    hue = (h & np.uint64(0xFFFF)).astype(np.float64) / 65536.0
-    sat = 0.55 + 0.4 * ((h >> np.uint64(16)) & np.uint64(0xFF)).astype(np.float64) / 255.0
-    val = 0.7 + 0.3 * ((h >> np.uint64(24)) & np.uint64(0xFF)).astype(np.float64) / 255.0
-    rgb = hsv_to_rgb(np.stack([hue, sat, val], axis=-1))
-    rgb[ids == 0] = 0.0
-    return rgb
-
-
-def class_colors(ids) -> np.ndarray:
-    """A fixed colour per semantic class id ((n, 3) in [0, 1]): a 60-colour qualitative palette, 0 black."""
-    import matplotlib
-
-    pal = []
-    for name in ("tab20", "tab20b", "tab20c"):
-        c = np.asarray(matplotlib.colormaps[name].colors)[:, :3]
-        pal.append(np.concatenate([c[0::2], c[1::2]]))  # strong colours first, their light twins after
-    pal = np.concatenate(pal)
-    ids = np.asarray(ids, dtype=np.int64)
-    out = pal[(ids - 1) % len(pal)]
-    out[ids == 0] = 0.0
-    return out
-
-
-def _colorize_ids(img: np.ndarray, salt: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    ids, inv, counts = np.unique(img, return_inverse=True, return_counts=True)
-    lut = id_colors(ids, salt)
-    return lut[inv.reshape(img.shape)], ids, counts
-
-
-def contact_sheet(tour: Tour, index: int, out, exposure: float | None = None, dpi: float = 110) -> Path:
-    """One PNG with the frame's RGB, depth, instance and semantic images (written atomically)."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-    from matplotlib.patches import Patch
-
-    out = Path(out)
-    fmt = out.suffix.lower().lstrip(".") or "png"
-    f = tour.frame(index)
-    H, W = f.depth.shape if f.depth is not None else (tour.intrinsics.height, tour.intrinsics.width)
-    panel_w = 5.2
-    panel_h = panel_w * H / W
-    fig = Figure(figsize=(2 * panel_w + 2.6, 2 * panel_h + 1.5), dpi=dpi)
-    canvas = FigureCanvasAgg(fig)
-    if fmt not in canvas.get_supported_filetypes():
-        raise UserError(f"{out}: cannot write '.{fmt}' images; use .png")
-    gs = fig.add_gridspec(2, 2, left=0.03, right=0.8, top=1 - 1.0 / fig.get_figheight(), bottom=0.03,
-                          wspace=0.28, hspace=0.14)
-    axes = [fig.add_subplot(gs[r, c]) for r in range(2) for c in range(2)]
-    for ax in axes:
-        ax.set_xticks([])
-        ax.set_yticks([])
-    ax_rgb, ax_d, ax_i, ax_s = axes
-    blank = np.zeros((H, W, 3), np.float32)
-
-    def missing(ax, text):
-        ax.imshow(blank + 0.15)
-        ax.text(0.5, 0.5, text, transform=ax.transAxes, ha="center", va="center", color="white", fontsize=11)
-
-    # RGB
-    if f.rgb is not None:
-        img, scale = tonemap(f.rgb, exposure)
-        ax_rgb.imshow(img, interpolation="nearest")
-        ax_rgb.set_title(f"RGB (linear x {scale:.3g}, sRGB)", fontsize=10)
-    else:
-        missing(ax_rgb, "no RGB (geometry-only tour)")
-        ax_rgb.set_title("RGB", fontsize=10)
-    # depth
-    if f.depth is not None:
-        import matplotlib
-
-        d = np.ma.masked_where(~(np.isfinite(f.depth) & (f.depth > 0)), f.depth)
-        cmap = matplotlib.colormaps["turbo"].with_extremes(bad="black")
-        vals = d.compressed()
-        vmin, vmax = (float(vals.min()), float(np.percentile(vals, 99.5))) if vals.size else (0.0, 1.0)
-        im = ax_d.imshow(d, cmap=cmap, vmin=vmin, vmax=max(vmax, vmin + 1e-3), interpolation="nearest")
-        cb = fig.colorbar(im, cax=ax_d.inset_axes((1.02, 0.0, 0.035, 1.0)))  # outside: panels keep one size
-        cb.set_label("depth (m)", fontsize=9)
-        cb.ax.tick_params(labelsize=8)
-        nohit = float(d.mask.mean()) if d.mask is not np.ma.nomask else 0.0
-        ax_d.set_title(f"planar depth, {vals.min() if vals.size else 0:.2f}-{vals.max() if vals.size else 0:.2f} m"
-                       + (f", no hit {nohit:.0%} (black)" if nohit else ""), fontsize=10)
-    else:
-        missing(ax_d, "no depth channel")
-        ax_d.set_title("depth", fontsize=10)
-    names = tour.class_names()
-    box_class = {}
-    try:
-        box_class = {int(b["id"]): str(b.get("class", "")) for b in tour.objects()["boxes"]}
-    except UserError:
-        pass
-    # instance
-    if f.instance is not None:
-        col, ids, counts = _colorize_ids(f.instance, salt=0)
-        ax_i.imshow(col, interpolation="nearest")
-        from scipy.ndimage import distance_transform_edt
-
-        shown = 0
-        for k in np.argsort(-counts):
-            iid = int(ids[k])
-            if iid == 0 or counts[k] < 0.005 * f.instance.size or shown >= 25:
-                continue
-            # label at the instance's most interior pixel (farthest from its outline and the image border)
-            dist = distance_transform_edt(np.pad(f.instance == iid, 1))[1:-1, 1:-1]
-            v, u = np.unravel_index(int(dist.argmax()), dist.shape)
-            label = f"{iid} {box_class[iid]}" if box_class.get(iid) else str(iid)
-            ax_i.text(u, v, label, fontsize=7, ha="center", va="center", color="white",
-                      bbox={"boxstyle": "round,pad=0.15", "fc": "black", "alpha": 0.55, "lw": 0})
-            shown += 1
-        ax_i.set_title(f"instance ids ({int((ids != 0).sum())} visible, 0 black)", fontsize=10)
-    else:
-        missing(ax_i, "no instance channel")
-        ax_i.set_title("instance ids", fontsize=10)
-    # semantic
-    if f.semantic is not None:
-        ids, inv, counts = np.unique(f.semantic, return_inverse=True, return_counts=True)
-        lut = class_colors(ids)
-        ax_s.imshow(lut[inv.reshape(f.semantic.shape)], interpolation="nearest")
-        handles = [Patch(facecolor=lut[k], edgecolor="none", label=f"{int(s)} {names.get(int(s), '?')}")
-                   for k, s in sorted(enumerate(ids), key=lambda x: -counts[x[0]]) if s != 0][:30]
-        if handles:
-            ax_s.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=7, frameon=False,
-                        title="classes", title_fontsize=8, handlelength=1.0, borderaxespad=0.0)
-        ax_s.set_title(f"semantic classes ({len(handles)} present)", fontsize=10)
-    else:
-        missing(ax_s, "no semantic channel")
-        ax_s.set_title("semantic", fontsize=10)
-
-    p = f.position
-    meta = tour.meta
-    sub = ", ".join(f"{k} {meta[k]}" for k in ("layout", "lighting", "renderer") if meta.get(k) is not None)
-    if meta.get("lighting") is None and "lighting" in meta:
-        sub = ", ".join(x for x in (sub, "geometry only") if x)
-    fig.suptitle(f"{tour.name}  |  frame {index}  |  camera at ({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f}) m"
-                 + (f"\n{sub}" if sub else ""), fontsize=12, y=1 - 0.1 / fig.get_figheight(), va="top")
-
-    from formats.atomic import save_figure
-
-    return save_figure(fig, out, dpi)
-
-
-# ---------------------------------------------------------------------------------------------
-# command line
-
-
-def cmd_check(args) -> int:
-    rep = check_tour(args.dir, consistency_pairs=args.pairs)
-    if args.json:
-        print(json.dumps(rep, indent=2))
-    else:
-        print(format_report(rep))
-    return 0 if rep["ok"] else 1
-
-
-def cmd_show(args) -> int:
-    tour = Tour(args.dir)
-    index = int(tour.frame_indices[0]) if args.frame is None else args.frame
-    out = contact_sheet(tour, index, args.out, exposure=args.exposure)
-    print(f"wrote {out}")
-    return 0
-
-
-def cmd_export(args) -> int:
-    from formats import export
-
-    m = export.export_tour(args.dir, args.format, args.out, role=args.role, exposure=args.exposure,
-                           progress=not args.quiet and sys.stderr.isatty(), sensor=args.sensor,
-                           sensor_seed=args.sensor_seed)
-    print(export.summary_line(m, args.out))
-    intr = m.get("intrinsics") or {}
-    note = (intr.get("ace") or {}).get("note") or (intr.get("dsacstar") or {}).get("resize_note")
-    if note:
-        print(f"note: {note}")
-    return 0
-
-
-def register_cli(subparsers) -> None:
-    """Add the ``dataset`` command group to ``synth``'s subparsers."""
-    g = subparsers.add_parser("dataset", help="rendered tours: check them, look at frames")
-    ds = g.add_subparsers(dest="cmd", required=True)
-    a = ds.add_parser("check", help="completeness, channels, depth, ids and pose/depth consistency of a tour "
-                                    "(exit 1 if problems are found)")
-    a.add_argument("dir", help="tour directory (holds camera.json, poses.txt, frames/)")
-    add_json(a, "the full report")
-    a.add_argument("--pairs", type=int, default=8, help="neighbouring frame pairs for the depth consistency test")
-    a.set_defaults(fn=cmd_check)
-    a = ds.add_parser("show", help="contact sheet of one frame: RGB, depth, instance, semantic")
-    a.add_argument("dir", help="tour directory")
-    a.add_argument("--frame", type=int, help="frame index (default: the first)")
-    a.add_argument("--out", required=True, help="output image (.png)")
-    a.add_argument("--exposure", type=float, help="linear RGB scale (default: automatic)")
-    a.set_defaults(fn=cmd_show)
-    a = ds.add_parser("export", help="write a tour in a layout other relocalizers read: 7scenes (DSAC*, ACE, hloc), "
-                                     "ace (ACE/DSAC* train|test), tum-rgbd (RGB-D SLAM, evo), colmap (hloc)")
-    a.add_argument("dir", help="tour directory")
-    a.add_argument("--format", required=True, help="7scenes | ace | dsacstar | tum-rgbd | colmap")
-    a.add_argument("--out", required=True, help="export folder (new or empty; the same export again resumes "
-                                                "or does nothing)")
-    a.add_argument("--role", default="query", help="mapping (ACE train/, 7-Scenes train split) | query (default)")
-    a.add_argument("--exposure", default="auto", help="auto (per frame, default) | fixed (one factor per tour: "
-                                                      "the median auto factor) | FACTOR (linear RGB scale)")
-    add_sensor(a, "export the frames")
-    add_quiet(a)
-    a.set_defaults(fn=cmd_export)

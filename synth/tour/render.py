@@ -1,4 +1,9 @@
-"""Render one tour (a layout x a lighting x a camera path) into a tour directory. No bpy here.
+"""``synth tour render``: one tour (a layout x a lighting x a camera path) into a tour directory. No bpy here.
+
+This is the tour's side of rendering: what to render (``prepare``), the tour's static files and
+meta.json (also written by a render job, ``synth.jobs``), and rendering its passes. The renderer's
+pieces it drives (chunks of frames in worker processes, the fast renderer, quality settings) are
+``synth.render``.
 
 Tour directory (documented in docs/conventions.md, "The tour folder")::
 
@@ -35,8 +40,8 @@ from formats.errors import UserError, check_output_folder
 from formats.lifetime import folder_lock
 
 from .. import __version__
-from .chunks import chunk_job, missing_frames, run_chunk_process, split, stopping_workers
-from .settings import DEFAULTS, DEVICES, quality
+from ..render.chunks import chunk_job, missing_frames, run_chunk_process, split, stopping_workers
+from ..render.settings import DEFAULTS, DEVICES, quality
 from ..scene.model import boxes_document, load_layout, resolve_layout_path
 
 
@@ -273,7 +278,7 @@ def _render_prepared(spec: TourSpec, p, progress: bool, t0: float) -> dict:
     info: dict = {}
     geometry_rendered = 0
     if spec.renderer == "fast":
-        from .fast_render import FastRenderer
+        from ..render.fast_render import FastRenderer
 
         todo = missing_frames(frames_dir, p.frame_ids)
         bar = _Progress(len(p.frame_ids), f"{p.layout_name} geometry (fast)", progress)
