@@ -27,7 +27,7 @@ from reloc.map.document import map_from_tour
 from synth.scene.model import boxes_document, load_layout
 from reloc.map.fitting import fit_box
 from reloc.map.scoring import box_errors
-from reloc.map.segmentation import _moments, _reduce, voxel_keys
+from reloc.map.segmentation import point_moments, reduce_by_key, voxel_keys
 from reloc.map.settings import MapBuildSettings
 
 from formats.errors import UserError
@@ -103,7 +103,7 @@ def test_fit_box_from_voxel_centroids_keeps_the_true_extents():
     center, size, yaw = np.array([0.3, 0.7, 1.3]), (1.2, 0.5, 2.6), math.radians(-20)
     P = box_surface_points(center, size, yaw, n=200000, faces=(0, 1, 2, 3))  # sides only, like a cabinet in a corner
     keys = voxel_keys(P, 0.05)
-    k, m, n = _reduce(keys, _moments(P), np.ones(len(P)))
+    k, m, n = reduce_by_key(keys, point_moments(P), np.ones(len(P)))
     mean = m / n[:, None]
     C = mean[:, :3]
     spread = np.column_stack([mean[:, 3:6] - C * C, mean[:, 6] - C[:, 0] * C[:, 1]])
@@ -456,27 +456,27 @@ def test_bad_settings_are_user_errors(tour_dir):
 def test_class_agnostic_fusion_of_untracked_segments():
     """One thing under two labels (a sofa some views call an armchair) becomes one segment of the
     majority class; a neighbour that only touches it keeps its own segment and class."""
-    from reloc.map.segmentation import _absorb_across_classes, _moments, _reduce, _Segment, voxel_keys
+    from reloc.map.segmentation import fuse_across_classes, point_moments, reduce_by_key, Segment, voxel_keys
 
     def seg(cls, lo, hi, npix, frame=0):
         g = np.mgrid[lo[0]:hi[0]:0.05, lo[1]:hi[1]:0.05, lo[2]:hi[2]:0.05].reshape(3, -1).T + 0.025
-        k, sm, ct = _reduce(voxel_keys(g, 0.05), _moments(g), np.ones(len(g)))
-        s = _Segment(None)
+        k, sm, ct = reduce_by_key(voxel_keys(g, 0.05), point_moments(g), np.ones(len(g)))
+        s = Segment(None)
         s.add(frame, cls, k, sm, ct, np.zeros(3), npix)
         return s
 
     sofa = seg("sofa", (0, 0, 0), (2.0, 0.9, 0.8), 5000)
     armchair = seg("armchair", (0.2, 0.0, 0.0), (1.0, 0.9, 0.8), 800)  # inside the sofa: the same thing
     table = seg("table", (1.95, 0.0, 0.0), (3.0, 0.9, 0.7), 3000)  # shares one voxel column with the sofa
-    out = _absorb_across_classes([armchair, table, sofa], 0.5)
+    out = fuse_across_classes([armchair, table, sofa], 0.5)
     assert [g.cls for g in out] == ["sofa", "table"]
     assert out[0].votes == {"sofa": 5000, "armchair": 800} and out[0].frames == 2
-    assert len(_absorb_across_classes([seg("sofa", (0, 0, 0), (2, 0.9, 0.8), 5), table], 0.5)) == 2
+    assert len(fuse_across_classes([seg("sofa", (0, 0, 0), (2, 0.9, 0.8), 5), table], 0.5)) == 2
     # the threshold is the fraction of the smaller segment's voxels: half inside joins, a quarter does not
     half = seg("armchair", (1.5, 0.0, 0.0), (2.5, 0.9, 0.8), 100)
     quarter = seg("armchair", (1.75, 0.0, 0.0), (2.75, 0.9, 0.8), 100)
-    assert len(_absorb_across_classes([seg("sofa", (0, 0, 0), (2, 0.9, 0.8), 5000), half], 0.5)) == 1
-    assert len(_absorb_across_classes([seg("sofa", (0, 0, 0), (2, 0.9, 0.8), 5000), quarter], 0.5)) == 2
+    assert len(fuse_across_classes([seg("sofa", (0, 0, 0), (2, 0.9, 0.8), 5000), half], 0.5)) == 1
+    assert len(fuse_across_classes([seg("sofa", (0, 0, 0), (2, 0.9, 0.8), 5000), quarter], 0.5)) == 2
 
 
 def test_low_wall_strips_are_no_walls():

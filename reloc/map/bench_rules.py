@@ -91,7 +91,7 @@ def bench(tour_dir, model, stride: int | None = None, progress: bool = False) ->
 
 def format_rows(rows: list[dict]) -> str:
     base = rows[0]
-    out = [f"Missing object classes with the defaults: "
+    out = ["Missing object classes with the defaults: "
            + ", ".join(f"{c} {n}" for c, n in sorted(base["missing_classes"].items(), key=lambda x: (-x[1], x[0]))), "",
            "| variant | built | matched | missing | extra | matched vs defaults | extra vs defaults |",
            "|---|---|---|---|---|---|---|"]

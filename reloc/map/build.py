@@ -67,10 +67,10 @@ from ..detection.base import FrameData, check_rgb_schedule, needs_labels, needs_
 from ..detection.oracle import OracleDetector
 from .document import kind_of
 from .fitting import fit_box
-from .pixels import _Backprojector, _depth_edges, _mask_pixels
-from .segmentation import _absorb_across_classes, _associate, _merge_overlapping, _moments, _reduce, _Segment, _vote_voxels, voxel_keys
+from .pixels import Backprojector, depth_edges, mask_pixels
+from .segmentation import fuse_across_classes, associate_segment, merge_overlapping, point_moments, reduce_by_key, Segment, vote_voxels, voxel_keys
 from .settings import MapBuildSettings
-from .structure import _structure_camera, split_rooms, split_walls
+from .structure import structure_camera, split_rooms, split_walls
 
 
 def _struct_slab() -> float:
@@ -122,7 +122,7 @@ def build_map(tour_dir, detector=None, stride: int | None = None, voxel: float |
         acc.absorb_across_classes(s.cross_class_shared)
     # voxel ownership: a voxel claimed by several segments stays with those holding at least
     # vote_ratio of the best one's points (mask bleed onto neighbouring surfaces loses)
-    voxels_disowned = _vote_voxels(acc.segments(), s.vote_ratio, 4 * s.min_voxels) if s.vote_ratio > 0 else 0
+    voxels_disowned = vote_voxels(acc.segments(), s.vote_ratio, 4 * s.min_voxels) if s.vote_ratio > 0 else 0
     movable = _movable_classes(tour)
     dropped = Counter()  # segments dropped, by kind
     pieces = _pieces(acc, s, dropped)
@@ -153,10 +153,10 @@ class _Accumulator:
     def __init__(self, K: np.ndarray, s: MapBuildSettings):
         self.K = K
         self.s = s
-        self.bp: _Backprojector | None = None
-        self.tracked: dict[int, _Segment] = {}
-        self.untracked: dict[str, list[_Segment]] = {}
-        self.pooled: dict[str, _Segment] = {}
+        self.bp: Backprojector | None = None
+        self.tracked: dict[int, Segment] = {}
+        self.untracked: dict[str, list[Segment]] = {}
+        self.pooled: dict[str, Segment] = {}
         self.counts = Counter()
 
     def add_frame(self, fi: int, f, detector) -> None:
@@ -172,58 +172,58 @@ class _Accumulator:
             counts["no_depth"] += 1
             return
         if self.bp is None or self.bp.shape != depth.shape:
-            self.bp = _Backprojector(self.K, depth.shape)
+            self.bp = Backprojector(self.K, depth.shape)
         dets = detector.detect(FrameData(fi, depth, self.K, f.rgb, f.instance, f.semantic))
         counts["frames_used"] += 1
         if not dets:
             counts["no_detections"] += 1
             return
         zc = np.where(valid, depth, 0.0).astype(float)
-        good = (valid & ~_depth_edges(zc, valid, s.edge_abs_m, s.edge_rel)).ravel()
+        good = (valid & ~depth_edges(zc, valid, s.edge_abs_m, s.edge_rel)).ravel()
         zf = zc.ravel()
         world = self.bp(zc, f.pose)
         cam = f.pose[:3, 3]
         any_used = False
         for d in dets:
             kind = kind_of(d.cls)
-            idx = _mask_pixels(d.mask, kind, zc, zf, valid, good, s)
+            idx = mask_pixels(d.mask, kind, zc, zf, valid, good, s)
             if idx is None:
                 counts["detections_too_small"] += 1
                 continue
             P = world[idx]
             keys = voxel_keys(P, s.voxel)
-            k, sm, ct = _reduce(keys, _moments(P), np.ones(len(P)))
+            k, sm, ct = reduce_by_key(keys, point_moments(P), np.ones(len(P)))
             counts["detections"] += 1
             any_used = True
             self.segment_of(d, kind, k, sm, ct).add(fi, d.cls, k, sm, ct, cam, len(idx))
         if not any_used:
             counts["no_detections"] += 1
 
-    def segment_of(self, d, kind: str, keys: np.ndarray, sums: np.ndarray, counts: np.ndarray) -> _Segment:
+    def segment_of(self, d, kind: str, keys: np.ndarray, sums: np.ndarray, counts: np.ndarray) -> Segment:
         """The segment a detection's voxels (``keys``, moment ``sums``, point ``counts``) join: its
         track's, its kind's pool (structure without a track id), or the untracked segment of its
-        class it belongs to (:func:`~reloc.map.segmentation._associate`, which may start one)."""
+        class it belongs to (:func:`~reloc.map.segmentation.associate_segment`, which may start one)."""
         if d.track_id is not None:
             seg = self.tracked.get(int(d.track_id))
             if seg is None:
-                seg = self.tracked[int(d.track_id)] = _Segment(int(d.track_id))
+                seg = self.tracked[int(d.track_id)] = Segment(int(d.track_id))
             return seg
         if kind != "object":
             seg = self.pooled.get(kind)
             if seg is None:
-                seg = self.pooled[kind] = _Segment(None)
+                seg = self.pooled[kind] = Segment(None)
             return seg
-        return _associate(self.untracked.setdefault(d.cls, []), keys, sums[:, :3] / counts[:, None], self.s)
+        return associate_segment(self.untracked.setdefault(d.cls, []), keys, sums[:, :3] / counts[:, None], self.s)
 
     def absorb_across_classes(self, min_shared: float) -> None:
         """Untracked object segments of different classes that hold one thing become one
-        (:func:`~reloc.map.segmentation._absorb_across_classes`), filed under its majority class."""
-        segs = _absorb_across_classes([g for v in self.untracked.values() for g in v], min_shared)
+        (:func:`~reloc.map.segmentation.fuse_across_classes`), filed under its majority class."""
+        segs = fuse_across_classes([g for v in self.untracked.values() for g in v], min_shared)
         self.untracked = {}
         for g in segs:
             self.untracked.setdefault(g.cls, []).append(g)
 
-    def segments(self) -> list[_Segment]:
+    def segments(self) -> list[Segment]:
         """Every segment: tracked, untracked, pooled."""
         return (list(self.tracked.values()) + [g for segs in self.untracked.values() for g in segs]
                 + list(self.pooled.values()))
@@ -237,7 +237,7 @@ def _pieces(acc: _Accumulator, s: MapBuildSettings, dropped: Counter) -> list[tu
     for tid, seg in sorted(acc.tracked.items()):
         pieces.append((seg.cls, *seg.points(), seg.camera(), tid, seg.frames))
     for cls, segs in sorted(acc.untracked.items()):
-        for seg in _merge_overlapping(segs):
+        for seg in merge_overlapping(segs):
             pieces.append((seg.cls, *seg.points(), seg.camera(), None, seg.frames))
     wall_points = acc.pooled["wall"].points()[0] if "wall" in acc.pooled else None
     for kind, seg in sorted(acc.pooled.items()):
@@ -288,7 +288,7 @@ def _boxes(pieces: list[tuple], s: MapBuildSettings, movable_of: dict[str, bool]
             continue
         n_voxels += len(P)
         if kind != "object" and tid is None:
-            camera = _structure_camera(kind, P, camera)
+            camera = structure_camera(kind, P, camera)
         center, size, yaw = fit_box(P, s.quantile, min_sizes[kind], camera, spread=V)
         if kind == "wall" and tid is None and size[2] < s.min_wall_height_m:
             dropped[kind] += 1  # a wall-labelled strip (a ceiling edge, a skirting) is no wall

@@ -1,9 +1,9 @@
 """Which pixels of a detection mask count, and where they are in the world.
 
-A mask's depth-consistent pixels (:func:`_mask_pixels`): valid depth; not on the far side of a
-depth discontinuity (:func:`_depth_edges`); near the mask's edge, within the depth range of the
+A mask's depth-consistent pixels (:func:`mask_pixels`): valid depth; not on the far side of a
+depth discontinuity (:func:`depth_edges`); near the mask's edge, within the depth range of the
 mask's interior around them (:func:`_consistent_rim`); for objects, within a band around the mask's
-median depth. :class:`_Backprojector` places pixels in the world with the frame's camera-to-world
+median depth. :class:`Backprojector` places pixels in the world with the frame's camera-to-world
 pose.
 """
 
@@ -14,7 +14,7 @@ import numpy as np
 from .settings import MapBuildSettings
 
 
-class _Backprojector:
+class Backprojector:
     def __init__(self, K: np.ndarray, shape: tuple[int, int]):
         H, W = shape
         u, v = np.meshgrid(np.arange(W, dtype=float), np.arange(H, dtype=float))
@@ -28,7 +28,7 @@ class _Backprojector:
         return pc @ pose[:3, :3].T + pose[:3, 3]
 
 
-def _depth_edges(z: np.ndarray, valid: np.ndarray, abs_m: float, rel: float) -> np.ndarray:
+def depth_edges(z: np.ndarray, valid: np.ndarray, abs_m: float, rel: float) -> np.ndarray:
     """Pixels on the far side of a depth discontinuity: a valid 4-neighbour is nearer by more
     than abs_m + rel * z. These are the flying pixels and the background a mask bleeds onto; the
     near side (an object's own silhouette) is kept."""
@@ -84,7 +84,7 @@ def _consistent_rim(mask: np.ndarray, z: np.ndarray, valid: np.ndarray, r: int, 
     return out
 
 
-def _mask_pixels(mask, kind: str, zc: np.ndarray, zf: np.ndarray, valid: np.ndarray, good: np.ndarray,
+def mask_pixels(mask, kind: str, zc: np.ndarray, zf: np.ndarray, valid: np.ndarray, good: np.ndarray,
                  s: MapBuildSettings) -> np.ndarray | None:
     """Flat pixel indices of a detection mask's depth-consistent pixels, or None when fewer than
     ``min_mask_pixels`` are left. ``zc``: the frame's depth (0 where not ``valid``), ``zf`` its flat

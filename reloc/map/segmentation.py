@@ -1,12 +1,12 @@
 """Voxel segments: the points of one thing, accumulated over the frames of a mapping tour.
 
-A segment (:class:`_Segment`) keeps per ``voxel`` cell the point count, centroid and second moments
+A segment (:class:`Segment`) keeps per ``voxel`` cell the point count, centroid and second moments
 (memory bounded by the observed surface, not by the number of frames), the pixel-weighted votes
 for its class and the mean camera that saw it. Object detections without a track id join an
-untracked segment of their class by voxel overlap, containment or proximity (:func:`_associate`);
-overlapping untracked segments are merged (:func:`_merge_overlapping`); a voxel several segments
+untracked segment of their class by voxel overlap, containment or proximity (:func:`associate_segment`);
+overlapping untracked segments are merged (:func:`merge_overlapping`); a voxel several segments
 claim stays with those holding at least a fraction of the best one's points there
-(:func:`_vote_voxels`).
+(:func:`vote_voxels`).
 """
 
 from __future__ import annotations
@@ -25,12 +25,12 @@ def voxel_keys(points: np.ndarray, voxel: float) -> np.ndarray:
     return (v[:, 0] << 42) | (v[:, 1] << 21) | v[:, 2]
 
 
-def _moments(P: np.ndarray) -> np.ndarray:
+def point_moments(P: np.ndarray) -> np.ndarray:
     """Per-point moments summed per voxel: x, y, z, xx, yy, zz, xy."""
     return np.column_stack([P, P * P, P[:, 0] * P[:, 1]])
 
 
-def _reduce(keys: np.ndarray, sums: np.ndarray, counts: np.ndarray):
+def reduce_by_key(keys: np.ndarray, sums: np.ndarray, counts: np.ndarray):
     u, inv = np.unique(keys, return_inverse=True)
     inv = inv.ravel()
     s = np.stack([np.bincount(inv, sums[:, d], len(u)) for d in range(sums.shape[1])], axis=1)
@@ -38,7 +38,7 @@ def _reduce(keys: np.ndarray, sums: np.ndarray, counts: np.ndarray):
     return u, s, c
 
 
-class _Segment:
+class Segment:
     __slots__ = ("track", "votes", "frames", "cam_sum", "cam_w", "keys", "sums", "counts", "pending",
                  "pending_n", "lo", "hi", "last_frame")
 
@@ -72,7 +72,7 @@ class _Segment:
         if self.pending_n > max(2 * len(self.keys), 20000):
             self.merge()
 
-    def absorb(self, other: "_Segment") -> None:
+    def absorb(self, other: "Segment") -> None:
         """Take over another segment's points, votes and views."""
         other.merge()
         self.votes.update(other.votes)
@@ -91,7 +91,7 @@ class _Segment:
         ks = [self.keys] + [p[0] for p in self.pending]
         ss = [self.sums] + [p[1] for p in self.pending]
         cs = [self.counts] + [p[2] for p in self.pending]
-        self.keys, self.sums, self.counts = _reduce(np.concatenate(ks), np.concatenate(ss), np.concatenate(cs))
+        self.keys, self.sums, self.counts = reduce_by_key(np.concatenate(ks), np.concatenate(ss), np.concatenate(cs))
         self.pending, self.pending_n = [], 0
 
     @property
@@ -111,7 +111,7 @@ class _Segment:
         return self.cam_sum / self.cam_w if self.cam_w > 0 else None
 
 
-def _vote_voxels(segs: list[_Segment], ratio: float, keep_small: int = 0) -> int:
+def vote_voxels(segs: list[Segment], ratio: float, keep_small: int = 0) -> int:
     """Per-voxel majority: drop a segment's voxel where another segment has more than
     1 / ratio times its points. Segments of fewer than ``keep_small`` voxels lose none (a small
     thing lying on a bigger one shares most of its few voxels with it). Returns the number of
@@ -142,7 +142,7 @@ def _vote_voxels(segs: list[_Segment], ratio: float, keep_small: int = 0) -> int
     return dropped
 
 
-def _associate(segs: list[_Segment], keys, pts, s: MapBuildSettings) -> _Segment:
+def associate_segment(segs: list[Segment], keys, pts, s: MapBuildSettings) -> Segment:
     """The untracked same-class segment a detection belongs to (or a new one).
 
     A candidate qualifies by voxel overlap (at least ``assoc_min_overlap`` of the detection's
@@ -167,12 +167,12 @@ def _associate(segs: list[_Segment], keys, pts, s: MapBuildSettings) -> _Segment
         if score > best_score:
             best, best_score = seg, score
     if best is None:
-        best = _Segment(None)
+        best = Segment(None)
         segs.append(best)
     return best
 
 
-def _absorb_across_classes(segs: list[_Segment], min_shared: float) -> list[_Segment]:
+def fuse_across_classes(segs: list[Segment], min_shared: float) -> list[Segment]:
     """Class-agnostic fusion of untracked segments: a segment sharing at least ``min_shared`` of
     its voxels with a bigger segment of any class is the same thing seen under another label (a
     sofa some views call an armchair) and joins it; the class is the pixel-weighted majority of
@@ -180,7 +180,7 @@ def _absorb_across_classes(segs: list[_Segment], min_shared: float) -> list[_Seg
     for g in segs:
         g.merge()
     order = sorted((g for g in segs if len(g.keys)), key=lambda g: -len(g.keys))
-    kept: list[_Segment] = []
+    kept: list[Segment] = []
     for g in order:
         host = None
         for h in kept:
@@ -196,7 +196,7 @@ def _absorb_across_classes(segs: list[_Segment], min_shared: float) -> list[_Seg
     return kept
 
 
-def _merge_overlapping(segs: list[_Segment], min_shared: float = 0.5) -> list[_Segment]:
+def merge_overlapping(segs: list[Segment], min_shared: float = 0.5) -> list[Segment]:
     """Merge untracked same-class segments whose bounding boxes share at least ``min_shared`` of
     the smaller box's volume (pieces of one thing that no single view tied together)."""
     segs = list(segs)

@@ -1,6 +1,6 @@
 """Walls, floors and ceilings pooled without track ids, split geometrically: walls into straight
 vertical runs cut at T-junctions (:func:`split_walls`), floors and ceilings into rooms separated by
-the walls (:func:`split_rooms`); and the side a split piece was seen from (:func:`_structure_camera`).
+the walls (:func:`split_rooms`); and the side a split piece was seen from (:func:`structure_camera`).
 """
 
 from __future__ import annotations
@@ -170,7 +170,7 @@ def split_rooms(points: np.ndarray, min_points: int, cell: float = 0.05, barrier
     return [o for o in out if len(o) >= min_points]
 
 
-def _structure_camera(kind, P, camera):
+def structure_camera(kind, P, camera):
     """The side a pooled structure piece was seen from: its own mean camera is not known after
     the split, so floors are seen from above, ceilings from below, walls from the pooled mean."""
     if kind == "floor":

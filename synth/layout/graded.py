@@ -34,7 +34,7 @@ from ..scene.fixtures import layout_fixtures
 from ..scene.model import Layout
 from .placement import Placer
 from ..scene.stats import is_imported
-from .rearrange import (_VARIANT_META, RearrangePlan, _add_objects, _holds, _put_elsewhere, _rehang, _relocate_floor,
+from .rearrange import (VARIANT_META, RearrangePlan, add_objects, holds_others, put_elsewhere, rehang, relocate_floor,
                         free_rests, new_problems)
 from .validity import check_layout
 
@@ -87,12 +87,12 @@ def _move(placer: Placer, oid: int, rests, other_room: float, ref_report=None) -
 def _try_move(placer: Placer, oid: int, rests, other_room: float) -> bool:
     obj = placer.layout.object(oid)
     if obj.support == "floor":
-        return _relocate_floor(placer, obj, other_room, rests) is not None
+        return relocate_floor(placer, obj, other_room, rests) is not None
     if obj.support.startswith("wall:"):
-        return _rehang(placer, obj, other_room) is not None
-    if _holds(placer, oid, rests):  # a small object something was put on since: it stays
+        return rehang(placer, obj, other_room) is not None
+    if holds_others(placer, oid, rests):  # a small object something was put on since: it stays
         return False
-    return _put_elsewhere(placer, obj, RearrangePlan(other_room=other_room)) is not None
+    return put_elsewhere(placer, obj, RearrangePlan(other_room=other_room)) is not None
 
 
 def graded_variants(ref: Layout, strengths, seed: int, walkway: np.ndarray | None = None, beyond: bool = False,
@@ -128,7 +128,7 @@ def graded_variants(ref: Layout, strengths, seed: int, walkway: np.ndarray | Non
         lay.fixtures = layout_fixtures(lay, previous=ref)  # lamps' lights follow their lamps; removed ones go
         v = lay.copy()
         v.name, v.reference, v.seed = level_name(ref.name, level), ref.name, int(seed)
-        v.meta = {**{k: x for k, x in ref.meta.items() if k not in _VARIANT_META},  # an import record stays
+        v.meta = {**{k: x for k, x in ref.meta.items() if k not in VARIANT_META},  # an import record stays
                   "generator": "synth.graded", "strength": level, "units": len(order), "steps": steps,
                   "units_moved": moved, "fixed_moved": fixed_moved, "graded_seed": int(seed)}
         if walkway is not None:
@@ -155,15 +155,15 @@ def graded_variants(ref: Layout, strengths, seed: int, walkway: np.ndarray | Non
         fixed = [o.id for o in sorted(lay.objects, key=lambda o: o.id) if not o.movable and o.support == "floor"]
         for k in rng.permutation(len(fixed)):
             saved_objects, saved_boxes = list(lay.objects), dict(placer.boxes)
-            if _relocate_floor(placer, lay.object(fixed[k]), other_room, rests) is not None:
+            if relocate_floor(placer, lay.object(fixed[k]), other_room, rests) is not None:
                 if ref_report is not None and new_problems(ref_report, check_layout(lay)):
                     lay.objects, placer.boxes = saved_objects, saved_boxes
                 else:
                     fixed_moved += 1
-        leaves = [o for o in lay.objects if o.movable and not _holds(placer, o.id, rests) and o.id not in pinned]
+        leaves = [o for o in lay.objects if o.movable and not holds_others(placer, o.id, rests) and o.id not in pinned]
         for k in rng.permutation(len(leaves))[: plan.removed]:
             placer.remove(leaves[k].id)
-        _add_objects(placer, ref, plan.added, is_imported(ref))
+        add_objects(placer, ref, plan.added, is_imported(ref))
         out.append((BEYOND, snapshot(BEYOND, len(order))))
     return out
 

@@ -145,7 +145,7 @@ def _family(placer: Placer, obj: ObjectInstance, rests: dict[int, list[int]] | N
     return fam
 
 
-def _holds(placer: Placer, oid: int, rests: dict[int, list[int]] | None = None) -> bool:
+def holds_others(placer: Placer, oid: int, rests: dict[int, list[int]] | None = None) -> bool:
     """Whether anything stands on object ``oid`` or a ``free`` object rests in or on it."""
     return bool(placer.children(oid)) or bool(rests and rests.get(oid))
 
@@ -223,7 +223,7 @@ def _move_family(placer: Placer, obj: ObjectInstance, propose, tries: int = 12,
     return None
 
 
-def _relocate_floor(placer: Placer, obj: ObjectInstance, p_other: float,
+def relocate_floor(placer: Placer, obj: ObjectInstance, p_other: float,
                     rests: dict[int, list[int]] | None = None) -> list[ObjectInstance] | None:
     """Somewhere else on the floor, in the same room or (with probability ``p_other``) another."""
     cur_room = placer.stage.room_at(_xy(obj))
@@ -413,7 +413,7 @@ def pinned_ids(layout: Layout) -> set[int]:
     return free_rests(layout)[1]
 
 
-def _put_elsewhere(placer: Placer, obj: ObjectInstance, plan: RearrangePlan) -> ObjectInstance | None:
+def put_elsewhere(placer: Placer, obj: ObjectInstance, plan: RearrangePlan) -> ObjectInstance | None:
     """A small object onto another surface (mostly in its room): the moved object, or None."""
     lay, rng = placer.layout, placer.rng
     size, tmpl = _shape(obj)
@@ -440,7 +440,7 @@ def _put_elsewhere(placer: Placer, obj: ObjectInstance, plan: RearrangePlan) -> 
 def _small(placer: Placer, pinned: set[int], rests) -> list[ObjectInstance]:
     """Objects on surfaces that the operator may put elsewhere: movable, holding nothing, not pinned."""
     return [o for o in placer.layout.objects if o.movable and o.support.startswith("object:")
-            and not _holds(placer, o.id, rests) and o.id not in pinned]
+            and not holds_others(placer, o.id, rests) and o.id not in pinned]
 
 
 def _surface_moves(placer: Placer, plan: RearrangePlan, pinned: set[int], rests) -> None:
@@ -450,9 +450,9 @@ def _surface_moves(placer: Placer, plan: RearrangePlan, pinned: set[int], rests)
     for k in placer.rng.permutation(len(small)):
         if done >= plan.surface_moves:
             break
-        if _holds(placer, small[k].id, rests):
+        if holds_others(placer, small[k].id, rests):
             continue  # something was put on it since
-        if _put_elsewhere(placer, placer.layout.object(small[k].id), plan) is not None:
+        if put_elsewhere(placer, placer.layout.object(small[k].id), plan) is not None:
             done += 1
 
 
@@ -464,7 +464,7 @@ def _wall_moves(placer: Placer, plan: RearrangePlan, pinned: set[int], note=None
     for k in rng.permutation(len(hung)):
         if done >= plan.wall_moves or (reached is not None and reached()):
             break
-        cand = _rehang(placer, hung[k], plan.other_room)
+        cand = rehang(placer, hung[k], plan.other_room)
         if cand is None:
             continue
         if note is not None:
@@ -472,7 +472,7 @@ def _wall_moves(placer: Placer, plan: RearrangePlan, pinned: set[int], note=None
         done += 1
 
 
-def _rehang(placer: Placer, obj: ObjectInstance, other_room: float) -> ObjectInstance | None:
+def rehang(placer: Placer, obj: ObjectInstance, other_room: float) -> ObjectInstance | None:
     """A wall object onto another wall at its height (another room with probability ``other_room``):
     the moved object, or None (nothing changed)."""
     size, tmpl = _shape(obj)
@@ -559,7 +559,7 @@ def _toward_targets(placer: Placer, ref: Layout, plan: RearrangePlan, floor, ord
         if len(moved | ids) > hi or len(far | ids) > fhi:
             left.append(k)  # its family would take a count past its range
             continue
-        fam = _relocate_floor(placer, obj, plan.other_room, rests)
+        fam = relocate_floor(placer, obj, plan.other_room, rests)
         if fam:
             note(fam)
             done += 1
@@ -574,9 +574,9 @@ def _toward_targets(placer: Placer, ref: Layout, plan: RearrangePlan, floor, ord
         if done >= plan.surface_moves and far_enough():
             break
         obj = lay.object(small[k].id)
-        if (obj.id not in moved and far_enough()) or _holds(placer, obj.id, rests):
+        if (obj.id not in moved and far_enough()) or holds_others(placer, obj.id, rests):
             continue  # (something may have been put on it since)
-        cand = _put_elsewhere(placer, obj, plan)
+        cand = put_elsewhere(placer, obj, plan)
         if cand is not None:
             note([cand])
             done += 1
@@ -587,7 +587,7 @@ def _toward_targets(placer: Placer, ref: Layout, plan: RearrangePlan, floor, ord
         if len(moved) >= goal or done >= plan.nudges:
             break
         obj = lay.object(floor[k].id)
-        if not _holds(placer, obj.id, rests):
+        if not holds_others(placer, obj.id, rests):
             fam = _nudge(placer, obj, rests)
             if fam:
                 note(fam)
@@ -596,7 +596,7 @@ def _toward_targets(placer: Placer, ref: Layout, plan: RearrangePlan, floor, ord
     for k in rng.permutation(len(small)):
         if len(moved) >= goal:
             break
-        if _holds(placer, small[k].id, rests):
+        if holds_others(placer, small[k].id, rests):
             continue
         cand = _nudge_on_surface(placer, lay.object(small[k].id))
         if cand is not None:
@@ -606,9 +606,9 @@ def _toward_targets(placer: Placer, ref: Layout, plan: RearrangePlan, floor, ord
     for k in rng.permutation(len(small)):
         if len(moved) >= goal or len(far) >= fhi:
             break
-        if _holds(placer, small[k].id, rests):
+        if holds_others(placer, small[k].id, rests):
             continue
-        cand = _put_elsewhere(placer, lay.object(small[k].id), plan)
+        cand = put_elsewhere(placer, lay.object(small[k].id), plan)
         if cand is not None:
             note([cand])
 
@@ -654,7 +654,7 @@ def _add_copy(placer: Placer, t: ObjectInstance, oid: int, rng) -> ObjectInstanc
 
 
 # meta keys of a variant that are its own, not carried over from an imported reference
-_VARIANT_META = ("generator", "generator_version", "plan", "walkway", "variant_seed", "attempt", "ranges")
+VARIANT_META = ("generator", "generator_version", "plan", "walkway", "variant_seed", "attempt", "ranges")
 
 
 def rearrange(ref: Layout, name: str, seed: int, plan: RearrangePlan = RearrangePlan(),
@@ -678,7 +678,7 @@ def rearrange(ref: Layout, name: str, seed: int, plan: RearrangePlan = Rearrange
     lay.name, lay.reference, lay.seed = name, ref.name, seed
     lay.meta = {"generator": "synth.rearrange", "plan": asdict(plan)}
     if imported:  # keep the import record (where the meshes are)
-        lay.meta = {**{k: v for k, v in ref.meta.items() if k not in _VARIANT_META}, **lay.meta}
+        lay.meta = {**{k: v for k, v in ref.meta.items() if k not in VARIANT_META}, **lay.meta}
     if walkway is not None:
         lay.meta["walkway"] = {"planned_on": ref.name, "clearance_m": WALKWAY_CLEARANCE, "frames": WALKWAY_FRAMES}
     rng = np.random.default_rng(seed)
@@ -688,7 +688,7 @@ def rearrange(ref: Layout, name: str, seed: int, plan: RearrangePlan = Rearrange
     rests, pinned = free_rests(lay)
 
     # remove: movable objects that hold nothing
-    leaves = [o for o in lay.objects if o.movable and not _holds(placer, o.id, rests) and o.id not in pinned]
+    leaves = [o for o in lay.objects if o.movable and not holds_others(placer, o.id, rests) and o.id not in pinned]
     for k in rng.permutation(len(leaves))[: plan.removed]:
         placer.remove(leaves[k].id)
     present = {o.id for o in lay.objects}
@@ -703,24 +703,24 @@ def rearrange(ref: Layout, name: str, seed: int, plan: RearrangePlan = Rearrange
         done = 0
         while order and done < plan.floor_moves:
             obj = lay.object(floor[order.pop(0)].id)
-            if _relocate_floor(placer, obj, plan.other_room, rests):
+            if relocate_floor(placer, obj, plan.other_room, rests):
                 done += 1
         # nudge some of the others a little
         done = 0
         while order and done < plan.nudges:
             obj = lay.object(floor[order.pop(0)].id)
-            if not _holds(placer, obj.id, rests) and _nudge(placer, obj, rests):
+            if not holds_others(placer, obj.id, rests) and _nudge(placer, obj, rests):
                 done += 1
         _surface_moves(placer, plan, pinned, rests)
         _wall_moves(placer, plan, pinned)
 
-    _add_objects(placer, ref, plan.added, imported)
+    add_objects(placer, ref, plan.added, imported)
     lay.objects.sort(key=lambda o: o.id)
     lay.fixtures = layout_fixtures(lay, previous=ref)
     return lay
 
 
-def _add_objects(placer: Placer, ref: Layout, n: int, imported: bool) -> int:
+def add_objects(placer: Placer, ref: Layout, n: int, imported: bool) -> int:
     """Add up to ``n`` new instances: procedural classes in a procedural flat, copies of its own
     templates in an imported one; returns how many were placed."""
     lay, rng = placer.layout, placer.rng

@@ -177,7 +177,7 @@ def wall_clearance(stage: Stage, pts: np.ndarray, segs: np.ndarray | None = None
     (``inside_free``): the part of the clearance that comes from the shell, the same for planner
     (``synth.paths.space``) and checker (``path_clearance``)."""
     pts = np.asarray(pts, float).reshape(-1, 2)
-    d = _seg_dist(pts, wall_segments(stage) if segs is None else segs)
+    d = seg_dist(pts, wall_segments(stage) if segs is None else segs)
     d[~inside_free(stage, pts)] = 0.0
     return d
 
@@ -192,7 +192,7 @@ def room_index(stage: Stage, pts: np.ndarray) -> np.ndarray:
     return out
 
 
-def _seg_dist(pts: np.ndarray, segs: np.ndarray) -> np.ndarray:
+def seg_dist(pts: np.ndarray, segs: np.ndarray) -> np.ndarray:
     """Min distance of each point to a set of segments."""
     out = np.full(len(pts), np.inf)
     for a, b in segs:
@@ -259,7 +259,7 @@ class Boxes:
 FLAT = 0.05  # m: an object whose top is at most this far above the floor (a rug, a mat) is walked over
 
 
-def _object_boxes(layout: Layout, obstacles: str):
+def object_boxes(layout: Layout, obstacles: str):
     """The boxes that obstruct a camera: every object but ceiling-mounted ones (``all``; every
     object for ``band``), except flat ones on the floor (top <= floor + ``FLAT``: rugs, mats)."""
     if obstacles not in ("band", "all"):
@@ -290,8 +290,8 @@ def path_clearance_detail(path: CameraPath, layout: Layout, obstacles: str = "al
     xy = P[:, :2]
     st = layout.stage
     inside = inside_free(st, xy)
-    d = _seg_dist(xy, wall_segments(st))
-    boxes = _object_boxes(layout, obstacles)
+    d = seg_dist(xy, wall_segments(st))
+    boxes = object_boxes(layout, obstacles)
     bx = Boxes.of(boxes)
     mask = None
     if obstacles == "band" and len(bx):
@@ -366,16 +366,16 @@ def clearance_report(path: CameraPath, layout: Layout, clearance: float | None =
     }
 
 
-def _what(o: dict) -> str:
+def describe_object(o: dict) -> str:
     return f"object {o['id']} ({o['class']})" if o["id"] is not None else o["class"]
 
 
-def _range_text(r: dict) -> str:
+def range_text(r: dict) -> str:
     a, b = r["frames"]
     objs = r["objects"]
     return (f"frames {a}-{b}" if a != b else f"frame {a}") + (
         f": min {r['min_clearance_m']:.3f} m at frame {r['min_frame']}, "
-        + ", ".join(_what(o) for o in objs[:3]) + (f" and {len(objs) - 3} more" if len(objs) > 3 else ""))
+        + ", ".join(describe_object(o) for o in objs[:3]) + (f" and {len(objs) - 3} more" if len(objs) > 3 else ""))
 
 
 def replan_command(path: CameraPath, layout_args: list[str]) -> str:
@@ -428,6 +428,6 @@ def render_clearance_problem(path: CameraPath, layout: Layout, layout_file, layo
         spans += f" and {len(rep['ranges']) - 4} more"
     planned = ", ".join(map(str, path.meta.get("layouts") or [])) or "no named layouts"
     return (f"camera path '{path.name}' was planned on {planned} with {c:g} m clearance, but in layout "
-            f"'{layout.name}' it passes {worst['min_clearance_m']:.3f} m from {_what(worst['objects'][0])} at frame "
+            f"'{layout.name}' it passes {worst['min_clearance_m']:.3f} m from {describe_object(worst['objects'][0])} at frame "
             f"{worst['min_frame']} ({rep['frames_below']} frames closer than {c:g} m: {spans}); replan it for this "
             f"layout (`{replan_command(path, [layout_arg])}`) or pass --allow-clearance-breach")

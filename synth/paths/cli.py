@@ -10,7 +10,7 @@ import numpy as np
 from formats.errors import UnknownNameError, UserError
 from formats.cli import add_json, positive_int
 
-from .clearance import CLEARANCE_TOL, _range_text, _what, clearance_report, declared_clearance, replan_command
+from .clearance import CLEARANCE_TOL, range_text, describe_object, clearance_report, declared_clearance, replan_command
 from .files import load_path, save_path
 from .mapping import plan_mapping_path
 from .model import DEFAULTS, CameraPath
@@ -156,9 +156,9 @@ def _cmd_check(args) -> int:
             print(f"{r['layout']}: ok (min {r['min_clearance_m']:.3f} m)")
             continue
         print(f"{r['layout']}: {r['frames_below']} frames closer than {c:g} m (min {r['min_clearance_m']:.3f} m at "
-              f"frame {r['min_frame']}, {_what(r['nearest'])})")
+              f"frame {r['min_frame']}, {describe_object(r['nearest'])})")
         for rg in r["ranges"]:
-            print(f"  {_range_text(rg)}")
+            print(f"  {range_text(rg)}")
         if r["frames_outside"] and not args.layout:
             from ..scene.model import resolve_layout_path
 

@@ -14,7 +14,7 @@ from .model import CURVE_MARGIN, DS, MARGIN, MAX_YAW_RATE
 from .space import Space
 
 
-def _polyline_resample(P: np.ndarray, step: float) -> np.ndarray:
+def polyline_resample(P: np.ndarray, step: float) -> np.ndarray:
     P = np.asarray(P, float)
     seg = np.linalg.norm(np.diff(P, axis=0), axis=1)
     keep = np.concatenate([[True], seg > 1e-9])
@@ -27,11 +27,11 @@ def _polyline_resample(P: np.ndarray, step: float) -> np.ndarray:
     return np.stack([np.interp(t, s, P[:, 0]), np.interp(t, s, P[:, 1])], axis=1)
 
 
-def _arc(P: np.ndarray) -> np.ndarray:
+def arc_length(P: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(P, axis=0), axis=1))])
 
 
-def _smooth_valid(space: Space, Q: np.ndarray, sigma_m: float) -> tuple[np.ndarray, np.ndarray]:
+def smooth_valid(space: Space, Q: np.ndarray, sigma_m: float) -> tuple[np.ndarray, np.ndarray]:
     """Gaussian-smooth a dense valid polyline, less where the smooth curve would come too close."""
     from scipy import ndimage
 
@@ -55,7 +55,7 @@ def _smooth_valid(space: Space, Q: np.ndarray, sigma_m: float) -> tuple[np.ndarr
     return Q + w[:, None] * (S - Q), w
 
 
-def _turn_loops(space: Space, raw: np.ndarray, marks: list[int], rng, attrs: np.ndarray | None = None):
+def turn_loops(space: Space, raw: np.ndarray, marks: list[int], rng, attrs: np.ndarray | None = None):
     """Replace sharp reversals at junctions (indices ``marks`` into ``raw``) by a loop.
 
     The loop is a circle around a point of the incoming path (the junction itself when there is
@@ -134,7 +134,7 @@ def _turn_loops(space: Space, raw: np.ndarray, marks: list[int], rng, attrs: np.
     return np.concatenate(out, axis=0), np.concatenate(out_a, axis=0)
 
 
-def _smooth_noise(rng, t: np.ndarray, pmin: float, pmax: float, n: int = 3) -> np.ndarray:
+def smooth_noise(rng, t: np.ndarray, pmin: float, pmax: float, n: int = 3) -> np.ndarray:
     """Slow, smooth noise in [-1, 1]: a sum of sinusoids with seeded periods and phases."""
     P = rng.uniform(pmin, pmax, n)
     ph = rng.uniform(0.0, 2 * math.pi, n)
@@ -143,7 +143,7 @@ def _smooth_noise(rng, t: np.ndarray, pmin: float, pmax: float, n: int = 3) -> n
     return np.sum(a[:, None] * np.sin(2 * math.pi * t[None, :] / P[:, None] + ph[:, None]), axis=0)
 
 
-def _continuous(raw: np.ndarray) -> np.ndarray:
+def continuous_angles(raw: np.ndarray) -> np.ndarray:
     """Angles made continuous (each within pi of the previous)."""
     out = np.empty_like(raw)
     out[0] = raw[0]
@@ -152,7 +152,7 @@ def _continuous(raw: np.ndarray) -> np.ndarray:
     return out
 
 
-def _rate_limit(x: np.ndarray, max_step: float) -> np.ndarray:
+def rate_limit(x: np.ndarray, max_step: float) -> np.ndarray:
     y = np.empty_like(x)
     y[0] = x[0]
     for i in range(1, len(x)):
@@ -160,7 +160,7 @@ def _rate_limit(x: np.ndarray, max_step: float) -> np.ndarray:
     return y
 
 
-def _travel_yaw(xy: np.ndarray) -> np.ndarray:
+def travel_yaw(xy: np.ndarray) -> np.ndarray:
     if len(xy) < 2:
         return np.zeros(len(xy))
     d = np.diff(xy, axis=0)
@@ -168,9 +168,9 @@ def _travel_yaw(xy: np.ndarray) -> np.ndarray:
     return np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
 
 
-def _resample_track(P: np.ndarray, attrs: dict[str, np.ndarray], frames: int, step: float):
+def resample_track(P: np.ndarray, attrs: dict[str, np.ndarray], frames: int, step: float):
     """Constant arc-length samples of a dense curve (and of per-point attributes, nearest)."""
-    s = _arc(P)
+    s = arc_length(P)
     n = min(frames, int(math.floor(s[-1] / step)) + 1)
     t = np.arange(n) * step
     xy = np.stack([np.interp(t, s, P[:, 0]), np.interp(t, s, P[:, 1])], axis=1)
@@ -178,16 +178,16 @@ def _resample_track(P: np.ndarray, attrs: dict[str, np.ndarray], frames: int, st
     return xy, {key: v[k] for key, v in attrs.items()}
 
 
-def _poses(xy, z, yaw, pitch, roll) -> np.ndarray:
+def track_poses(xy, z, yaw, pitch, roll) -> np.ndarray:
     return np.stack([camera.pose_from_ypr((float(p[0]), float(p[1]), float(h)), float(a), float(b), float(c))
                      for p, h, a, b, c in zip(xy, z, yaw, pitch, roll)]) if len(xy) else np.zeros((0, 4, 4))
 
 
-def _final_yaw(target: np.ndarray, fps: float) -> np.ndarray:
+def final_yaw(target: np.ndarray, fps: float) -> np.ndarray:
     """Rate-limit a continuous yaw target, then smooth it (smoothing cannot raise the rate)."""
     from scipy import ndimage
 
     if len(target) < 2:
         return target.copy()
-    y = _rate_limit(ndimage.gaussian_filter1d(target, 0.25 * fps, mode="nearest"), MAX_YAW_RATE / fps)
+    y = rate_limit(ndimage.gaussian_filter1d(target, 0.25 * fps, mode="nearest"), MAX_YAW_RATE / fps)
     return ndimage.gaussian_filter1d(y, 0.2 * fps, mode="nearest")

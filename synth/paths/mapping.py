@@ -11,9 +11,9 @@ import numpy as np
 from formats.errors import UserError
 
 from ..scene.model import Layout
-from .curves import _arc, _continuous, _final_yaw, _poses, _rate_limit, _resample_track, _smooth_noise, _smooth_valid, _travel_yaw, _turn_loops
+from .curves import arc_length, continuous_angles, final_yaw, track_poses, rate_limit, resample_track, smooth_noise, smooth_valid, travel_yaw, turn_loops
 from .model import BOB, DEFAULTS, DS, M_HEIGHT_VAR, M_HEIGHTS, M_LOOK, M_MIN_RUN, M_PITCH, M_PITCH_VAR, M_ROLL, M_SMOOTH, M_SPACING, MARGIN, STEP_HZ, CameraPath
-from .space import Space, _check_args, _line, _meta, _require_rooms, _start_cell
+from .space import Space, check_args, grid_line, path_meta, require_rooms, start_cell
 
 __all__ = ["plan_mapping_path"]
 
@@ -106,11 +106,11 @@ def plan_mapping_path(layout: Layout, frames: int = DEFAULTS.mapping_frames, see
     """Cross-hatch tour of one layout: lawnmower sweeps along x and y in every room, rooms chained through doors."""
     from scipy import ndimage
 
-    _check_args(frames, fps, speed, clearance)
+    check_args(frames, fps, speed, clearance)
     zlo = min(M_HEIGHTS) - M_HEIGHT_VAR
     zhi = max(M_HEIGHTS) + M_HEIGHT_VAR
     space = Space([layout], clearance, zlo, zhi, obstacles)
-    _require_rooms(space, "mapping path")
+    require_rooms(space, "mapping path")
     step = speed / fps
     need = (frames - 1) * step
     max_dim = max(float((r.outline().max(axis=0) - r.outline().min(axis=0)).max()) for r in space.stage.rooms)
@@ -119,10 +119,10 @@ def plan_mapping_path(layout: Layout, frames: int = DEFAULTS.mapping_frames, see
         return _mapping_pass(space, sp, offset, np.random.default_rng([seed, 11, k]), start=start)
     spacing = M_SPACING
     P, attrs = one_pass(spacing)
-    if _arc(P)[-1] > need:  # too long: sparser sweeps (never fewer rooms)
+    if arc_length(P)[-1] > need:  # too long: sparser sweeps (never fewer rooms)
         lo, hi = spacing, 2.0 * max_dim
         P_hi, a_hi = one_pass(hi)
-        L = _arc(P_hi)[-1]
+        L = arc_length(P_hi)[-1]
         if L > need:
             raise UserError(f"mapping path: {frames} frames at {speed:g} m/s ({need:.1f} m) cannot cover every room of "
                             f"'{layout.name}' even with one sweep line per direction ({L:.1f} m); use at least "
@@ -130,34 +130,34 @@ def plan_mapping_path(layout: Layout, frames: int = DEFAULTS.mapping_frames, see
         for _ in range(7):
             mid = math.sqrt(lo * hi)
             P_mid, a_mid = one_pass(mid)
-            if _arc(P_mid)[-1] <= need:
+            if arc_length(P_mid)[-1] <= need:
                 hi, P_hi, a_hi = mid, P_mid, a_mid
             else:
                 lo = mid
         spacing, P, attrs = hi, P_hi, a_hi
     passes = 1
-    while _arc(P)[-1] < need and passes < 8:  # fill with offset passes, cut to length
+    while arc_length(P)[-1] < need and passes < 8:  # fill with offset passes, cut to length
         P2, a2 = one_pass(spacing, 0.5 if passes % 2 else 0.25, passes, start=P[-1])
         P = np.concatenate([P, P2[1:]])
         attrs = {k: np.concatenate([attrs[k], a2[k][1:]]) for k in attrs}
         passes += 1
-    xy, at = _resample_track(P, attrs, frames, step)
+    xy, at = resample_track(P, attrs, frames, step)
     n = len(xy)
     t = np.arange(n) / fps
     nr = np.random.default_rng([seed, 13])
-    travel = ndimage.gaussian_filter1d(_travel_yaw(xy), 0.4 * fps, mode="nearest") if n > 1 else np.zeros(n)
+    travel = ndimage.gaussian_filter1d(travel_yaw(xy), 0.4 * fps, mode="nearest") if n > 1 else np.zeros(n)
     look = at["look"]
     sweeping = np.isfinite(look)
-    raw = np.where(sweeping, look, travel) + np.where(sweeping, M_LOOK * _smooth_noise(nr, t, 5.0, 11.0), 0.0)
-    yaw = _final_yaw(_continuous(raw), fps)
+    raw = np.where(sweeping, look, travel) + np.where(sweeping, M_LOOK * smooth_noise(nr, t, 5.0, 11.0), 0.0)
+    yaw = final_yaw(continuous_angles(raw), fps)
     zt = at["z"]
-    z = ndimage.gaussian_filter1d(_rate_limit(zt, 0.15 / fps), 0.5 * fps, mode="nearest") if n > 1 else zt
-    z = z + M_HEIGHT_VAR * _smooth_noise(nr, t, 8.0, 20.0) * 0.6 + 0.4 * BOB * np.sin(2 * math.pi * STEP_HZ * speed * t)
-    pitch = M_PITCH + M_PITCH_VAR * _smooth_noise(nr, t, 6.0, 15.0)
-    roll = M_ROLL * _smooth_noise(nr, t, 5.0, 13.0)
-    poses = _poses(xy, z, yaw, pitch, roll)
+    z = ndimage.gaussian_filter1d(rate_limit(zt, 0.15 / fps), 0.5 * fps, mode="nearest") if n > 1 else zt
+    z = z + M_HEIGHT_VAR * smooth_noise(nr, t, 8.0, 20.0) * 0.6 + 0.4 * BOB * np.sin(2 * math.pi * STEP_HZ * speed * t)
+    pitch = M_PITCH + M_PITCH_VAR * smooth_noise(nr, t, 6.0, 15.0)
+    roll = M_ROLL * smooth_noise(nr, t, 5.0, 13.0)
+    poses = track_poses(xy, z, yaw, pitch, roll)
     path = CameraPath(name, poses, float(fps), {})
-    path.meta = _meta("mapping", [layout], seed, frames, fps, speed, clearance, obstacles, space, path,
+    path.meta = path_meta("mapping", [layout], seed, frames, fps, speed, clearance, obstacles, space, path,
                       {"sweep_spacing_m": round(spacing, 4), "passes": passes, "smoothing_sigma_m": M_SMOOTH,
                        "heights_m": list(M_HEIGHTS), "look_sweep_deg": round(math.degrees(M_LOOK), 3)})
     return path
@@ -166,7 +166,7 @@ def plan_mapping_path(layout: Layout, frames: int = DEFAULTS.mapping_frames, see
 def _mapping_pass(space: Space, spacing: float, offset: float, rng, start=None):
     """One cross-hatch tour over all rooms: dense smoothed curve + per-point look yaw / height."""
     st = space.stage
-    cur = _start_cell(space) if start is None else space.snap(start)
+    cur = start_cell(space) if start is None else space.snap(start)
     todo = [k for k in range(len(st.rooms)) if (space.comp & (space.room == k)).any()]
     pts, looks, zs = [space.xy([cur])], [np.array([np.nan])], [np.array([M_HEIGHTS[0]])]
     marks = []
@@ -199,7 +199,7 @@ def _mapping_pass(space: Space, spacing: float, offset: float, rng, start=None):
                 looks.append(np.full(len(conn) - 1, np.nan))
                 zs.append(np.full(len(conn) - 1, z_now))
                 marks.append(sum(len(p) for p in pts) - 1)
-            seg = _line(space.xy(ca), space.xy(cb))  # a run of walkable cells on one grid line
+            seg = grid_line(space.xy(ca), space.xy(cb))  # a run of walkable cells on one grid line
             if len(seg) > 1:
                 pts.append(seg[1:])
                 looks.append(np.full(len(seg) - 1, look))
@@ -208,15 +208,15 @@ def _mapping_pass(space: Space, spacing: float, offset: float, rng, start=None):
             z_now = z
             cur = cb
     raw = np.concatenate(pts)
-    raw, A = _turn_loops(space, raw, marks[:-1], rng,
+    raw, A = turn_loops(space, raw, marks[:-1], rng,
                          np.stack([np.concatenate(looks), np.concatenate(zs)], axis=1))
     look, zz = A[:, 0], A[:, 1]
     # dense resampling carrying attributes
-    s = _arc(raw)
+    s = arc_length(raw)
     keep = np.concatenate([[True], np.diff(s) > 1e-9])
     raw, look, zz, s = raw[keep], look[keep], zz[keep], s[keep]
     t = np.arange(int(math.floor(s[-1] / DS)) + 1) * DS
     Q = np.stack([np.interp(t, s, raw[:, 0]), np.interp(t, s, raw[:, 1])], axis=1)
     k = np.clip(np.searchsorted(s, t), 0, len(s) - 1)
-    P, _ = _smooth_valid(space, Q, M_SMOOTH)
+    P, _ = smooth_valid(space, Q, M_SMOOTH)
     return P, {"look": look[k], "z": zz[k]}

@@ -11,9 +11,9 @@ import numpy as np
 from formats.errors import UserError
 
 from ..scene.model import Layout
-from .curves import _arc, _final_yaw, _polyline_resample, _poses, _resample_track, _smooth_noise, _smooth_valid, _travel_yaw, _turn_loops
+from .curves import arc_length, final_yaw, polyline_resample, track_poses, resample_track, smooth_noise, smooth_valid, travel_yaw, turn_loops
 from .model import BOB, DEFAULTS, DS, Q_HEIGHT, Q_HEIGHT_VAR, Q_LOOK, Q_PITCH, Q_PITCH_VAR, Q_ROLL, Q_SMOOTH, STEP_HZ, CameraPath
-from .space import Space, _check_args, _meta, _require_rooms, _start_cell
+from .space import Space, check_args, path_meta, require_rooms, start_cell
 
 __all__ = ["plan_query_path"]
 
@@ -84,17 +84,17 @@ def plan_query_path(layouts: list[Layout], frames: int = DEFAULTS.query_frames, 
     """The shared query walk: every room, ``clearance`` from the objects of every layout given."""
     from scipy import ndimage
 
-    _check_args(frames, fps, speed, clearance)
+    check_args(frames, fps, speed, clearance)
     if not layouts:
         raise UserError("plan_query_path needs at least one layout")
     rng = np.random.default_rng([seed, 1])
     zlo = Q_HEIGHT - Q_HEIGHT_VAR - BOB
     zhi = Q_HEIGHT + Q_HEIGHT_VAR + BOB
     space = Space(layouts, clearance, zlo, zhi, obstacles)
-    _require_rooms(space, "query path")
+    require_rooms(space, "query path")
     step = speed / fps
     need = (frames - 1) * step
-    cur = _start_cell(space)
+    cur = start_cell(space)
     pieces, marks, n_loops = [space.xy([cur])], [], 0
     raw_len = 0.0
     while True:
@@ -120,32 +120,32 @@ def plan_query_path(layouts: list[Layout], frames: int = DEFAULTS.query_frames, 
         if raw_len >= 1.25 * need + 2.0 or n_loops >= 100:
             raw = np.concatenate(pieces)
             P = _dense_smooth(space, raw, marks[:-1], Q_SMOOTH, rng)
-            if _arc(P)[-1] >= need:
+            if arc_length(P)[-1] >= need:
                 break
             if n_loops >= 100:
                 raise UserError(f"query path: the free space shared by {', '.join(l.name for l in layouts)} is too "
                                 f"small to walk {need:.1f} m without standing still")
-    xy, _ = _resample_track(P, {}, frames, step)
+    xy, _ = resample_track(P, {}, frames, step)
     n = len(xy)
     t = np.arange(n) / fps
     nr = np.random.default_rng([seed, 3])
-    z = Q_HEIGHT + Q_HEIGHT_VAR * _smooth_noise(nr, t, 14.0, 40.0) + BOB * np.sin(2 * math.pi * STEP_HZ * speed * t)
-    travel = ndimage.gaussian_filter1d(_travel_yaw(xy), 0.6 * fps, mode="nearest") if n > 1 else np.zeros(n)
-    target = travel + Q_LOOK * _smooth_noise(nr, t, 9.0, 22.0)
-    yaw = _final_yaw(target, fps)
-    pitch = Q_PITCH + Q_PITCH_VAR * _smooth_noise(nr, t, 7.0, 19.0)
-    roll = Q_ROLL * _smooth_noise(nr, t, 5.0, 13.0) + math.radians(0.4) * np.sin(math.pi * STEP_HZ * speed * t)
-    poses = _poses(xy, z, yaw, pitch, roll)
+    z = Q_HEIGHT + Q_HEIGHT_VAR * smooth_noise(nr, t, 14.0, 40.0) + BOB * np.sin(2 * math.pi * STEP_HZ * speed * t)
+    travel = ndimage.gaussian_filter1d(travel_yaw(xy), 0.6 * fps, mode="nearest") if n > 1 else np.zeros(n)
+    target = travel + Q_LOOK * smooth_noise(nr, t, 9.0, 22.0)
+    yaw = final_yaw(target, fps)
+    pitch = Q_PITCH + Q_PITCH_VAR * smooth_noise(nr, t, 7.0, 19.0)
+    roll = Q_ROLL * smooth_noise(nr, t, 5.0, 13.0) + math.radians(0.4) * np.sin(math.pi * STEP_HZ * speed * t)
+    poses = track_poses(xy, z, yaw, pitch, roll)
     path = CameraPath(name, poses, float(fps), {})
-    path.meta = _meta("query", layouts, seed, frames, fps, speed, clearance, obstacles, space, path,
+    path.meta = path_meta("query", layouts, seed, frames, fps, speed, clearance, obstacles, space, path,
                       {"loops": n_loops, "smoothing_sigma_m": Q_SMOOTH, "height_m": Q_HEIGHT, "height_var_m": Q_HEIGHT_VAR,
                        "bob_m": BOB, "look_around_deg": round(math.degrees(Q_LOOK), 3)})
     return path
 
 
 def _dense_smooth(space: Space, raw: np.ndarray, marks: list[int], sigma: float, rng) -> np.ndarray:
-    looped, _ = _turn_loops(space, raw, marks, rng)
-    Q = _polyline_resample(looped, DS)
-    Q, _ = _smooth_valid(space, Q, 0.1)  # takes the grid staircase off first (nearly always valid)
-    P, _ = _smooth_valid(space, Q, sigma)
+    looped, _ = turn_loops(space, raw, marks, rng)
+    Q = polyline_resample(looped, DS)
+    Q, _ = smooth_valid(space, Q, 0.1)  # takes the grid staircase off first (nearly always valid)
+    P, _ = smooth_valid(space, Q, sigma)
     return P

@@ -12,7 +12,7 @@ import numpy as np
 from formats.errors import UserError
 
 from ..scene.model import Layout
-from .clearance import Boxes, _object_boxes, _seg_dist, inside_free, path_clearance, room_index, wall_segments
+from .clearance import Boxes, object_boxes, seg_dist, inside_free, path_clearance, room_index, wall_segments
 from .model import BAND, CURVE_MARGIN, DCAP, GRID, MARGIN, MAX_YAW_RATE, PREFER
 
 __all__ = ["Space"]
@@ -58,14 +58,14 @@ class Space:
         self.pts = pts
         self.segs = wall_segments(st)
         inside = inside_free(st, pts)  # the checker's free space (synth.paths.clearance), cell by cell
-        dist = np.minimum(_seg_dist(pts, self.segs), DCAP)
+        dist = np.minimum(seg_dist(pts, self.segs), DCAP)
         dist[~inside] = 0.0
         dist = dist.reshape(self.ny, self.nx)
         self.shell = dist.copy()  # walls only: what an empty room allows
         occ = np.zeros((self.ny, self.nx))
         self.boxes: list[Boxes] = []
         for lay in layouts:
-            all_boxes = _object_boxes(lay, obstacles)
+            all_boxes = object_boxes(lay, obstacles)
             if obstacles == "band":
                 hit = [b for b in all_boxes if b.zmax > zlo - BAND and b.zmin < zhi + BAND]
                 low = [b for b in all_boxes if not (b.zmax > zlo - BAND and b.zmin < zhi + BAND) and b.zmax < zlo]
@@ -129,7 +129,7 @@ class Space:
     def exact(self, xy: np.ndarray) -> np.ndarray:
         """Exact planning clearance of arbitrary points (min over layouts; walls; 0 outside)."""
         xy = np.asarray(xy, float).reshape(-1, 2)
-        d = _seg_dist(xy, self.segs)
+        d = seg_dist(xy, self.segs)
         for bx in self.boxes:
             np.minimum(d, bx.dist(xy), out=d)
         d[~inside_free(self.stage, xy)] = 0.0
@@ -181,7 +181,7 @@ class Space:
 
     def straight(self, a: int, b: int) -> np.ndarray | None:
         """The straight segment from cell a to cell b when it keeps the walkable clearance, else None."""
-        seg = _line(self.xy(a), self.xy(b))
+        seg = grid_line(self.xy(a), self.xy(b))
         if (self.exact(seg) >= self.clearance + MARGIN - 0.5 * self.grid).all():
             return seg
         return None
@@ -208,7 +208,7 @@ class Space:
         raise UserError("no walkable connection between two points of the path")
 
 
-def _line(a: np.ndarray, b: np.ndarray, step: float = GRID) -> np.ndarray:
+def grid_line(a: np.ndarray, b: np.ndarray, step: float = GRID) -> np.ndarray:
     n = max(1, int(math.ceil(np.linalg.norm(b - a) / step)))
     return a + (b - a) * np.linspace(0.0, 1.0, n + 1)[:, None]
 
@@ -217,7 +217,7 @@ def _line(a: np.ndarray, b: np.ndarray, step: float = GRID) -> np.ndarray:
 # shared by both planners
 
 
-def _start_cell(space: Space) -> int:
+def start_cell(space: Space) -> int:
     """Where walks begin: inside the entrance door (a door with one room), else the first room's best cell."""
     st = space.stage
     for op in st.openings:
@@ -240,7 +240,7 @@ def _start_cell(space: Space) -> int:
     return int(i * space.nx + j)
 
 
-def _check_args(frames, fps, speed, clearance):
+def check_args(frames, fps, speed, clearance):
     if not (isinstance(frames, (int, np.integer)) and frames >= 2):
         raise UserError(f"frames must be an integer >= 2, got {frames!r}")
     for nm, v in (("fps", fps), ("speed", speed)):
@@ -250,7 +250,7 @@ def _check_args(frames, fps, speed, clearance):
         raise UserError(f"clearance must be >= 0, got {clearance!r}")
 
 
-def _require_rooms(space: Space, what: str) -> None:
+def require_rooms(space: Space, what: str) -> None:
     """Every room a camera fits in (``Space.required``) must be in the walkable component; else say
     which, how much clearance each one's roomiest spot has and at what clearance it would connect."""
     have = set(np.unique(space.room[space.comp])) - {-1}
@@ -307,7 +307,7 @@ def _bisect(ok, hi: float) -> float:
     return lo
 
 
-def _meta(kind, layouts, seed, frames, fps, speed, clearance, obstacles, space, path, extra) -> dict:
+def path_meta(kind, layouts, seed, frames, fps, speed, clearance, obstacles, space, path, extra) -> dict:
     xy = path.positions[:, :2]
     rooms = space.room_of(xy)
     visited = []

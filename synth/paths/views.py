@@ -22,9 +22,9 @@ from formats import camera
 from formats.errors import UserError
 
 from ..scene.model import Layout
-from .curves import _poses
+from .curves import track_poses
 from .model import BOB, DEFAULTS, Q_HEIGHT, Q_HEIGHT_VAR, Q_PITCH, Q_PITCH_VAR, Q_ROLL, CameraPath
-from .space import Space, _require_rooms
+from .space import Space, require_rooms
 
 VIEWS_SPREAD = 1.5  # the query's height, pitch and roll ranges, widened by this factor
 MIN_PER_ROOM = 3
@@ -43,7 +43,7 @@ def plan_views(layouts: list[Layout], frames: int = DEFAULTS.views_frames, seed:
     rng = np.random.default_rng([seed, 7])
     h_var = (Q_HEIGHT_VAR + BOB) * spread
     space = Space(list(layouts), clearance, Q_HEIGHT - h_var, Q_HEIGHT + h_var, "all")
-    _require_rooms(space, "views")
+    require_rooms(space, "views")
     free = np.flatnonzero((space.comp & (space.room >= 0)).ravel())
     rooms = space.room.ravel()[free]
     present = np.unique(rooms)
@@ -68,7 +68,7 @@ def plan_views(layouts: list[Layout], frames: int = DEFAULTS.views_frames, seed:
     pitch = np.clip(rng.normal(Q_PITCH, Q_PITCH_VAR * spread, n), Q_PITCH - 3 * Q_PITCH_VAR * spread,
                     Q_PITCH + 3 * Q_PITCH_VAR * spread)
     roll = rng.normal(0.0, Q_ROLL * spread, n)
-    poses = _poses(xy, z, yaw, pitch, roll)
+    poses = track_poses(xy, z, yaw, pitch, roll)
     meta = {
         "kind": "views", "layouts": [lay.name for lay in layouts], "seed": int(seed), "frames": int(frames),
         "clearance": float(clearance), "spread": float(spread), "rooms": {space.stage.rooms[int(r)].name: int(q)
