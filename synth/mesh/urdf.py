@@ -1,11 +1,13 @@
-"""ReplicaCAD articulated objects (URDF): one static object instance per articulated object.
+"""URDF models (articulated objects): links, joints, forward kinematics and the visual meshes at a joint state.
 
-No Blender here. ReplicaCAD's kitchen counter, fridge, kitchen cupboards, chest of drawers,
-cabinet and doors are *articulated objects*: the scene instance JSON lists them under
-``articulated_object_instances`` and each names a template that resolves to a URDF whose links
-carry GLB visual meshes. This module parses those URDFs (``xml.etree``, no new dependency), runs
-forward kinematics at a joint state, and turns each articulated instance into ONE
-``synth.scene.model.ObjectInstance`` in that joint state.
+No Blender here. The mesh layer's URDF reader: it parses a URDF (``xml.etree``, no new dependency),
+runs forward kinematics at a joint state and gives the link meshes (``urdf_visuals``, ``urdf_mesh``,
+``urdf_geometry``) and their bounds (``local_bounds``). ReplicaCAD's kitchen counter, fridge, kitchen
+cupboards, chest of drawers, cabinet and doors are *articulated objects*: the scene instance JSON lists
+them under ``articulated_object_instances`` and each names a template that resolves to a URDF whose
+links carry GLB visual meshes; finding those URDFs and turning each instance into ONE
+``synth.scene.model.ObjectInstance`` in its joint state is the scene source's
+(``synth.sources.replicacad.articulated``). The notes below are on both.
 
 Why one static object
     A closed drawer or door is visually part of the counter or cabinet; a detector sees one piece
