@@ -18,12 +18,15 @@ def build_parser() -> argparse.ArgumentParser:
     from .jobs import cli as jobs
     from .paths import cli as paths_cli
     from .render import bench
-    from .scene import cli as scene_cli
+    from .layout import cli as scene_cli
+    from .sources import SOURCES
     from .tour import cli as tour_cli
 
     p = ArgumentParser(prog="synth", description="Build, check and render controlled-change indoor scenes.")
     sub = p.add_subparsers(dest="group", required=True)
-    scene_cli.register_cli(sub)  # synth scene list|show|check|stats|preview|export-boxes|generate|build|rearrange|...
+    scene_cmds = scene_cli.register_cli(sub)  # synth scene list|show|check|stats|preview|export-boxes|generate|build|rearrange|...
+    for source in SOURCES.values():
+        source.register_scene_cli(scene_cmds)  # synth scene import-replicacad
     tour_cli.register_cli(sub)  # synth tour render|check|show|export
     paths_cli.register_cli(sub)  # synth path plan|show|check|preview|generate
     jobs.register_cli(sub)  # synth render SPEC.yaml

@@ -7,7 +7,7 @@ the ``empty_stage`` and ``apt_0..apt_5`` navmeshes), plus
 
 * a box GLB for every object GLB and URDF link GLB of the real dataset, at the bounds the real GLB
   has in its own (Y-up) frame (``tests/data/replicacad/glb_bounds.json``, measured once from the
-  real files through ``synth.replicacad.gltf.glb_geometry``; the three GLBs the public copy lacks have the
+  real files through ``synth.mesh.gltf.glb_geometry``; the three GLBs the public copy lacks have the
   bounds of their collision asset, or of a sibling: see the table's ``source``). Each box has a
   base colour factor; the first ``TEXTURED`` of them also a 4 x 4 base-colour texture with UVs.
 * the stand-in stage ``stages/frl_apartment_stage.glb``, built by ``tools/replicacad_standin.py`` itself
@@ -54,7 +54,7 @@ VENDORED_GLOBS = (
     "navmeshes/empty_stage.navmesh",
     "navmeshes/apt_[0-5].navmesh",
 )
-_C = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # habitat -> ours (synth.replicacad.habitat_format)
+_C = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # habitat -> ours (synth.sources.replicacad.habitat_format)
 
 
 def sha256(path: Path) -> str:
@@ -122,7 +122,7 @@ def standin_tool():
 
 def write_real_fixture(root) -> Path:
     """Write the fixture dataset root at ``root`` (created; existing files are overwritten)."""
-    from synth.replicacad.navmesh import StandinSpec
+    from synth.sources.replicacad.navmesh import StandinSpec
 
     root = Path(root)
     root.mkdir(parents=True, exist_ok=True)
@@ -145,7 +145,7 @@ def write_real_fixture(root) -> Path:
 
 
 def _glb_bounds_h(path: Path) -> tuple[list[float], list[float]]:
-    from synth.replicacad.gltf import glb_geometry
+    from synth.mesh.gltf import glb_geometry
 
     v = glb_geometry(path).vertices @ _C  # ours -> the GLB's own frame (C^T v)
     return [round(float(x), 6) for x in v.min(0)], [round(float(x), 6) for x in v.max(0)]
@@ -190,7 +190,7 @@ def vendor(src: Path) -> None:
                 glbs[rel] = {"min": lo, "max": hi, "source": "measured"}
     MANIFEST.write_text(json.dumps({"source": "github angli66/SAPIEN-ReplicaCAD, folder replica_cad/ (CC BY-NC 4.0)",
                                     "sha256": sums}, indent=1, sort_keys=True) + "\n")
-    BOUNDS.write_text(json.dumps({"frame": "each GLB's own frame (glTF, Y up), metres, through synth.replicacad.gltf.glb_geometry",
+    BOUNDS.write_text(json.dumps({"frame": "each GLB's own frame (glTF, Y up), metres, through synth.mesh.gltf.glb_geometry",
                                   "glbs": glbs}, indent=1, sort_keys=True) + "\n")
     print(f"vendored {len(sums)} files, {len(glbs)} GLB bounds")
 

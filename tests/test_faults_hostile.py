@@ -150,7 +150,7 @@ def synth_main_ok(root, tmp_path) -> bool:
 def test_a_texture_uri_outside_the_root_is_refused(root, tmp_path, capsys, uri):
     from test_gltf_render import glb_chunks, write_glb_chunks
 
-    from synth.replicacad.gltf import check_glb, clear_cache
+    from synth.mesh.gltf import check_glb, clear_cache
 
     glb = object_glb(root)
     png = external_texture(glb)
@@ -187,8 +187,8 @@ from formats.errors import SceneFormatError  # noqa: E402
 
 
 def test_a_layout_asset_name_cannot_climb_out_of_the_root(root, tmp_path):
-    from synth.replicacad.mesh_assets import asset_file
-    from synth.replicacad.urdf import urdf_path
+    from synth.mesh.mesh_assets import asset_file
+    from synth.mesh.urdf import urdf_path
 
     (tmp_path / "x.glb").write_bytes(b"glTF")
     for fn, name in ((asset_file, "replicacad:../x.glb"), (urdf_path, "replicacad-urdf:../../x.urdf")):
@@ -382,7 +382,7 @@ def test_a_navmesh_with_hostile_settings_is_one_line(tmp_path, setting, value):
     import struct
 
     from replicacad_real_fixture import FILES
-    from synth.replicacad.navmesh import HEADER, PARAMS, SETTINGS, SETTINGS_NAMES, read_navmesh
+    from synth.sources.replicacad.navmesh import HEADER, PARAMS, SETTINGS, SETTINGS_NAMES, read_navmesh
 
     b = bytearray((FILES / "navmeshes" / "apt_0.navmesh").read_bytes())
     at = HEADER.size + PARAMS.size + 4 * SETTINGS_NAMES.index(setting)
@@ -519,7 +519,7 @@ def test_error_lines_escape_what_a_file_says(tmp_path, capsys):
 def test_a_glb_with_a_deeply_nested_json_chunk_is_one_line(tmp_path):
     import struct
 
-    from synth.replicacad.gltf import check_glb
+    from synth.mesh.gltf import check_glb
 
     body = ('{"asset": {"version": "2.0"}, "extras": ' + "[" * DEEP + "]" * DEEP + "}").encode()
     body += b" " * (-len(body) % 4)

@@ -1,4 +1,4 @@
-"""ReplicaCAD meshes with their own glTF materials, in both renderers (synth.replicacad.gltf, synth.render.meshes,
+"""ReplicaCAD meshes with their own glTF materials, in both renderers (synth.mesh.gltf, synth.render.meshes,
 synth.blender).
 
 A tiny dataset is built here with trimesh: a box whose baseColorTexture has four coloured
@@ -147,7 +147,7 @@ def make_dataset(root: Path) -> Path:
 
 
 def load_test_layout(root: Path, fixture: bool = True):
-    from synth.replicacad.importer import load_replicacad
+    from synth.sources.replicacad.importer import load_replicacad
 
     lay = load_replicacad(root, SCENE, allow_unknown=True, structure=False)
     if fixture:
@@ -156,7 +156,7 @@ def load_test_layout(root: Path, fixture: bool = True):
 
 
 def glb_chunks(path: Path) -> tuple[dict, bytes]:
-    """(JSON, BIN) of a GLB, read here by hand (independent of synth.replicacad.gltf)."""
+    """(JSON, BIN) of a GLB, read here by hand (independent of synth.mesh.gltf)."""
     data = path.read_bytes()
     n = struct.unpack_from("<I", data, 12)[0]
     doc = json.loads(data[20:20 + n])
@@ -200,7 +200,7 @@ def layout(dataset):
     return load_test_layout(dataset)
 
 
-# ---- synth.replicacad.gltf: frames, UVs, materials, node transforms ----------------------------------------
+# ---- synth.mesh.gltf: frames, UVs, materials, node transforms ----------------------------------------
 
 
 def test_the_fixture_glb_holds_what_the_test_says(dataset):
@@ -212,7 +212,7 @@ def test_the_fixture_glb_holds_what_the_test_says(dataset):
 
 
 def test_load_glb_parts_converts_to_z_up_and_keeps_uvs_and_material(dataset):
-    from synth.replicacad.gltf import glb_geometry, load_glb_parts, pbr
+    from synth.mesh.gltf import glb_geometry, load_glb_parts, pbr
 
     path = dataset / "objects/tex_box.glb"
     doc, binary = glb_chunks(path)
@@ -251,7 +251,7 @@ def test_load_glb_parts_converts_to_z_up_and_keeps_uvs_and_material(dataset):
 
 
 def test_node_transforms_instancing_and_normals(tmp_path):
-    from synth.replicacad.gltf import load_glb_parts
+    from synth.mesh.gltf import load_glb_parts
 
     box = plain_box(0.2, (0.5, 0.5, 0.5))
     ang = 0.7
@@ -287,7 +287,7 @@ def test_node_transforms_instancing_and_normals(tmp_path):
 
 
 def test_undecodable_texture_warns_once_and_falls_back_to_the_factor(tmp_path, caplog):
-    from synth.replicacad import gltf
+    from synth.mesh import gltf
 
     src = tmp_path / "src.glb"
     write_glb(src, [textured_box()])
@@ -296,7 +296,7 @@ def test_undecodable_texture_warns_once_and_falls_back_to_the_factor(tmp_path, c
     doc["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] = [0.5, 0.25, 0.125, 1.0]
     bad = tmp_path / "ktx2.glb"
     write_glb_chunks(bad, doc, binary)
-    with caplog.at_level("WARNING", logger="synth.replicacad.gltf"):
+    with caplog.at_level("WARNING", logger="synth.mesh.gltf"):
         (p,) = gltf.load_glb_parts(bad)
         gltf.clear_cache()
         gltf.load_glb_parts(bad)
@@ -325,7 +325,7 @@ def external_texture_glb(tmp_path: Path, uri: str) -> Path:
 
 
 def test_missing_external_texture_names_the_glb_and_the_field(tmp_path):
-    from synth.replicacad.gltf import check_glb, load_glb_parts, pbr
+    from synth.mesh.gltf import check_glb, load_glb_parts, pbr
 
     path, png = external_texture_glb(tmp_path, "textures/red%20box.png")
     for fn in (check_glb, load_glb_parts):
@@ -345,7 +345,7 @@ def test_missing_texture_is_reported_when_the_scene_loads(tmp_path):
     root = make_dataset(tmp_path / "ds")
     path, _ = external_texture_glb(tmp_path / "tmp", "gone.png")
     (root / "objects/tex_box.glb").write_bytes(path.read_bytes())
-    from synth.replicacad.importer import load_replicacad
+    from synth.sources.replicacad.importer import load_replicacad
 
     with pytest.raises(SceneFormatError) as e:
         load_replicacad(root, SCENE, allow_unknown=True, structure=False)
@@ -353,7 +353,7 @@ def test_missing_texture_is_reported_when_the_scene_loads(tmp_path):
 
 
 def test_broken_and_empty_glbs(tmp_path):
-    from synth.replicacad.gltf import check_glb, load_glb_parts
+    from synth.mesh.gltf import check_glb, load_glb_parts
 
     junk = tmp_path / "junk.glb"
     junk.write_bytes(b"not a glb at all, just some bytes")
@@ -491,7 +491,7 @@ def test_stage_is_split_per_triangle_into_walls_and_floors(layout, monkeypatch):
         ids[side & (centroids[:, 1] > 2.85) & (centroids[:, 0] > -2.92) & (centroids[:, 2] > 0.0)] = WALL_ID_BASE
         return ids  # left at 0: wall tops (z = 2.5), the north wall's west end, all of the west wall
 
-    monkeypatch.setitem(sys.modules, "synth.replicacad.stage_structure", types.SimpleNamespace(face_ids=face_ids))
+    monkeypatch.setitem(sys.modules, "synth.mesh.stage_structure", types.SimpleNamespace(face_ids=face_ids))
     import synth.render.meshes
 
     monkeypatch.setattr(synth.render.meshes, "STAGE_MAX_EDGE", 100.0)  # no splitting of big floor triangles here (next test)
@@ -518,7 +518,7 @@ def test_stage_is_split_per_triangle_into_walls_and_floors(layout, monkeypatch):
 
 def test_stage_split_keeps_uvs(tmp_path):
     """Splitting a textured primitive keeps each triangle's UVs."""
-    from synth.replicacad.gltf import load_glb_parts, submesh
+    from synth.mesh.gltf import load_glb_parts, submesh
 
     path = tmp_path / "t.glb"
     write_glb(path, [textured_box()])
@@ -548,7 +548,7 @@ SCRIPT = textwrap.dedent(r'''
     from synth.blender.gltf_materials import get_gltf_material
     from synth.blender.shading import set_emission
     from synth.blender.worker import read_blender_exr
-    from synth.replicacad.gltf import load_glb_parts, pbr
+    from synth.mesh.gltf import load_glb_parts, pbr
 
     args = json.loads(sys.argv[1])
     out = args["out"]
@@ -848,7 +848,7 @@ def fixture_module():
 
 @pytest.fixture(scope="module")
 def rcad(tmp_path_factory):
-    from synth.replicacad.importer import load_replicacad
+    from synth.sources.replicacad.importer import load_replicacad
 
     F = fixture_module()
     root = F.make_fixture(tmp_path_factory.mktemp("rcad"))
@@ -972,7 +972,7 @@ def test_floor_triangles_spanning_rooms_are_split_per_room(tmp_path):
     from replicacad_fixture import ROOMS, make_fixture
 
     from synth.render.meshes import STAGE_MAX_EDGE, layout_parts
-    from synth.replicacad.importer import load_replicacad
+    from synth.sources.replicacad.importer import load_replicacad
 
     lay = load_replicacad(make_fixture(tmp_path / "rc"), "apt_0")
     floors = [p for p in layout_parts(lay) if FLOOR_ID_BASE <= p.instance_id < CEILING_ID_BASE]

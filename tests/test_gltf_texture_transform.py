@@ -1,4 +1,4 @@
-"""KHR_texture_transform (offset, rotation, scale) in synth.replicacad.gltf, the fast renderer's texture lookup
+"""KHR_texture_transform (offset, rotation, scale) in synth.mesh.gltf, the fast renderer's texture lookup
 and the Blender material translation.
 
 The expected values come from the extension's own text, worked by hand: its first example
@@ -59,7 +59,7 @@ def cell_texture() -> Image.Image:
 
 
 def test_spec_examples_by_hand():
-    from synth.replicacad.gltf import uv_transform_matrix
+    from synth.mesh.gltf import uv_transform_matrix
 
     M = uv_transform_matrix(SPEC_EXAMPLE, "gltf")
     corners = np.array([[0, 0, 1], [1, 0, 1], [0, 1, 1], [1, 1, 1]], float).T
@@ -80,7 +80,7 @@ def test_spec_examples_by_hand():
 def test_trimesh_convention_and_blender_mapping_agree():
     """The transform on trimesh/Blender UVs (u, 1 - v) is F M F, and the Blender Mapping node's
     values (Location + Rz(r) (Scale * uv), Rz counter-clockwise) give the same map."""
-    from synth.replicacad.gltf import blender_mapping, uv_transform_matrix
+    from synth.mesh.gltf import blender_mapping, uv_transform_matrix
 
     rng = np.random.default_rng(4)
     for _ in range(20):
@@ -148,7 +148,7 @@ def dataset(tmp_path_factory) -> Path:
 
 
 def test_transform_is_recorded_and_applied_to_the_uvs(dataset):
-    from synth.replicacad.gltf import check_glb, load_glb_parts, pbr, texture_uv
+    from synth.mesh.gltf import check_glb, load_glb_parts, pbr, texture_uv
 
     path = dataset / "objects/cells.glb"
     check_glb(path)
@@ -174,7 +174,7 @@ def test_transform_is_recorded_and_applied_to_the_uvs(dataset):
     ([1, 2], None, "expected a JSON object"),
 ])
 def test_malformed_transform_names_the_field(tmp_path, transform, field, match):
-    from synth.replicacad.gltf import check_glb, load_glb_parts
+    from synth.mesh.gltf import check_glb, load_glb_parts
 
     path = write_glb_and_transform(tmp_path, transform)
     want = "materials[0].pbrMetallicRoughness.baseColorTexture.extensions.KHR_texture_transform"
@@ -192,10 +192,10 @@ def write_glb_and_transform(tmp_path, transform, slot=("pbrMetallicRoughness", "
 
 
 def test_other_texcoord_set_is_logged_once(tmp_path, caplog):
-    from synth.replicacad import gltf
+    from synth.mesh import gltf
 
     path = write_glb_and_transform(tmp_path, {"scale": [2.0, 2.0], "texCoord": 1})
-    with caplog.at_level("WARNING", logger="synth.replicacad.gltf"):
+    with caplog.at_level("WARNING", logger="synth.mesh.gltf"):
         gltf.load_glb_parts(path)
         gltf.clear_cache()
         gltf.load_glb_parts(path)
@@ -205,7 +205,7 @@ def test_other_texcoord_set_is_logged_once(tmp_path, caplog):
 
 def test_emissive_slot_transform(tmp_path):
     """Transforms of other slots are recorded under their own slot name."""
-    from synth.replicacad.gltf import load_glb_parts, texture_uv
+    from synth.mesh.gltf import load_glb_parts, texture_uv
 
     path = tmp_path / "e.glb"
     m = plane_mesh()
@@ -224,7 +224,7 @@ def test_emissive_slot_transform(tmp_path):
 def test_real_replicacad_glbs_load_with_their_transform(name):
     """The three ReplicaCAD objects that use the extension (the only ones; extensionsRequired): offset
     (0, 0.99), scale 0.01, so each samples the 1 % corner patch at the image's bottom-left."""
-    from synth.replicacad.gltf import check_glb, load_glb_parts, pbr, texture_uv
+    from synth.mesh.gltf import check_glb, load_glb_parts, pbr, texture_uv
 
     path = RCAD / f"{name}.glb"
     doc = check_glb(path)
@@ -287,7 +287,7 @@ def test_expected_cells_tell_the_variants_apart():
 
 @pytest.fixture(scope="module")
 def layout(dataset):
-    from synth.replicacad.importer import load_replicacad
+    from synth.sources.replicacad.importer import load_replicacad
 
     return load_replicacad(dataset, SCENE, allow_unknown=True, structure=False)
 
@@ -319,7 +319,7 @@ BLENDER_SCRIPT = textwrap.dedent(r'''
     from formats.camera import Intrinsics
     from synth.blender import scene_builder as sb
     from synth.blender.worker import read_blender_exr
-    from synth.replicacad.gltf import load_glb_parts
+    from synth.mesh.gltf import load_glb_parts
     from synth.render.meshes import RenderPart
 
     args = json.loads(sys.argv[1])
@@ -362,7 +362,7 @@ BLENDER_SCRIPT = textwrap.dedent(r'''
 def test_blender_shows_the_transformed_texture(tmp_path, dataset):
     """Our material (a Mapping node between UV map and image) and Blender's own glTF importer,
     under a uniform white sky: at each probe pixel the colour is the cell worked out by hand."""
-    from synth.replicacad.gltf import blender_mapping
+    from synth.mesh.gltf import blender_mapping
 
     intr = Intrinsics.from_fov(W, H, HFOV)
     args = {"glb": str(dataset / "objects/cells.glb"), "intrinsics": intr.to_dict(), "pose": POSE.tolist(),

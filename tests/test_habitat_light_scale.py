@@ -1,6 +1,6 @@
 """Intensity scales of habitat lighting configs: the scene dataset config's
 ``light_setups.default_attributes`` apply where a lighting file sets none, a file's own value wins
-(habitat-sim's attribute inheritance; see synth/replicacad/habitat_lighting.py), and fixture powers record the
+(habitat-sim's attribute inheritance; see synth/sources/replicacad/habitat_lighting.py), and fixture powers record the
 scaled intensity.
 
 The documents below have the real files' structure: ReplicaCAD's replicaCAD.scene_dataset_config.json
@@ -19,8 +19,8 @@ from pathlib import Path
 import pytest
 
 from formats.errors import SceneFormatError
-from synth.replicacad.habitat_format import dataset_config_path, dataset_root
-from synth.replicacad.habitat_lighting import (WATTS_PER_INTENSITY, assign_lights, dataset_light_defaults, fixtures_for_imported,
+from synth.sources.replicacad.habitat_format import dataset_config_path, dataset_root
+from synth.sources.replicacad.habitat_lighting import (WATTS_PER_INTENSITY, assign_lights, dataset_light_defaults, fixtures_for_imported,
                                     parse_lighting_config, read_lighting_config)
 
 REAL = Path("/work/rcad_git/replica_cad")
@@ -140,7 +140,7 @@ def fixture_module():
 
 @pytest.fixture(scope="module")
 def fx(tmp_path_factory):
-    from synth.replicacad.importer import load_replicacad
+    from synth.sources.replicacad.importer import load_replicacad
 
     F = fixture_module()
     root = F.make_fixture(tmp_path_factory.mktemp("rcad_light"))

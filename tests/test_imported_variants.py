@@ -24,9 +24,9 @@ from synth.scene import geometry as geo
 from synth.scene.fixtures import layout_fixtures
 from synth.layout.validity import check_layout
 from synth.scene.lighting import kelvin_to_rgb
-from synth.replicacad.habitat_lighting import assign_lights, color_temperature, fixtures_for_imported, parse_lighting_config, read_lighting_config
+from synth.sources.replicacad.habitat_lighting import assign_lights, color_temperature, fixtures_for_imported, parse_lighting_config, read_lighting_config
 from synth.layout.placement import Placer, placed_copy
-from synth.replicacad.surfaces import mesh_top_coverage
+from synth.mesh.surfaces import mesh_top_coverage
 from synth.layout.rearrange import (
     RearrangePlan,
     VariantSpec,
@@ -613,7 +613,7 @@ def _fixture_module():
 @pytest.fixture(scope="module")
 def fx_layout(tmp_path_factory):
     F = _fixture_module()
-    from synth.replicacad.importer import load_replicacad
+    from synth.sources.replicacad.importer import load_replicacad
 
     root = F.make_fixture(tmp_path_factory.mktemp("rcad_fixture"))
     lay = load_replicacad(root, "apt_0")

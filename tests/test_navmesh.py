@@ -1,4 +1,4 @@
-"""synth.replicacad.navmesh on ReplicaCAD's own navmeshes (vendored in tests/data/replicacad/files/navmeshes).
+"""synth.sources.replicacad.navmesh on ReplicaCAD's own navmeshes (vendored in tests/data/replicacad/files/navmeshes).
 
 Expected figures were read off the files' headers by hand (a hex dump of empty_stage.navmesh: one
 tile, 62 vertices, 28 polygons, 116 links, 28 detail meshes, 1 detail vertex, 61 detail triangles, 56
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from formats.errors import SceneFormatError
-from synth.replicacad.navmesh import navmesh_for_scene, read_navmesh, standin_stage, StandinSpec, write_standin_glb
+from synth.sources.replicacad.navmesh import navmesh_for_scene, read_navmesh, standin_stage, StandinSpec, write_standin_glb
 
 from replicacad_real_fixture import FILES
 
@@ -94,7 +94,7 @@ def test_navmesh_for_scene_resolves_the_apartments_handle():
 
 
 def test_standin_stage_matches_the_navmesh(tmp_path):
-    from synth.replicacad.gltf import glb_geometry
+    from synth.mesh.gltf import glb_geometry
 
     n = read_navmesh(NAV / "empty_stage.navmesh")
     s = standin_stage(n, StandinSpec(floor_z=0.0))
@@ -199,12 +199,12 @@ def test_standin_floor_holds_an_object_sticking_out(plain, held):
     # the mesh: floor faces (up, z 0) cover the shelf's box + margin, no wall face stands in it
     floor, walls = held.parts["floor"], held.parts["walls"]
     up = (floor.face_normals[:, 2] > 0.95) & (np.abs(floor.triangles_center[:, 2]) < 1e-6)
-    from synth.replicacad.stage_structure import _rasterise
+    from synth.mesh.stage_structure import rasterise
 
     r = _grow(SHELF, m)
     fine = 0.005
     shape = (int(round((r[2] - r[0]) / fine)), int(round((r[3] - r[1]) / fine)))
-    cover = _rasterise((floor.triangles[up][:, :, :2] - r[:2]) / fine, shape)
+    cover = rasterise((floor.triangles[up][:, :, :2] - r[:2]) / fine, shape)
     assert cover.all()
     wc = walls.triangles_center
     inside = (wc[:, 0] > r[0] + 1e-3) & (wc[:, 0] < r[2] - 1e-3) & (wc[:, 1] > r[1] + 1e-3) & (wc[:, 1] < r[3] - 1e-3)

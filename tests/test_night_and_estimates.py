@@ -20,7 +20,7 @@ from replicacad_real_fixture import write_real_fixture
 from synth.cli import main as synth_main
 from synth.jobs import expand, load_spec
 from synth.paths.files import load_path, save_path
-from synth.replicacad.importer import load_replicacad
+from synth.sources.replicacad.importer import load_replicacad
 from synth.scene.lighting import DARK_MIN_FRAMES, chosen_lamps, dark_tour_problem, lamp_visibility, load_lighting
 from synth.scene.model import dump_yaml, layout_to_dict, load_layout, object_box, resolve_layout_path
 

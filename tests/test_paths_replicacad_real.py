@@ -24,7 +24,7 @@ from synth.paths.clearance import clearance_report
 from synth.paths.files import load_path
 from synth.paths.mapping import plan_mapping_path
 from synth.paths.query import plan_query_path
-from synth.replicacad.importer import load_replicacad
+from synth.sources.replicacad.importer import load_replicacad
 from synth.scene.model import save_layout
 
 CLEARANCE = 0.3

@@ -15,7 +15,7 @@ import pytest
 from replicacad_real_fixture import write_real_fixture
 from synth.layout.validity import check_layout
 from synth.layout.rearrange import RearrangePlan, VariantSpec, free_rests, make_variant, new_problems, reference_walkway
-from synth.replicacad.importer import load_replicacad
+from synth.sources.replicacad.importer import load_replicacad
 from synth.scene.model import layout_to_dict
 from synth.scene.stats import PAPER_RANGES, change_stats, change_table, moved_distances, scaled_ranges
 

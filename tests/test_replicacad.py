@@ -1,4 +1,4 @@
-"""synth.replicacad.importer: a tiny ReplicaCAD-shaped dataset built here, expected values worked out by hand.
+"""synth.sources.replicacad.importer: a tiny ReplicaCAD-shaped dataset built here, expected values worked out by hand.
 
 These tests cover the conversion of scene instances, poses, scales and frames, so they import with
 ``structure=False`` (the stage stays one mesh, articulated objects are skipped); the full import
@@ -21,7 +21,7 @@ from scipy.spatial.transform import Rotation
 
 from formats.errors import SceneFormatError, UnknownNameError
 from synth.scene.classes import parse_class_table
-from synth.replicacad.importer import Y_UP_TO_Z_UP, list_scenes, load_asset_mesh, load_replicacad
+from synth.sources.replicacad.importer import Y_UP_TO_Z_UP, list_scenes, load_asset_mesh, load_replicacad
 from synth.scene.model import load_layout, object_box, save_layout
 from meshes import box_mesh, write_glb
 

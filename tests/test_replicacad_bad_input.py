@@ -107,7 +107,7 @@ def test_the_fixture_imports_cleanly(root, tmp_path, capsys):
 
 
 def test_folder_without_its_dataset_config_is_refused(root):
-    from synth.replicacad.habitat_format import dataset_config_path, dataset_root
+    from synth.sources.replicacad.habitat_format import dataset_config_path, dataset_root
 
     (root / "replicaCAD.scene_dataset_config.json").unlink()
     for call in (lambda: dataset_root(root, require_config=True), lambda: dataset_config_path(root)):
@@ -120,7 +120,7 @@ def test_folder_without_its_dataset_config_is_refused(root):
 
 def test_configs_folder_given_as_the_root_is_refused(root):
     """A common slip: pointing at replica_cad/configs instead of replica_cad."""
-    from synth.replicacad.habitat_format import dataset_root
+    from synth.sources.replicacad.habitat_format import dataset_root
 
     with pytest.raises(SceneFormatError, match="no .*scene_dataset_config.json") as e:
         dataset_root(root / "configs", require_config=True)
@@ -138,7 +138,7 @@ def test_folder_without_its_dataset_config_exits_2(root, tmp_path, capsys):
 
 @pytest.mark.parametrize("which", ["object", "stage", "urdf"])
 def test_glb_that_is_a_git_lfs_pointer(root, tmp_path, capsys, which):
-    from synth.replicacad.gltf import check_glb, glb_geometry
+    from synth.mesh.gltf import check_glb, glb_geometry
 
     glb = {"object": object_glb, "stage": stage_glb, "urdf": urdf_glb}[which](root)
     glb.write_text(LFS_POINTER)
@@ -152,7 +152,7 @@ def test_glb_that_is_a_git_lfs_pointer(root, tmp_path, capsys, which):
 
 
 def test_truncated_glb(root, tmp_path, capsys):
-    from synth.replicacad.gltf import check_glb, glb_geometry
+    from synth.mesh.gltf import check_glb, glb_geometry
 
     glb = object_glb(root)
     data = glb.read_bytes()
@@ -168,7 +168,7 @@ def test_truncated_glb(root, tmp_path, capsys):
 
 
 def test_file_that_is_not_a_glb(root, tmp_path, capsys):
-    from synth.replicacad.gltf import check_glb, glb_geometry
+    from synth.mesh.gltf import check_glb, glb_geometry
 
     glb = object_glb(root)
     glb.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(200))  # an image saved under the GLB's name
@@ -198,7 +198,7 @@ def external_texture(glb: Path) -> Path:
 
 
 def test_texture_that_is_a_git_lfs_pointer(root, tmp_path, capsys):
-    from synth.replicacad.gltf import check_glb, clear_cache, load_glb_parts, pbr
+    from synth.mesh.gltf import check_glb, clear_cache, load_glb_parts, pbr
 
     glb = object_glb(root)
     png = external_texture(glb)
@@ -219,7 +219,7 @@ def test_texture_that_is_a_git_lfs_pointer(root, tmp_path, capsys):
 def test_external_buffer_that_is_a_git_lfs_pointer(tmp_path):
     from test_gltf_render import glb_chunks, plain_box, write_glb, write_glb_chunks
 
-    from synth.replicacad.gltf import check_glb
+    from synth.mesh.gltf import check_glb
 
     glb = tmp_path / "b.glb"
     write_glb(glb, [plain_box()])
@@ -234,7 +234,7 @@ def test_external_buffer_that_is_a_git_lfs_pointer(tmp_path):
 
 def test_render_asset_names_the_pointer_and_its_config(root):
     """The importer meets the pointer first through the config's render_asset."""
-    from synth.replicacad.habitat_format import render_asset
+    from synth.sources.replicacad.habitat_format import render_asset
 
     glb = object_glb(root)
     glb.write_text(LFS_POINTER)

@@ -16,8 +16,8 @@ from replicacad_real_fixture import FILES, write_real_fixture
 from formats.errors import SceneFormatError
 from synth.layout.validity import check_layout
 from synth.scene.classes import class_table, lexicon_table
-from synth.replicacad.collision import overlap_depth, penetration, touching
-from synth.replicacad.importer import load_replicacad
+from synth.mesh.collision import overlap_depth, penetration, touching
+from synth.sources.replicacad.importer import load_replicacad
 from synth.scene.model import ObjectInstance, Room, load_layout, object_box, save_layout
 
 APTS = [f"apt_{k}" for k in range(6)]
@@ -96,7 +96,7 @@ def test_receptacles_in_the_object_frame_and_as_supports(apt0):
     # habitat (x, y, z) = (0.0088, 0.4683, 0.0441) +- (0.6336, 0.1366, 0.3973) -> ours (x, -z, y)
     assert np.allclose(top1["center"], [0.0088, -0.0441, 0.4683], atol=1e-4)
     assert np.allclose(top1["half"], [0.6336, 0.3973, 0.1366], atol=1e-4)
-    from synth.replicacad.surfaces import mesh_surfaces
+    from synth.mesh.surfaces import mesh_surfaces
 
     surfs = mesh_surfaces(table, apt0.meta["root"])
     assert len(surfs) == 3 and surfs[0].band == pytest.approx(2 * 0.1366, abs=1e-3)

@@ -1,5 +1,5 @@
 """The ReplicaCAD-shaped fixture (tests/replicacad_fixture.py): deterministic, textured, and imported
-by synth.replicacad.importer with the boxes worked out by hand in the fixture's constants."""
+by synth.sources.replicacad.importer with the boxes worked out by hand in the fixture's constants."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ import trimesh
 sys.path.insert(0, str(Path(__file__).parent))
 import replicacad_fixture as F  # noqa: E402
 
-from synth.replicacad.importer import load_replicacad  # noqa: E402
+from synth.sources.replicacad.importer import load_replicacad  # noqa: E402
 from synth.scene.model import object_box  # noqa: E402
 
 

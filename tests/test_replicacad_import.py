@@ -26,8 +26,8 @@ from replicacad_fixture import (
 from synth.layout.validity import check_layout
 from synth.cli import main as synth_main
 from synth.jobs import load_spec
-from synth.replicacad.importer import load_replicacad
-from synth.replicacad.job import prepare
+from synth.sources.replicacad.importer import load_replicacad
+from synth.sources.replicacad.job import prepare
 from synth.scene.model import load_layout, object_box, structure_boxes
 
 

@@ -47,7 +47,7 @@ def test_structure_of_the_vendored_files():
 
 
 def test_every_box_glb_has_the_table_bounds(root):
-    from synth.replicacad.gltf import glb_geometry, load_glb_parts
+    from synth.mesh.gltf import glb_geometry, load_glb_parts
 
     table = bounds_table()
     assert len(table) == 116
@@ -71,7 +71,7 @@ def test_every_box_glb_has_the_table_bounds(root):
 @pytest.fixture(scope="module")
 def plain_footprint(root):
     """The navmesh footprint as the stand-in takes it (every level's), without objects to hold."""
-    from synth.replicacad.navmesh import StandinSpec, read_navmesh, standin_stage
+    from synth.sources.replicacad.navmesh import StandinSpec, read_navmesh, standin_stage
 
     return standin_stage(read_navmesh(root / "navmeshes/empty_stage.navmesh"), StandinSpec(floor_z=0.0)).footprint
 
@@ -91,9 +91,9 @@ def test_standin_stage_floor_is_the_navmesh_footprint_and_the_objects(root, plai
     """The floor is the navmesh footprint plus every object's box (+2 cm) that sticks out of it
     (as tools/replicacad_standin.py builds the real data's): the up-facing floor faces at z 0 cover
     the footprint except where the stairs stand, and each held box; they lie nowhere else."""
-    from synth.replicacad.gltf import glb_geometry
-    from synth.replicacad.navmesh import STANDIN_KEEP_MARGIN, StandinSpec
-    from synth.replicacad.stage_structure import _rasterise
+    from synth.mesh.gltf import glb_geometry
+    from synth.sources.replicacad.navmesh import STANDIN_KEEP_MARGIN, StandinSpec
+    from synth.mesh.stage_structure import rasterise
 
     fp = plain_footprint
     cell, pad = fp.cell, int(round(2.0 / fp.cell))  # a grid 2 m wider than the footprint's on every side
@@ -101,9 +101,9 @@ def test_standin_stage_floor_is_the_navmesh_footprint_and_the_objects(root, plai
     fpm = np.pad(fp.mask, pad)
     m = glb_geometry(root / STAGE_GLB)
     up = (m.face_normals[:, 2] > 0.95) & (np.abs(m.triangles_center[:, 2]) < 1e-6)
-    floor = _rasterise((m.triangles[up][:, :, :2] - origin) / cell, fpm.shape)
+    floor = rasterise((m.triangles[up][:, :, :2] - origin) / cell, fpm.shape)
     steps = (m.face_normals[:, 2] > 0.95) & (m.triangles_center[:, 2] > 1e-6) & (m.triangles_center[:, 2] < 2.85)  # not the slabs' tops (2.9, 5.4)
-    stood = floor | _rasterise((m.triangles[steps][:, :, :2] - origin) / cell, fpm.shape)  # floor or a step
+    stood = floor | rasterise((m.triangles[steps][:, :, :2] - origin) / cell, fpm.shape)  # floor or a step
     assert (floor & fpm).sum() / fp.mask.sum() > 0.8  # the stairs and landings (10 m2) stand on the rest
     assert (stood & fpm).sum() / fp.mask.sum() > 0.98
     assert m.bounds[0][2] == pytest.approx(-0.1, abs=1e-4)
@@ -140,10 +140,10 @@ def test_floor_standing_objects_are_held_at_the_floor(root, plain_footprint):
     """Every object standing on the floor (bottom within 0.1 m of z 0) whose box (+2 cm) sticks out of
     the footprint has floor at z 0 under the part that sticks out: a cell added to hold it goes to
     the level its bottom is nearest, not to the nearest level (beside the stairs: steps under a bike)."""
-    from synth.replicacad.gltf import glb_geometry
-    from synth.replicacad.navmesh import STANDIN_KEEP_MARGIN
+    from synth.mesh.gltf import glb_geometry
+    from synth.sources.replicacad.navmesh import STANDIN_KEEP_MARGIN
     from synth.scene.model import object_box
-    from synth.replicacad.stage_structure import _rasterise
+    from synth.mesh.stage_structure import rasterise
 
     fp = plain_footprint
     cell, pad = fp.cell, int(round(2.0 / fp.cell))
@@ -151,7 +151,7 @@ def test_floor_standing_objects_are_held_at_the_floor(root, plain_footprint):
     fpm = np.pad(fp.mask, pad)
     m = glb_geometry(root / STAGE_GLB)
     up = (m.face_normals[:, 2] > 0.95) & (np.abs(m.triangles_center[:, 2]) < 1e-6)
-    floor = _rasterise((m.triangles[up][:, :, :2] - origin) / cell, fpm.shape)
+    floor = rasterise((m.triangles[up][:, :, :2] - origin) / cell, fpm.shape)
     ii, jj = np.nonzero(np.ones(fpm.shape, bool))
     centres = origin + (np.stack([ii, jj], axis=1) + 0.5) * cell
     tool = standin_tool()
@@ -171,7 +171,7 @@ def test_floor_standing_objects_are_held_at_the_floor(root, plain_footprint):
 
 
 def test_apt_0_imports_on_the_fixture(root):
-    from synth.replicacad.importer import load_replicacad
+    from synth.sources.replicacad.importer import load_replicacad
 
     lay = load_replicacad(root, "apt_0", allow_unknown=True)
     doc = json.loads((FILES / "configs/scenes/apt_0.scene_instance.json").read_text())

@@ -20,7 +20,7 @@ from replicacad_real_fixture import write_real_fixture
 from synth.trainset.trainset import HELD_OUT_SCENES, load_trainset, parse_trainset, prepare
 from synth.layout.rearrange import RearrangePlan, VariantSpec, clutter, make_variant, new_problems, reference_walkway, template_pool
 from synth.layout.validity import check_layout
-from synth.replicacad.importer import load_replicacad
+from synth.sources.replicacad.importer import load_replicacad
 from synth.scene.fixtures import OPEN_TOP_TOLERANCE, is_light_source
 from synth.scene.lighting import chosen_lamps, enclosed_lamps
 from synth.scene.model import load_layout, object_box

@@ -1,4 +1,4 @@
-"""synth.replicacad.stage_structure: structure (floor, ceiling, walls, openings, rooms) from one stage mesh.
+"""synth.mesh.stage_structure: structure (floor, ceiling, walls, openings, rooms) from one stage mesh.
 
 Every stage here is built by the test from boxes or quads in our frame (Z up), and every expected
 number is written out by hand from that construction (the same two-room stage as the ReplicaCAD
@@ -22,7 +22,7 @@ import trimesh
 from formats.boxes import CEILING_ID_BASE, FLOOR_ID_BASE, WALL_ID_BASE
 from formats.errors import SceneFormatError
 from synth.scene.model import Stage, structure_boxes
-from synth.replicacad.stage_structure import DEFAULT_THICKNESS, derive_structure, face_ids
+from synth.mesh.stage_structure import DEFAULT_THICKNESS, derive_structure, face_ids
 from meshes import box_mesh
 
 TOL = 0.05  # m
@@ -147,7 +147,7 @@ def test_yawed_and_translated_stage(caplog):
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = R, shift
     mesh.apply_transform(T)
-    with caplog.at_level(logging.WARNING, logger="synth.replicacad.stage_structure"):
+    with caplog.at_level(logging.WARNING, logger="synth.mesh.stage_structure"):
         s = derive_structure(mesh, "yawed.glb")
     assert abs(s.floor_z - 0.25) <= 1e-6 and abs(s.ceiling_height - 2.5) <= 1e-6
     expected = {n: (tuple(move(cen) + [0, 0, 0.25]), size, y + yaw) for n, (cen, size, y) in WALL_BOXES.items()}
@@ -459,7 +459,7 @@ def test_stairs_and_a_landing_are_not_walls_a_half_height_wall_is():
 def test_without_the_stairs_rule_the_landing_fronts_would_be_walls(monkeypatch):
     """The stage above exercises the rule: the landing's fronts are 1.02 m high (taller than
     MIN_WALL_HEIGHT) and long enough, so without it they come out as two more walls."""
-    from synth.replicacad import stage_structure as ss
+    from synth.mesh import stage_structure as ss
 
     monkeypatch.setattr(ss, "_drop_platform_sides", lambda pieces, *a, **k: pieces)
     s = derive_structure(stairs_room(), "stairs.glb")
@@ -499,7 +499,7 @@ def _ccw(q) -> bool:
 
 
 def test_l_shaped_room_is_a_polygon_its_floor_fills(caplog):
-    with caplog.at_level(logging.WARNING, logger="synth.replicacad.stage_structure"):
+    with caplog.at_level(logging.WARNING, logger="synth.mesh.stage_structure"):
         s = derive_structure(l_room(), "l.glb")
     assert len(s.walls) == 6 and len(s.rooms) == 1
     r = s.rooms[0]

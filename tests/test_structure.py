@@ -166,7 +166,9 @@ def test_the_format_layer_is_the_only_bridge():
 # synth's layers, lowest first: a module may import its own layer and the layers below it, never
 # one above. ``synth.resources`` (where the shipped data lives) and the package root (its version)
 # are below everything; every command-line module (``synth.cli``, ``synth.<layer>.cli``) is the top.
-SYNTH_LAYERS = ("scene", "assets", "paths", "replicacad", "layout", "render", "blender", "tour", "jobs", "trainset", "cli")
+# The mesh layer (``synth.mesh``: glTF, URDF, collision, support surfaces) reads standard formats for every
+# dataset; the scene sources (``synth.sources.<name>``: ReplicaCAD) sit above layout and below the renderers.
+SYNTH_LAYERS = ("scene", "assets", "mesh", "paths", "layout", "sources", "render", "blender", "tour", "jobs", "trainset", "cli")
 SYNTH_BASE = {"synth", "synth.resources"}
 
 
@@ -198,7 +200,7 @@ def synth_upward_imports(mods) -> list[tuple[str, str]]:
 
 
 def test_synth_layers_import_downwards():
-    """scene < assets < paths < replicacad < layout < render < blender < tour < jobs < trainset < cli."""
+    """scene < assets < mesh < paths < layout < sources < render < blender < tour < jobs < trainset < cli."""
     mods = _modules()
     assert synth_upward_imports(mods) == []
     # every synth module is in a layer, and the layers are the subpackages on disk
@@ -217,6 +219,47 @@ def test_an_upward_synth_import_is_found(tmp_path, monkeypatch):
     (tmp_path / "synth" / "scene" / "model.py").write_text("def f():\n    from ..layout.apartment import g\n")
     monkeypatch.setattr(sys.modules[__name__], "REPO", tmp_path)
     assert synth_upward_imports(_modules()) == [("synth.scene.model", "synth.layout.apartment")]
+
+
+# packages that work on any layout, whatever dataset it came from: they import no scene source (what they
+# need of meshes is the mesh layer's, synth.mesh), so a second source plugs in without touching them
+SOURCE_FREE = ("synth.layout", "synth.render", "synth.blender")
+SCENE_SOURCES = ("synth.sources", "synth.replicacad")
+
+
+def scene_source_imports(mods) -> list[tuple[str, str]]:
+    """(module, imported scene-source module) for every module of SOURCE_FREE, top level or in a function."""
+    def under(m, prefixes):
+        return any(m == s or m.startswith(s + ".") for s in prefixes)
+
+    return sorted((m, t) for m, p in mods.items() if under(m, SOURCE_FREE)
+                  for t in _imports(m, p, mods) if under(t, SCENE_SOURCES))
+
+
+def test_layout_render_and_blender_import_no_scene_source():
+    mods = _modules()
+    assert [m for m in mods if m.startswith("synth.sources.replicacad.")], "the scan must see the ReplicaCAD source"
+    assert scene_source_imports(mods) == []
+
+
+def test_a_scene_source_import_is_found(tmp_path, monkeypatch):
+    for pkg in ("synth", "synth/render", "synth/sources", "synth/sources/replicacad", "synth/mesh", "formats", "reloc"):
+        (tmp_path / pkg).mkdir()
+        (tmp_path / pkg / "__init__.py").write_text("")
+    (tmp_path / "synth" / "mesh" / "gltf.py").write_text("")
+    (tmp_path / "synth" / "sources" / "replicacad" / "importer.py").write_text("from ...mesh import gltf\n")
+    (tmp_path / "synth" / "render" / "meshes.py").write_text(
+        "from ..mesh.gltf import x\n\ndef f():\n    from ..sources.replicacad.importer import load_replicacad\n")
+    monkeypatch.setattr(sys.modules[__name__], "REPO", tmp_path)
+    mods = _modules()
+    assert scene_source_imports(mods) == [("synth.render.meshes", "synth.sources.replicacad.importer")]
+    # the layer test sees it too (render is above sources), but a layout CLI module would pass it: this one does not
+    (tmp_path / "synth" / "layout").mkdir()
+    (tmp_path / "synth" / "layout" / "__init__.py").write_text("")
+    (tmp_path / "synth" / "layout" / "cli.py").write_text("from ..sources import replicacad\n")
+    mods = _modules()
+    assert ("synth.layout.cli", "synth.sources.replicacad") in scene_source_imports(mods)
+    assert ("synth.layout.cli", "synth.sources.replicacad") not in synth_upward_imports(mods)
 
 
 def test_bpy_is_imported_only_by_the_blender_package():

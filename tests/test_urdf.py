@@ -1,4 +1,4 @@
-"""synth.replicacad.urdf: URDFs and GLBs written here, expected positions worked out by hand.
+"""synth.mesh.urdf: URDFs and GLBs written here, expected positions worked out by hand.
 
 Frames: a URDF is in habitat coordinates (Y up, like its GLBs); ours is Z up. C maps habitat
 (x, y, z) to ours (x, -z, y). Every expected number below is derived in the comments.
@@ -17,7 +17,8 @@ from formats.errors import SceneFormatError, UnknownNameError
 from synth.scene import geometry as geo
 from synth.scene.classes import parse_class_table
 from synth.scene.model import object_box
-from synth.replicacad.urdf import find_urdf, load_articulated_instances, parse_urdf, urdf_geometry, urdf_visuals
+from synth.mesh.urdf import parse_urdf, urdf_geometry, urdf_visuals
+from synth.sources.replicacad.articulated import find_urdf, load_articulated_instances
 from meshes import box_mesh, write_glb
 
 CLASSES = parse_class_table(

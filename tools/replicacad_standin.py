@@ -7,7 +7,7 @@ config, URDF, navmesh and 89 of the 92 object GLBs, but no ``stages/*.glb``. Thi
 to OUT (files are copied, not linked: OUT may be edited without touching SRC) and writes:
 
 * for every ``configs/stages/*.stage_config.json`` whose ``render_asset`` is missing, a **stand-in
-  stage** built from the stage's navmeshes (``synth.replicacad.navmesh.standin_stage``): the navmeshes of every
+  stage** built from the stage's navmeshes (``synth.sources.replicacad.navmesh.standin_stage``): the navmeshes of every
   scene instance that uses the stage, walkable areas united (``frl_apartment_stage``: its scenes all
   name ``empty_stage_navmesh``, i.e. ``navmeshes/empty_stage.navmesh``, built without furniture;
   ``Stage_v3_scK_staging``: the 21 ``v3_scK_staging_NN`` navmeshes, each built with its furniture, so
@@ -59,8 +59,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from formats.atomic import write_bytes_atomic, write_text_atomic  # noqa: E402
 from formats.errors import UserError  # noqa: E402
-from synth.replicacad.habitat_format import hab_matrix, mapping, read_json  # noqa: E402
-from synth.replicacad.navmesh import (  # noqa: E402
+from synth.sources.replicacad.habitat_format import hab_matrix, mapping, read_json  # noqa: E402
+from synth.sources.replicacad.navmesh import (  # noqa: E402
     NavMesh, StandinSpec, navmesh_for_scene, read_navmesh, standin_stage, write_standin_glb,
 )
 
@@ -103,8 +103,8 @@ def stage_scenes(root: Path) -> dict[str, list[tuple[Path, dict]]]:
 
 def object_bottoms(root: Path, scenes: list[tuple[Path, dict]]) -> list[float]:
     """World heights (habitat y) of the lowest vertex of every rigid object with a GLB in the scenes."""
-    from synth.replicacad.gltf import glb_geometry
-    from synth.replicacad.habitat_format import Y_UP_TO_Z_UP as C
+    from synth.mesh.gltf import glb_geometry
+    from synth.sources.replicacad.habitat_format import Y_UP_TO_Z_UP as C
 
     cache: dict[str, tuple[np.ndarray, np.ndarray | None] | None] = {}
     out = []
@@ -134,10 +134,10 @@ def object_bottoms(root: Path, scenes: list[tuple[Path, dict]]) -> list[float]:
 
 
 def scene_objects(root: Path, scene_path: Path, doc: dict) -> list:
-    """The objects of a scene as the importer reads them (``synth.replicacad.importer``: rigid objects at their
+    """The objects of a scene as the importer reads them (``synth.sources.replicacad.importer``: rigid objects at their
     configs' bounds, articulated ones from their URDFs, doors opened) without reading its stage,
     which is what is being built."""
-    from synth.replicacad.importer import scene_objects as read_scene_objects
+    from synth.sources.replicacad.importer import scene_objects as read_scene_objects
 
     return read_scene_objects(root, scene_path, doc)
 
@@ -201,8 +201,8 @@ def sibling_glb(glb: Path) -> Path | None:
 
 def glb_bounds_habitat(path: Path) -> np.ndarray:
     """Bounds of a GLB in its own (Y-up) frame, through the importer's reading (node transforms)."""
-    from synth.replicacad.gltf import glb_geometry
-    from synth.replicacad.habitat_format import Y_UP_TO_Z_UP as C
+    from synth.mesh.gltf import glb_geometry
+    from synth.sources.replicacad.habitat_format import Y_UP_TO_Z_UP as C
 
     v = glb_geometry(path).vertices @ C
     return np.stack([v.min(0), v.max(0)])

@@ -1,8 +1,8 @@
 """Supporting surfaces: the rectangles of an object where smaller objects can stand.
 
 Procedural objects get theirs from their generator (``synth.assets.registry.support_surfaces``), mesh
-objects from their geometry (``synth.replicacad.surfaces``), ReplicaCAD receptacles from their boxes
-(``synth.replicacad.receptacles``); all three are ``Surface`` rectangles. No dependencies.
+objects from their geometry (``synth.mesh.surfaces``), ReplicaCAD receptacles from their boxes
+(``synth.sources.replicacad.receptacles``); all three are ``Surface`` rectangles. No dependencies.
 """
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ class Surface:
     usable area (about 2 cm inside the supporting board's edges, excluding arm- and backrests);
     ``clearance`` the free height above it (to the next board for shelves, 0.5 for seats,
     ``inf`` for open tops); ``band`` how far above ``z`` a resting object's bottom may be (0 for
-    boards; a ReplicaCAD receptacle's box height, ``synth.replicacad.receptacles``)."""
+    boards; a ReplicaCAD receptacle's box height, ``synth.sources.replicacad.receptacles``)."""
 
     z: float
     xmin: float

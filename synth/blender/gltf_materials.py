@@ -1,7 +1,7 @@
 """glTF PBR materials for mesh assets (ReplicaCAD): a Principled BSDF per glTF material.
 
 :func:`get_gltf_material` builds a Principled BSDF from a part's glTF PBR material
-(``synth.replicacad.gltf.pbr``), once per (glTF file, material index) and emission key:
+(``synth.mesh.gltf.pbr``), once per (glTF file, material index) and emission key:
 
 * base colour = ``baseColorTexture`` (sRGB image, UV map "UVMap", linear filtering, repeat)
   x ``baseColorFactor``; alpha = texture alpha x factor alpha for ``alphaMode`` BLEND, the same
@@ -15,7 +15,7 @@
   ``emissiveFactor`` x the colour of an RGB node named ``"emission_light"`` (the light's colour,
   white by default; :func:`set_emission` and the scene builder set it);
 * ``KHR_texture_transform`` of a slot (``params["texture_transforms"]``): a UV Map node ("UVMap")
-  and a Mapping node (POINT, values from ``synth.replicacad.gltf.blender_mapping``, as Blender's own glTF
+  and a Mapping node (POINT, values from ``synth.mesh.gltf.blender_mapping``, as Blender's own glTF
   importer sets them) feed that slot's Image Texture node;
 * occlusion maps, vertex colours and samplers are ignored; IOR 1.5 (glTF's).
 
@@ -61,7 +61,7 @@ def _load_packed(suffix: str, write) -> bpy.types.Image:
 def _bpy_image(pil, colorspace: str, label: str, source: dict | None = None):
     """A packed Blender image (once per image and colour space), or None.
 
-    With ``source`` (``synth.replicacad.gltf.pbr(...)["sources"][slot]``) the file's own encoded bytes are
+    With ``source`` (``synth.mesh.gltf.pbr(...)["sources"][slot]``) the file's own encoded bytes are
     loaded as they are (no re-encoding); otherwise the PIL image is saved as PNG first."""
     if pil is None:
         return None
@@ -75,7 +75,7 @@ def _bpy_image(pil, colorspace: str, label: str, source: dict | None = None):
             except ReferenceError:
                 pass
         try:
-            from ..replicacad.gltf import read_image_source
+            from ..mesh.gltf import read_image_source
 
             blob = read_image_source(source)
             img = _load_packed(source["suffix"], lambda path: Path(path).write_bytes(blob))
@@ -111,7 +111,7 @@ def _bpy_image(pil, colorspace: str, label: str, source: dict | None = None):
 
 
 def get_gltf_material(params: dict, emissive: bool = False, key: str | None = None) -> bpy.types.Material:
-    """The Cycles material of a glTF PBR material (``params`` = ``synth.replicacad.gltf.pbr(mesh)``).
+    """The Cycles material of a glTF PBR material (``params`` = ``synth.mesh.gltf.pbr(mesh)``).
 
     Built once per (``params["key"]``, emissive, ``key``); ``key`` (the light fixture) gives an
     emitter a material of its own. The "emission" node exists when ``emissive`` is true (and the
@@ -143,7 +143,7 @@ def _build_gltf(params: dict, emissive: bool, key: str | None) -> bpy.types.Mate
         node = t.add("ShaderNodeTexImage", image=img, interpolation="Linear", extension="REPEAT")
         tt = transforms.get(what + "Texture")
         if tt is not None:  # KHR_texture_transform: UV map -> Mapping -> this image
-            from ..replicacad.gltf import blender_mapping
+            from ..mesh.gltf import blender_mapping
 
             m = blender_mapping(tt)
             uvmap = t.add("ShaderNodeUVMap", uv_map="UVMap")

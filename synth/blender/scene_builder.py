@@ -39,7 +39,7 @@ def add_parts(scene, parts, with_materials: bool) -> dict[str, bpy.types.Materia
     emitters: dict[str, list] = {}
     coll = scene.collection
     if with_materials:
-        from ..replicacad.gltf import pbr
+        from ..mesh.gltf import pbr
         from .gltf_materials import get_gltf_material
         from .materials import get_material
     for p in parts:

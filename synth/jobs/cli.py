@@ -76,10 +76,11 @@ def _dry_run(args, spec: JobSpec, clusters: list) -> int:
         check_output_file(args.save_calibration)
     out, store = job_folder(spec, args.out, args.backend)
     with tempfile.TemporaryDirectory(prefix="synth_dry_run_") as tmp:  # a dry run leaves nothing behind
-        if spec.replicacad is not None:
-            from ..replicacad.job import prepare as prepare_replicacad
+        from ..sources import spec_source
 
-            spec = prepare_replicacad(spec, Path(tmp), args.replicacad_root, progress=lambda m: print(m, file=sys.stderr))
+        scene_source = spec_source(spec)
+        if scene_source is not None:
+            spec = scene_source.prepare(spec, Path(tmp), args.replicacad_root, progress=lambda m: print(m, file=sys.stderr))
         if store is None:
             plan = expand(spec, out, check_clearance=not args.allow_clearance_breach, check_light=True)
         else:  # what is still to render is read from the storage

@@ -40,7 +40,7 @@ def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, back
     """Render everything the spec asks for that is not on disk yet. Returns a summary.
 
     A spec with ``replicacad:`` first imports its scenes and plans its paths into ``OUT/replicacad``
-    (``synth.replicacad.job.prepare``; ``replicacad_root`` overrides the spec's dataset folder).
+    (its scene source's ``prepare``, ``synth.sources``; ``replicacad_root`` overrides the spec's dataset folder).
 
     ``backend="ray"``: the cluster at ``ray_address`` (default: a local instance on loopback, or the
     connection this process already has) is connected to and checked (a CPU; a GPU for ``device:
@@ -56,15 +56,16 @@ def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, back
         raise UserError(f"unknown backend '{backend}'; use local or ray")
     from_cli = out is not None
     out, store = job_folder(spec, out, backend)
-    if spec.replicacad is not None:
-        from ..replicacad.job import prepare as prepare_replicacad
+    from ..sources import spec_source
 
+    scene_source = spec_source(spec)
+    if scene_source is not None:
         target = Path(out or spec.out)
         try:
             check_output_folder(target)
         except UserError as e:
             out_error(spec, from_cli, e)
-        spec = prepare_replicacad(spec, target, replicacad_root,
+        spec = scene_source.prepare(spec, target, replicacad_root,
                                   progress=(lambda m: print(m, file=sys.stderr)) if progress else (lambda m: None))
     staging = None
     session = None

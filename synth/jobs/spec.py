@@ -50,7 +50,7 @@ class JobSpec:
     previews: bool = DEFAULTS.previews
     description: str = ""
     source: str = ""
-    replicacad: dict | None = None  # layouts are scenes of a ReplicaCAD folder (synth.replicacad.job)
+    replicacad: dict | None = None  # layouts are scenes of a ReplicaCAD folder (a scene source: synth.sources)
 
 
 def parse_spec(doc, source: str) -> JobSpec:
@@ -135,9 +135,9 @@ def parse_spec(doc, source: str) -> JobSpec:
 def _replicacad_section(doc: dict, source: str) -> dict | None:
     if "replicacad" not in doc:
         return None
-    from ..replicacad.job import parse_section
+    from ..sources import get_source
 
-    return parse_section(doc["replicacad"], source)
+    return get_source("replicacad").parse_section(doc["replicacad"], source)
 
 
 def load_spec(path) -> JobSpec:

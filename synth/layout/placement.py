@@ -20,7 +20,7 @@ Procedural and mesh objects
 
 Supporting surfaces
     Procedural objects: ``synth.assets.registry.support_surfaces``; mesh objects:
-    ``synth.replicacad.surfaces.mesh_surfaces`` (their box top and the levels below it).
+    ``synth.mesh.surfaces.mesh_surfaces`` (their box top and the levels below it).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ import numpy as np
 from formats.camera import wrap_angle
 
 from ..assets import registry as assets
-from ..replicacad.surfaces import mesh_surfaces
+from ..mesh.surfaces import mesh_surfaces
 from ..scene import geometry as geo
 from ..scene.classes import class_table
 from ..scene.fixtures import OPEN_TOP_TOLERANCE, is_light_source

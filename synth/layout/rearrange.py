@@ -14,7 +14,7 @@ Imported layouts (ReplicaCAD)
 
     * Moving: a mesh object is moved as itself (``synth.layout.placement.placed_copy``: same asset, scale
       and local box; its world box goes where a procedural one would). Mesh objects hold things on
-      the top of their box when their mesh has a top there (``synth.replicacad.surfaces.mesh_surfaces``).
+      the top of their box when their mesh has a top there (``synth.mesh.surfaces.mesh_surfaces``).
     * ``free`` objects (resting on something the importer could not name) are not moved, and
       neither is an object whose box holds a ``free`` object's box centre (lifting it would leave
       the ``free`` one in the air): both stay put, though they may be removed when nothing stands

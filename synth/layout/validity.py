@@ -16,8 +16,8 @@ from scipy import ndimage
 
 from ..assets import registry as assets
 from ..scene import geometry as geo
-from ..replicacad.collision import DEFAULT_MARGIN, PENETRATION_TOL, contact_gap, margin, penetration, stage_distance, stage_drop, touching, world_pieces
-from ..replicacad.surfaces import mesh_surfaces
+from ..mesh.collision import DEFAULT_MARGIN, PENETRATION_TOL, contact_gap, margin, penetration, stage_distance, stage_drop, touching, world_pieces
+from ..mesh.surfaces import mesh_surfaces
 from ..scene.openings import door_zone, opening_box
 from ..scene.model import Layout, object_box
 
@@ -25,7 +25,7 @@ Z_TOL = 0.003  # how far an object may float above / sink into its support (m)
 XY_TOL = 0.002
 OVERLAP_TOL = 0.005  # boxes may touch; interpenetration deeper than this counts
 WALL_TOL = 0.03
-# Structure derived from a stage mesh (ReplicaCAD: synth.replicacad.stage_structure) has a finite resolution:
+# Structure derived from a stage mesh (ReplicaCAD: synth.mesh.stage_structure) has a finite resolution:
 # wall faces found from the mesh, rooms from the floor; a navmesh-built stand-in stage is good to
 # about its cell size plus its edge error (5 + 6.5 cm). Footprint-in-room and wall-contact tests on
 # such a stage allow this much.
@@ -106,7 +106,7 @@ def _support_problem(layout: Layout, o, box: geo.OrientedBox, by_id, boxes, piec
             return f"stands on object {pid}, which is missing"
         if parent.asset.startswith("proc:"):
             surfs = assets.support_surfaces(parent.cls, parent.size, parent.params)
-        else:  # a mesh object: its box top and the levels below it (synth.replicacad.surfaces.mesh_surfaces)
+        else:  # a mesh object: its box top and the levels below it (synth.mesh.surfaces.mesh_surfaces)
             surfs = mesh_surfaces(parent, layout.meta.get("root"))
             if not surfs:
                 return _rests_on_some_box(box, [boxes[pid]], floor)
@@ -123,7 +123,7 @@ def _support_problem(layout: Layout, o, box: geo.OrientedBox, by_id, boxes, piec
         if not dataset_placed and box.zmax - (parent.position[2] + s.z) > s.clearance + Z_TOL:
             return f"taller than the {s.clearance:.2f} m clearance of surface {k} of object {pid}"
         # footprint in the parent's frame: inside a board's rectangle; a receptacle (band > 0) is the
-        # region the dataset places object centres in (synth.replicacad.receptacles), so its centre must be inside
+        # region the dataset places object centres in (synth.sources.replicacad.receptacles), so its centre must be inside
         Rp = geo.rot_z(parent.yaw)[:2, :2]
         centre_rule = s.band > 0 or dataset_placed
         pts = box.corners_2d() if not centre_rule else np.asarray(box.center[:2], float)[None, :]
@@ -136,7 +136,7 @@ def _support_problem(layout: Layout, o, box: geo.OrientedBox, by_id, boxes, piec
         why = _rests_on_some_box(box, list(boxes.values()), floor)
         if why and pieces and pieces.get(o.id):
             # a physics-settled object (ReplicaCAD): it rests on, leans against or hangs from what its
-            # collision shape touches, within the two shapes' collision margins (synth.replicacad.collision):
+            # collision shape touches, within the two shapes' collision margins (synth.mesh.collision):
             # another object's shape, the floor, the stage mesh, or a derived wall (to STRUCTURE_TOL)
             mine, m = pieces[o.id], margin(o)
             stage_margin = _stage_margin(layout)
@@ -296,7 +296,7 @@ def check_layout(layout: Layout) -> CheckReport:
     st = layout.stage
 
     # the shell: a procedural stage needs rooms (free space, floors, ceilings) and walls; a stage
-    # mesh (ReplicaCAD) carries what synth.replicacad.stage_structure derived from it, or nothing when it was
+    # mesh (ReplicaCAD) carries what synth.mesh.stage_structure derived from it, or nothing when it was
     # imported without structure
     if st.asset is None:
         if not st.rooms:
@@ -313,7 +313,7 @@ def check_layout(layout: Layout) -> CheckReport:
             rep.unsupported.append({"id": o.id, "class": o.cls, "support": o.support, "why": why})
 
     # interpenetration between objects (an object may overlap the box of what holds it). Objects
-    # with collision shapes (ReplicaCAD: synth.replicacad.collision) are tested on those where their boxes
+    # with collision shapes (ReplicaCAD: synth.mesh.collision) are tested on those where their boxes
     # overlap: a chair under a table, a book in a cabinet, shoes in a rack are no collision
     ids = sorted(boxes)
     parent = {o.id: (o.support_parent() or (None, None))[0] for o in objs}

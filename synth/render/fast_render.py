@@ -5,11 +5,11 @@ parts (``synth.render.meshes``), with an independent camera model: for pixel (u,
 camera centre along ``R @ K^-1 [u, v, 1]``, whose camera-frame z is 1, so Open3D's hit parameter
 is the planar depth itself. It is the fast mode for relocalization experiments and the independent
 check of the Blender camera conventions. Parts of mesh assets carry their glTF materials
-(``mesh.visual``, ``synth.replicacad.gltf``); ``render`` reads only their vertices and faces.
+(``mesh.visual``, ``synth.mesh.gltf``); ``render`` reads only their vertices and faces.
 
 ``render_base_color`` gives the unlit base colour (albedo, linear RGB) seen at each pixel: for a
 glTF part its base colour texture looked up at the hit point's UV with the slot's
-``KHR_texture_transform`` applied, times ``baseColorFactor`` (``synth.replicacad.gltf.sample_base_color``);
+``KHR_texture_transform`` applied, times ``baseColorFactor`` (``synth.mesh.gltf.sample_base_color``);
 for a procedural part its flat ``color`` (``PROCEDURAL_ALBEDO`` when it has none). It is a check of
 what texture each surface shows, not a shaded image.
 """
@@ -83,7 +83,7 @@ class FastRenderer:
     def render_base_color(self, T_world_cam: np.ndarray, intr: Intrinsics) -> np.ndarray:
         """Unlit base colour (linear RGB, float32, H x W x 3; 0 where nothing is hit) for one camera
         pose: textures sampled at the hit points with their texture transforms (module docstring)."""
-        from ..replicacad.gltf import sample_base_color
+        from ..mesh.gltf import sample_base_color
         from .meshes import GLTF_MATERIAL
 
         ans = self._cast(T_world_cam, intr)

@@ -12,15 +12,15 @@ Windows and doors are open holes (no glass, no door leaves): daylight comes in t
 rays that leave the flat hit nothing (depth 0, instance 0).
 
 Mesh assets (ReplicaCAD) are drawn with their own glTF materials: ``material == "gltf"`` means
-"use ``mesh.visual``" (see :class:`RenderPart`), one part per glTF primitive (``synth.replicacad.gltf``):
+"use ``mesh.visual``" (see :class:`RenderPart`), one part per glTF primitive (``synth.mesh.gltf``):
 
 * ``"replicacad:<glb>"`` objects: one part per primitive, placed by ``pose @ diag(scale)``.
-* ``"replicacad-urdf:<urdf>"`` objects (articulated, ``synth.replicacad.urdf``): one part per primitive of
+* ``"replicacad-urdf:<urdf>"`` objects (articulated, ``synth.mesh.urdf``): one part per primitive of
   every link visual, placed by ``pose @ diag(scale) @ visual.matrix @ diag(visual.scale)``, in the
   instance's ``params["joint_state"]``.
 * A stage with an ``asset``: its primitives placed by the stage pose. When the stage has derived
   structure (``walls`` or ``rooms``), every triangle gets the id that
-  ``synth.replicacad.stage_structure.face_ids`` gives it (wall ``WALL_ID_BASE+k``, floor ``FLOOR_ID_BASE+k``,
+  ``synth.mesh.stage_structure.face_ids`` gives it (wall ``WALL_ID_BASE+k``, floor ``FLOOR_ID_BASE+k``,
   ceiling ``CEILING_ID_BASE+k``) and each primitive is split into one part per id (UVs kept), so
   walls, floors and ceilings are separate instances in both renderers. Triangles it leaves
   unclassified (0: door and window frames, skirting, fittings) take the id of the NEAREST WALL
@@ -71,7 +71,7 @@ class RenderPart:
     ``material`` names a procedural material (``synth.blender.materials``), or is ``"gltf"``
     (:data:`GLTF_MATERIAL`): then ``mesh.visual`` is a ``trimesh.visual.TextureVisuals`` (UVs and a
     ``PBRMaterial``) and ``mesh.metadata["gltf"]`` identifies the glTF file and material
-    (``synth.replicacad.gltf``); ``color`` and ``seed`` are unused. The fast renderer reads only vertices
+    (``synth.mesh.gltf``); ``color`` and ``seed`` are unused. The fast renderer reads only vertices
     and faces."""
 
     name: str  # unique within the layout, e.g. "obj12/seat", "W3/2", "floor/living"
@@ -232,13 +232,13 @@ def object_parts(layout: Layout, obj: ObjectInstance) -> list[RenderPart]:
             for p in pieces
         ]
     T = _pose_matrix(obj.position, obj.rotation, obj.scale)
-    from ..replicacad.gltf import load_glb_parts
+    from ..mesh.gltf import load_glb_parts
 
     if obj.asset.startswith(GLB_PREFIX) and len(obj.asset) > len(GLB_PREFIX):
         prims = load_glb_parts(_asset_file(layout, obj.asset, GLB_PREFIX, "GLB"))
         return [_gltf_part(layout, f"obj{obj.id}/{j}", obj.id, sem, m, T, fixture) for j, m in enumerate(prims)]
     if obj.asset.startswith(URDF_PREFIX) and len(obj.asset) > len(URDF_PREFIX):
-        from ..replicacad.urdf import urdf_visuals
+        from ..mesh.urdf import urdf_visuals
 
         path = _asset_file(layout, obj.asset, URDF_PREFIX, "URDF")
         state = obj.params.get("joint_state")
@@ -283,7 +283,7 @@ def _emitter_fixture(layout: Layout, own: str | None, center: np.ndarray) -> str
 
 def _gltf_part(layout: Layout, name: str, iid: int, sid: int, mesh: trimesh.Trimesh, T: np.ndarray,
                own_fixture: str | None = None) -> RenderPart:
-    from ..replicacad.gltf import is_emissive
+    from ..mesh.gltf import is_emissive
 
     emissive = is_emissive(mesh)
     fixture = None
@@ -340,7 +340,7 @@ def _refine_horizontal(m, T: np.ndarray, max_edge: float | None = None):
     most ``max_edge`` -- and room boundaries lie under walls, where the floor is not seen."""
     import trimesh
 
-    from ..replicacad.gltf import _make
+    from ..mesh.gltf import make_part
 
     max_edge = STAGE_MAX_EDGE if max_edge is None else max_edge
     meta = m.metadata["gltf"]
@@ -368,11 +368,11 @@ def _refine_horizontal(m, T: np.ndarray, max_edge: float | None = None):
     normals = attrs.get("normals")
     if normals is not None:
         normals = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
-    return _make(v, f, attrs.get("uv"), m.visual.material, normals, meta)
+    return make_part(v, f, attrs.get("uv"), m.visual.material, normals, meta)
 
 
 def _mesh_stage_parts(layout: Layout) -> list[RenderPart]:
-    from ..replicacad.gltf import load_glb_parts, submesh
+    from ..mesh.gltf import load_glb_parts, submesh
 
     st = layout.stage
     ct = class_table()
@@ -381,7 +381,7 @@ def _mesh_stage_parts(layout: Layout) -> list[RenderPart]:
     T = _pose_matrix(st.position, st.rotation)
     if not st.walls and not st.rooms:  # no derived structure: all of it one wall instance, as before
         return [_gltf_part(layout, f"stage/{j}", WALL_ID_BASE, sem[WALL_ID_BASE], m, T) for j, m in enumerate(prims)]
-    from ..replicacad.stage_structure import face_ids
+    from ..mesh.stage_structure import face_ids
 
     prims = [_refine_horizontal(m, T) for m in prims]
     frames = [_triangle_frames(m, T) for m in prims]

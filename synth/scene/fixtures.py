@@ -26,7 +26,7 @@ def layout_fixtures(layout: Layout, previous: Layout | None = None) -> list[Ligh
     * A lamp (``floor_lamp``, ``table_lamp``) has its light at 85 % of its box height above its
       bottom, over its box centre (procedural lamps: above their origin, the same point). A mesh
       lamp that had a lamp fixture in ``previous`` (default: ``layout`` itself) -- e.g. a light of
-      its ReplicaCAD lighting config (``synth.replicacad.habitat_lighting``) -- keeps it, carried rigidly with
+      its ReplicaCAD lighting config (``synth.sources.replicacad.habitat_lighting``) -- keeps it, carried rigidly with
       the lamp from its pose in ``previous``.
     * A ``ceiling_light`` object has its fixture at its origin.
     * Ceiling fixtures of ``previous`` that belong to no object (an imported stage's ceiling lights,

@@ -44,7 +44,7 @@ from ..resources import layouts_dir
 
 FORMAT = "synth-layout/1"
 GLB_ASSET_PREFIX = "replicacad:"  # a GLB mesh, relative to the layout's meta.root
-URDF_ASSET_PREFIX = "replicacad-urdf:"  # an articulated object's URDF (synth.replicacad.urdf), relative to meta.root
+URDF_ASSET_PREFIX = "replicacad-urdf:"  # an articulated object's URDF (synth.mesh.urdf), relative to meta.root
 MESH_ASSET_PREFIXES = (GLB_ASSET_PREFIX, URDF_ASSET_PREFIX)
 
 # --------------------------------------------------------------------------------------------

@@ -263,9 +263,9 @@ def replicacad_scenes(spec: TrainsetSpec, root: Path) -> list[str]:
     nothing is an error naming it."""
     from fnmatch import fnmatch
 
-    from ..replicacad.importer import list_scenes
+    from ..sources import get_source
 
-    known = list_scenes(root)
+    known = get_source("replicacad").list_scenes(root)
     out = []
     for i, pat in enumerate(spec.replicacad["scenes"]):
         hit = [n for n in known if fnmatch(n, pat)]
@@ -281,19 +281,20 @@ def replicacad_scenes(spec: TrainsetSpec, root: Path) -> list[str]:
 def _replicacad_layouts(spec: TrainsetSpec, root: Path, progress: bool):
     """(key, [layout]) per ReplicaCAD scene: imported, then cluttered with the templates' objects."""
     from ..layout.rearrange import clutter, template_pool
-    from ..replicacad.importer import list_scenes, load_replicacad
+    from ..sources import get_source
 
+    source = get_source("replicacad")
     rc = spec.replicacad
     src = spec.source or "<trainset>"
-    known = set(list_scenes(root))
+    known = set(source.list_scenes(root))
     pool = []
     for i, name in enumerate(rc["templates"]):
         if name not in known:
             raise SceneFormatError(src, f"replicacad.templates[{i}]", f"no scene '{name}' in {root}")
-        pool += template_pool(load_replicacad(root, name, allow_unknown=rc["allow_unknown"]), distinct=False)
+        pool += template_pool(source.load_scene(root, name, allow_unknown=rc["allow_unknown"]), distinct=False)
     lo, hi = rc["clutter"]
     for k, name in enumerate(replicacad_scenes(spec, root)):
-        lay = load_replicacad(root, name, allow_unknown=rc["allow_unknown"])
+        lay = source.load_scene(root, name, allow_unknown=rc["allow_unknown"])
         if hi:
             rng = np.random.default_rng([spec.seed, k, 5])
             n = int(rng.integers(lo, hi + 1))
@@ -312,9 +313,9 @@ def prepare(spec: TrainsetSpec, out: Path | None = None, progress: bool = True, 
     presets = [load_lighting(name) for name in spec.lightings]
     designs = []
     if spec.replicacad is not None:
-        from ..replicacad.job import resolve_root
+        from ..sources import get_source
 
-        root = resolve_root(spec.replicacad, spec.source or "<trainset>", replicacad_root)
+        root = get_source("replicacad").resolve_root(spec.replicacad, spec.source or "<trainset>", replicacad_root)
         groups = _replicacad_layouts(spec, root, progress)
     else:
         groups = _seed_layouts(spec, progress)

@@ -40,14 +40,14 @@ Templates
 
 Structure, articulated objects, supports, lights (``structure=True``, the default)
     * The stage's walls, doors, windows, rooms, floor and ceiling are derived from its mesh
-      (``synth.replicacad.stage_structure``), so a ReplicaCAD layout has structure boxes, rooms for camera
+      (``synth.mesh.stage_structure``), so a ReplicaCAD layout has structure boxes, rooms for camera
       paths and rearrangement, and per-triangle wall/floor/ceiling instance ids in renders.
     * Articulated objects (``articulated_object_instances``, URDF) load as one static object each in
-      their default joint state (``synth.replicacad.urdf``; asset ``"replicacad-urdf:<urdf path>"``), ids after
+      their default joint state (``synth.mesh.urdf``; asset ``"replicacad-urdf:<urdf path>"``), ids after
       the rigid objects.
     * Supports are inferred from the boxes (``infer_supports``): floor, the top of another object, or
       ``free``.
-    * Light fixtures come from the scene's ``default_lighting`` config (``synth.replicacad.habitat_lighting``).
+    * Light fixtures come from the scene's ``default_lighting`` config (``synth.sources.replicacad.habitat_lighting``).
     ``structure=False`` keeps the older reading: the stage is one mesh without structure and
     articulated objects are skipped (listed in ``layout.meta["skipped_articulated"]``).
 
@@ -70,12 +70,12 @@ from formats.boxes import MAX_OBJECT_ID
 from formats.errors import UnknownNameError
 from formats.fields import shown
 
-from ..scene.classes import ClassTable, LexiconTable, class_table, lexicon_table
+from ...scene.classes import ClassTable, LexiconTable, class_table, lexicon_table
 from .receptacles import read_receptacles, to_object_frame
 from .habitat_format import ASSET_PREFIX, MIN_EXTENT, dataset_config_path, MOTION_TYPES, UNKNOWN_CLASS, URDF_PREFIX, Y_UP_TO_Z_UP, ConfigFinder, asset_name, check_frame, convert_quat, dataset_root, fail, hab_matrix, inside_root, mapping, number, numbers, quat, read_json, render_asset, string, translation_origin, vec
-from .gltf import check_glb, glb_geometry
-from .mesh_assets import load_asset_mesh
-from ..scene.model import Layout, ObjectInstance, Stage
+from ...mesh.gltf import check_glb, glb_geometry
+from ...mesh.mesh_assets import load_asset_mesh
+from ...scene.model import Layout, ObjectInstance, Stage
 
 log = logging.getLogger(__name__)
 
@@ -111,8 +111,8 @@ class _Template:
     com: np.ndarray | None  # config COM, habitat object frame, unscaled
     semantic_id: int | None = None  # the config's semantic_id (the dataset's lexicon names it)
     receptacles: tuple = ()  # the config's user_defined receptacle_aabb_* (habitat object frame, unscaled)
-    collision: str | None = None  # the config's collision_asset, relative to the root (synth.replicacad.collision)
-    margin: float | None = None  # the config's collision margin (m); None: habitat-sim's default (synth.replicacad.collision)
+    collision: str | None = None  # the config's collision_asset, relative to the root (synth.mesh.collision)
+    margin: float | None = None  # the config's collision margin (m); None: habitat-sim's default (synth.mesh.collision)
 
 
 @dataclass
@@ -195,7 +195,7 @@ def _load_stage(root: Path, scene_path: Path, doc: dict, structure: bool = True)
         z = world.vertices[:, 2]
         zmin, zmax = float(z.min()), float(z.max())
         return Stage(ceiling_height=zmax - zmin, floor_z=zmin, asset=asset_name(root, glb), position=position, rotation=rotation), {}
-    from .stage_structure import derive_structure
+    from ...mesh.stage_structure import derive_structure
 
     stage_margin = number(config, cfg["margin"], "margin") if "margin" in cfg else None
     st = derive_structure(world, str(glb))
@@ -203,7 +203,7 @@ def _load_stage(root: Path, scene_path: Path, doc: dict, structure: bool = True)
                   asset=asset_name(root, glb), position=position, rotation=rotation)
     report = dict(st.report)
     if stage_margin is not None:
-        report["margin"] = stage_margin  # the stage's collision margin (synth.replicacad.collision)
+        report["margin"] = stage_margin  # the stage's collision margin (synth.mesh.collision)
     return stage, report
 
 
@@ -399,9 +399,9 @@ def infer_supports(objects: list[ObjectInstance], floor_z: float, root=None) -> 
     layout checks, which allow 3 mm, hold. Objects are processed bottom-up so that a stack snaps in
     order.
     """
-    from ..scene import geometry as geo
-    from .surfaces import mesh_surfaces
-    from ..scene.model import object_box
+    from ...scene import geometry as geo
+    from ...mesh.surfaces import mesh_surfaces
+    from ...scene.model import object_box
 
     by_z = sorted(objects, key=lambda o: (object_box(o).zmin, o.id))
     placed: dict[int, ObjectInstance] = {}
@@ -456,7 +456,7 @@ def scene_objects(root, scene_path, doc: dict, allow_unknown: bool = True) -> li
     semantics = read_semantics(r, Path(scene_path), doc, classes)
     instances = _parse_instances(r, Path(scene_path), doc, classes, semantics)
     objects = [_object(inst, k + 1, inst.cls or UNKNOWN_CLASS) for k, inst in enumerate(instances)]
-    from .urdf import load_articulated_instances
+    from .articulated import load_articulated_instances
 
     objects += load_articulated_instances(r, Path(scene_path), doc, len(objects) + 1, classes, allow_unknown=allow_unknown,
                                           lexicon=semantics.table)
@@ -468,14 +468,14 @@ def load_replicacad(root, scene: str, classes: ClassTable | None = None, allow_u
     """Read ``<root>/configs/scenes/<scene>.scene_instance.json`` into a Layout (see the module docstring).
 
     Object ids are 1.. in file order of ``object_instances``, then the articulated objects
-    (``articulated_object_instances``, one static object each: ``synth.replicacad.urdf``); classes come from
+    (``articulated_object_instances``, one static object each: ``synth.mesh.urdf``); classes come from
     ``ClassTable.replicacad_class``. Templates without a class rule raise ``UnknownNameError``
     naming all of them, unless ``allow_unknown`` maps them to class ``"other"``. Bad files or
     fields raise ``SceneFormatError`` naming the file and the field.
 
     With ``structure`` (the default) the stage's walls, openings, rooms, floor and ceiling are
-    derived from its mesh (``synth.replicacad.stage_structure``), supports are inferred (``infer_supports``) and
-    light fixtures come from the scene's lighting config (``synth.replicacad.habitat_lighting``); without it
+    derived from its mesh (``synth.mesh.stage_structure``), supports are inferred (``infer_supports``) and
+    light fixtures come from the scene's lighting config (``synth.sources.replicacad.habitat_lighting``); without it
     the stage is one mesh with no structure, as before (for datasets whose stage the derivation
     cannot read).
     """
@@ -506,7 +506,7 @@ def load_replicacad(root, scene: str, classes: ClassTable | None = None, allow_u
     objects = [_object(inst, k + 1, inst.cls or UNKNOWN_CLASS) for k, inst in enumerate(instances)]
     meta = {"source": "replicacad", "root": str(r), "scene": scene}
     if structure:
-        from .urdf import load_articulated_instances
+        from .articulated import load_articulated_instances
 
         objects += load_articulated_instances(r, scene_path, doc, len(objects) + 1, classes, allow_unknown=allow_unknown,
                                               lexicon=semantics.table)
@@ -535,11 +535,11 @@ DOOR_STEP = math.radians(5.0)  # how far a door swings back per try when its ope
 def open_doors(objects: list[ObjectInstance], root) -> list[ObjectInstance]:
     """Doors (``DOOR_CLASS``) opened by ``load_articulated_instances`` swing back towards closed, in
     ``DOOR_STEP`` steps, until their leaf's collision shape interpenetrates no other object
-    (``synth.replicacad.collision``): a door opens until it meets the bin behind it. The angle taken is recorded
+    (``synth.mesh.collision``): a door opens until it meets the bin behind it. The angle taken is recorded
     in ``params["door_opening"]`` ("limit", "stopped" or "closed": no open angle was free)."""
-    from .collision import PENETRATION_TOL, penetration, world_pieces
-    from ..scene.model import object_box
-    from .urdf import DOOR_CLASS, with_joint_state
+    from ...mesh.collision import PENETRATION_TOL, penetration, world_pieces
+    from ...scene.model import object_box
+    from .articulated import DOOR_CLASS, with_joint_state
 
     others = [o for o in objects if o.cls != DOOR_CLASS]
     out = []

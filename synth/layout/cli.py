@@ -1,5 +1,6 @@
-"""``synth scene list|show|check|stats|preview|export-boxes|generate|build|rearrange|grade|import-replicacad``:
-layouts from the command line (docs/layouts.md, docs/replicacad.md)."""
+"""``synth scene list|show|check|stats|preview|export-boxes|generate|build|rearrange|grade``: layouts from the
+command line (docs/layouts.md); the scene sources add theirs to the group (``import-replicacad``: synth.sources,
+docs/replicacad.md). Here, above ``synth.scene``, because the commands check, rearrange and plan paths."""
 
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ def _write_json(path: Path, obj) -> None:
 
 
 def _load(name):
-    from .model import load_layout
+    from ..scene.model import load_layout
 
     return load_layout(name)
 
@@ -33,7 +34,7 @@ def _load(name):
 
 
 def cmd_list(args) -> int:
-    from .model import list_layouts, load_layout
+    from ..scene.model import list_layouts, load_layout
 
     names = list_layouts()
     if not names:
@@ -81,8 +82,8 @@ def cmd_show(args) -> int:
 
 
 def cmd_stats(args) -> int:
-    from ..layout.rearrange import target_ranges
-    from .stats import PAPER_RANGES, change_stats
+    from .rearrange import target_ranges
+    from ..scene.stats import PAPER_RANGES, change_stats
 
     ref = _load(args.ref)
     st = change_stats(ref, _load(args.var))
@@ -98,7 +99,7 @@ def cmd_stats(args) -> int:
 
 
 def cmd_check(args) -> int:
-    from ..layout.validity import check_layout
+    from .validity import check_layout
 
     rep = check_layout(_load(args.name))
     if args.json:
@@ -122,7 +123,7 @@ def cmd_check(args) -> int:
 
 
 def cmd_export_boxes(args) -> int:
-    from .model import boxes_document
+    from ..scene.model import boxes_document
 
     check_output_file(args.out)
     doc = boxes_document(_load(args.name))
@@ -133,7 +134,7 @@ def cmd_export_boxes(args) -> int:
 
 
 def cmd_preview(args) -> int:
-    from .preview import plot_layout
+    from ..scene.preview import plot_layout
 
     lay = _load(args.name)
     ref = _load(args.diff) if args.diff else None
@@ -146,10 +147,10 @@ def cmd_generate(args) -> int:
     """Regenerate the built-in layouts apt_0..apt_5 (deterministic)."""
     from tqdm import tqdm
 
-    from ..layout.apartment import DEFAULT_SEED, generate_apartment
+    from .apartment import DEFAULT_SEED, generate_apartment
     from ..resources import layouts_dir
-    from ..layout.rearrange import BUILTIN_VARIANTS, make_variant, reference_walkway
-    from .model import save_layout
+    from .rearrange import BUILTIN_VARIANTS, make_variant, reference_walkway
+    from ..scene.model import save_layout
 
     out = Path(args.out_dir) if args.out_dir else layouts_dir()
     ref = generate_apartment(DEFAULT_SEED, "apt_0")
@@ -167,12 +168,12 @@ def cmd_build(args) -> int:
     """The scene pipeline: generate apt_0..apt_5, check them, print their change statistics, plot them."""
     from tqdm import tqdm
 
-    from ..layout.apartment import DEFAULT_SEED, generate_apartment
-    from ..layout.validity import check_layout
-    from .preview import plot_layout
-    from ..layout.rearrange import BUILTIN_VARIANTS, make_variant, reference_walkway
-    from .model import boxes_document, save_layout
-    from .stats import change_stats
+    from .apartment import DEFAULT_SEED, generate_apartment
+    from .validity import check_layout
+    from ..scene.preview import plot_layout
+    from .rearrange import BUILTIN_VARIANTS, make_variant, reference_walkway
+    from ..scene.model import boxes_document, save_layout
+    from ..scene.stats import change_stats
 
     out = Path(args.out)
     (out / "layouts").mkdir(parents=True, exist_ok=True)
@@ -200,7 +201,7 @@ def cmd_build(args) -> int:
 def _print_stats_table(rows, ranges: dict | None = None) -> None:
     """Objects, check and change statistics per layout against the paper's ranges, or ``ranges``
     (scaled for an imported flat) (rows: (layout, report, stats|None))."""
-    from .stats import PAPER_RANGES
+    from ..scene.stats import PAPER_RANGES
 
     ranges = ranges or PAPER_RANGES
     label = "paper" if ranges == PAPER_RANGES else "target"
@@ -224,10 +225,10 @@ def _check_out_file(out: Path, suffixes=(".yaml", ".yml")) -> None:
 
 def cmd_rearrange(args) -> int:
     """A new rearranged variant of BASE from a seed: the operator, ranges and checks of apt_1..apt_5."""
-    from ..layout.validity import check_layout
-    from ..layout.rearrange import NoVariantFound, RearrangePlan, VariantSpec, make_variant, new_problems, reference_walkway, target_ranges
-    from .model import save_layout
-    from .stats import PAPER_RANGES, change_stats
+    from .validity import check_layout
+    from .rearrange import NoVariantFound, RearrangePlan, VariantSpec, make_variant, new_problems, reference_walkway, target_ranges
+    from ..scene.model import save_layout
+    from ..scene.stats import PAPER_RANGES, change_stats
 
     out = Path(args.out)
     if args.seed < 0:
@@ -256,8 +257,8 @@ def cmd_rearrange(args) -> int:
     print(f"{var.name}: rearranged from {ref.name} (seed {args.seed}, attempt {var.meta['attempt']}), "
           f"{len(var.objects)} objects")
     _print_stats_table([(ref, ref_rep, None), (var, rep, st)], target_ranges(ref))
-    from ..layout.rearrange import is_imported
-    from .stats import change_table, scale_note
+    from .rearrange import is_imported
+    from ..scene.stats import change_table, scale_note
 
     print()
     if is_imported(ref):
@@ -272,11 +273,11 @@ def cmd_grade(args) -> int:
     """Nested variants of BASE at graded strengths (synth.layout.graded), one file per level."""
     from formats.atomic import write_bytes_atomic
 
-    from ..layout.graded import BEYOND, check_strengths, graded_variants, level_name, moved_ids
-    from ..layout.rearrange import target_ranges
-    from ..layout.validity import check_layout
-    from .model import resolve_layout_path, save_layout
-    from .stats import change_stats
+    from .graded import BEYOND, check_strengths, graded_variants, level_name, moved_ids
+    from .rearrange import target_ranges
+    from .validity import check_layout
+    from ..scene.model import resolve_layout_path, save_layout
+    from ..scene.stats import change_stats
 
     levels = check_strengths(args.levels, "--levels")
     if len(levels) + bool(args.beyond) < 2:
@@ -338,19 +339,7 @@ def cmd_grade(args) -> int:
     return 0 if all(rep.ok for _, rep, _ in rows) else 1
 
 
-def cmd_import_replicacad(args) -> int:
-    from ..replicacad.importer import load_replicacad
-    from .model import save_layout
-
-    lay = load_replicacad(args.root, args.scene, allow_unknown=args.allow_unknown, structure=not args.no_structure)
-    out = save_layout(lay, args.out)
-    st = lay.stage
-    print(f"wrote {out}: {len(lay.objects)} objects in {len({o.cls for o in lay.objects})} classes; stage: "
-          f"{len(st.walls)} walls, {len(st.rooms)} rooms, {len(st.openings)} openings, {len(lay.fixtures)} light fixtures")
-    return 0
-
-
-def register_cli(subparsers) -> None:
+def register_cli(subparsers):
     sc = subparsers.add_parser("scene", help="layouts: list, show, check, stats, preview, export boxes")
     ss = sc.add_subparsers(dest="cmd", required=True)
 
@@ -404,12 +393,4 @@ def register_cli(subparsers) -> None:
                                                    "replanned on every level, into OUT/paths/, if they do not")
     a.add_argument("--out", required=True, help="folder for the level layouts (<base>_g<percent>.yaml)")
     a.set_defaults(fn=cmd_grade)
-    a = ss.add_parser("import-replicacad", help="convert a ReplicaCAD scene instance to a layout file")
-    a.add_argument("root", help="ReplicaCAD dataset folder (holds configs/)")
-    a.add_argument("scene", help="scene instance name, e.g. apt_0")
-    a.add_argument("--out", required=True)
-    a.add_argument("--allow-unknown", action="store_true", help="map unknown templates to class 'other'")
-    a.add_argument("--no-structure", action="store_true",
-                   help="keep the stage one mesh: no walls, rooms or openings derived from it, no articulated objects, "
-                        "no fixtures (camera paths and variants then cannot be planned)")
-    a.set_defaults(fn=cmd_import_replicacad)
+    return ss  # the scene sources add their commands (synth.sources: import-replicacad)

@@ -2,7 +2,7 @@
 
 The one place that turns an ``ObjectInstance.asset`` of an imported layout into triangles for
 geometry (boxes, supporting surfaces, checks); the renderers take the textured primitives from
-``synth.replicacad.gltf`` and ``synth.replicacad.urdf`` directly. Paths are relative to the dataset root
+``synth.mesh.gltf`` and ``synth.mesh.urdf`` directly. Paths are relative to the dataset root
 (``layout.meta["root"]``). No Blender here.
 """
 
@@ -14,7 +14,11 @@ import trimesh
 
 from formats.errors import UnknownNameError
 
-from .habitat_format import ASSET_PREFIX, URDF_PREFIX, dataset_root, fail, inside_root
+from formats.fields import fail, inside_root
+
+from ..scene.model import GLB_ASSET_PREFIX as ASSET_PREFIX
+from ..scene.model import URDF_ASSET_PREFIX as URDF_PREFIX
+from .roots import dataset_root
 
 
 def asset_file(root, asset: str) -> Path:
@@ -37,7 +41,7 @@ def load_asset_mesh(root, asset: str, joint_state: dict | None = None) -> trimes
     with ``ObjectInstance.scale`` (per axis, first) and then ``ObjectInstance.matrix()``; for the
     stage with ``Stage.position``/``Stage.rotation``. Returns a new mesh on every call.
     ``"replicacad-urdf:<urdf path>"`` gives all link meshes of an articulated object at
-    ``joint_state`` (an object's ``params["joint_state"]``; None: every joint at 0), see ``synth.replicacad.urdf``.
+    ``joint_state`` (an object's ``params["joint_state"]``; None: every joint at 0), see ``synth.mesh.urdf``.
     """
     path = asset_file(root, asset)
     if asset.startswith(URDF_PREFIX):

@@ -1,7 +1,7 @@
 """Supporting surfaces of mesh objects: where a ReplicaCAD object can hold another one.
 
 Procedural objects have theirs in ``synth.assets.registry.support_surfaces``. A mesh object's are
-the receptacles its dataset declares when it has any (``synth.replicacad.receptacles``), else the
+the receptacles its dataset declares when it has any (``synth.sources.replicacad.receptacles``), else the
 top face of its local box, when the mesh has up-facing triangles at its top covering at least
 ``MESH_TOP_COVERAGE`` of that face (``mesh_top_coverage``, cached per asset), ``SURFACE_MARGIN``
 inside its edges, with unlimited clearance, then the horizontal levels below the top (a sofa's
@@ -10,7 +10,7 @@ box top (a cushion on a seat sits inside the sofa's box; ``synth.layout.validity
 overlap the box of what holds it); only for objects standing upright (tilt below
 ``UPRIGHT_TILT_DEG``) and of a class that holds things in the procedural apartment too (not
 ``MESH_NO_SURFACE_CLASSES``: lamps, vases, bowls, plants, cushions, "other"...). Meshes come from
-``synth.replicacad.mesh_assets.load_asset_mesh``; a layout without ``meta["root"]`` has no mesh
+``synth.mesh.mesh_assets.load_asset_mesh``; a layout without ``meta["root"]`` has no mesh
 surfaces. Placement (``synth.layout.placement``) and the layout checks read them from here.
 """
 
@@ -22,6 +22,7 @@ import math
 import numpy as np
 
 from ..assets import registry as assets
+from ..assets.surfaces import Surface
 from ..scene import geometry as geo
 from ..scene.model import MESH_ASSET_PREFIXES, ObjectInstance
 
@@ -43,7 +44,7 @@ def mesh_top_coverage(vertices, faces) -> float:
     A triangle counts when its normal is within 10 deg of +Z and all its vertices lie within
     ``MESH_TOP_TOL`` of the highest vertex; coverage is the sum of the counted triangles'
     horizontal areas over the box top's area (overlapping triangles count twice: capped at 1).
-    Vertices are in a Z-up frame (``synth.replicacad.importer.load_asset_mesh``)."""
+    Vertices are in a Z-up frame (``synth.sources.replicacad.importer.load_asset_mesh``)."""
     v = np.asarray(vertices, float)
     f = np.asarray(faces, int)
     if len(v) == 0 or len(f) == 0:
@@ -66,7 +67,7 @@ def mesh_top_coverage(vertices, faces) -> float:
 def _asset_geometry(root: str, asset: str):
     """(vertices, faces) of a mesh asset in its Z-up local frame, unscaled; None when unknown."""
     if any(asset.startswith(p) for p in MESH_ASSET_PREFIXES):
-        from ..replicacad.mesh_assets import load_asset_mesh
+        from .mesh_assets import load_asset_mesh
 
         m = load_asset_mesh(root, asset)
         return m.vertices, m.faces
@@ -167,13 +168,11 @@ def asset_levels(root: str, asset: str) -> tuple:
 def mesh_surfaces(obj: ObjectInstance, root) -> list[assets.Surface]:
     """The supporting surfaces of a mesh object (see the module docstring), in the object's local
     frame (origin at ``obj.position``, scaled): the receptacles its dataset declares, when it has any
-    (``params["receptacles"]``: ReplicaCAD's ``receptacle_aabb_*``, ``synth.replicacad.receptacles``), in their
+    (``params["receptacles"]``: ReplicaCAD's ``receptacle_aabb_*``, ``synth.sources.replicacad.receptacles``), in their
     file order; else surface 0 is its local box top when the mesh covers it, then the levels below
     it (``mesh_levels``: a sofa's seat, shelf boards), highest first; [] for classes that hold
     nothing and tilted objects."""
     if obj.params.get("receptacles"):
-        from ..replicacad.receptacles import surfaces as receptacle_surfaces
-
         return receptacle_surfaces(obj)
     if root is None or obj.asset.startswith("proc:") or obj.cls in MESH_NO_SURFACE_CLASSES:
         return []
@@ -195,4 +194,25 @@ def mesh_surfaces(obj: ObjectInstance, root) -> list[assets.Surface]:
         clearance = max((min(above) if above else top) - z, 0.0)
         mx, my = min(SURFACE_MARGIN, 0.1 * (x1 - x0)), min(SURFACE_MARGIN, 0.1 * (y1 - y0))
         out.append(assets.Surface(z=z, xmin=x0 + mx, xmax=x1 - mx, ymin=y0 + my, ymax=y1 - my, clearance=clearance))
+    return out
+
+
+def receptacle_surfaces(obj) -> list:
+    """``synth.assets.surfaces.Surface`` per receptacle of ``obj`` (``params["receptacles"]``), in the frame
+    the checks use for supporting surfaces: origin at ``obj.position``, turned by ``obj.yaw`` only.
+    A tilted object's receptacle (an articulated object whose root frame is rolled, a mesh authored
+    on its side) becomes the level box around it in that frame. Each surface is the box's bottom
+    face, ``band`` = its height (a resting object's bottom lies anywhere in it), and the clearance
+    up to the next receptacle above that overlaps it in plan (else unlimited)."""
+    recs = obj.params.get("receptacles") or []
+    M = geo.rot_z(obj.yaw).T @ geo.quat_to_matrix(obj.rotation)
+    boxes = [(M @ np.asarray(r["center"], float), np.abs(M) @ np.asarray(r["half"], float)) for r in recs]
+    out = []
+    for k, (c, h) in enumerate(boxes):
+        z0 = c[2] - h[2]
+        above = [c2[2] - h2[2] for j, (c2, h2) in enumerate(boxes)
+                 if j != k and c2[2] - h2[2] > z0 + 0.02 and abs(c2[0] - c[0]) < h2[0] + h[0] and abs(c2[1] - c[1]) < h2[1] + h[1]]
+        clearance = (min(above) - z0) if above else math.inf
+        out.append(Surface(z=float(z0), xmin=float(c[0] - h[0]), xmax=float(c[0] + h[0]), ymin=float(c[1] - h[1]),
+                           ymax=float(c[1] + h[1]), clearance=float(clearance), band=float(2 * h[2])))
     return out

@@ -33,7 +33,7 @@ the dataset config's default, else 1. ReplicaCAD's ``replicaCAD.scene_dataset_co
 2.5 and 0.1 and its lighting configs set neither: its lights shine at 2.5 x their file intensity
 (and its fake-shadow lights at 0.1 x). ``read_lighting_config(path)`` alone reads no dataset
 defaults (scales from the file, else 1); ``read_lighting_config(path, dataset_config=...)`` (a
-``*.scene_dataset_config.json`` path, e.g. ``synth.replicacad.habitat_format.dataset_config_path(root)``,
+``*.scene_dataset_config.json`` path, e.g. ``synth.sources.replicacad.habitat_format.dataset_config_path(root)``,
 or the defaults dict of :func:`dataset_light_defaults`) applies them.
 
 Frames: positions and directions are converted once, here, with C = ``Y_UP_TO_Z_UP``:
@@ -75,9 +75,9 @@ import numpy as np
 from formats.errors import SceneFormatError
 from formats.fields import number
 
-from ..scene.geometry import Y_UP_TO_Z_UP
-from ..scene.fixtures import LAMP_CLASSES
-from ..scene.model import Layout, LightFixture, object_box
+from ...scene.geometry import Y_UP_TO_Z_UP
+from ...scene.fixtures import LAMP_CLASSES
+from ...scene.model import Layout, LightFixture, object_box
 
 C = Y_UP_TO_Z_UP  # habitat (Y up) -> ours (Z up)
 
@@ -300,6 +300,6 @@ def fixtures_for_imported(layout: Layout, lights: list[HabitatLight]) -> list[Li
             c = ((r.rect[0] + r.rect[2]) / 2.0, (r.rect[1] + r.rect[3]) / 2.0, top - CEILING_DROP)
             prelim.append(LightFixture(f"P_{r.name}", "ceiling", c, r.name, color_temperature=PLACED_CEILING_TEMPERATURE,
                                        power=PLACED_CEILING_POWER))
-    from ..scene.fixtures import layout_fixtures
+    from ...scene.fixtures import layout_fixtures
 
     return layout_fixtures(replace(layout, fixtures=prelim))

@@ -18,16 +18,15 @@ is taken.
 
 Frames. A receptacle's box is converted once, here, to the owning object's local Z-up frame (the
 frame of ``ObjectInstance.position``/``rotation``, scaled by ``ObjectInstance.scale``): centre
-``s * (C c)``, half extents ``s * |C| |h|`` with ``C`` = ``synth.replicacad.habitat_format.Y_UP_TO_Z_UP``;
+``s * (C c)``, half extents ``s * |C| |h|`` with ``C`` = ``synth.sources.replicacad.habitat_format.Y_UP_TO_Z_UP``;
 for an articulated object the link's pose at the object's joint state comes first. Receptacles are
 stored on the object (``params["receptacles"]``) so that a layout file keeps them and the checks,
-the importer's support inference and the placement engine read one list; ``surfaces`` turns them
-into ``synth.assets.surfaces.Surface`` (bottom face, with ``band`` = the box height).
+the importer's support inference and the placement engine read one list; the mesh layer's
+``synth.mesh.surfaces.receptacle_surfaces`` turns them into ``synth.assets.surfaces.Surface``
+(bottom face, with ``band`` = the box height).
 """
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 
@@ -80,28 +79,4 @@ def to_object_frame(recs, scale, link_pose=None) -> list[dict]:
             h = np.abs(R) @ h  # the axis-aligned box around the rotated one
         out.append({"name": r["name"], "center": [round(float(x), 4) for x in s * (C @ c)],
                     "half": [round(float(x), 4) for x in s * (np.abs(C) @ h)]})
-    return out
-
-
-def surfaces(obj) -> list:
-    """``synth.assets.surfaces.Surface`` per receptacle of ``obj`` (``params["receptacles"]``), in the frame
-    the checks use for supporting surfaces: origin at ``obj.position``, turned by ``obj.yaw`` only.
-    A tilted object's receptacle (an articulated object whose root frame is rolled, a mesh authored
-    on its side) becomes the level box around it in that frame. Each surface is the box's bottom
-    face, ``band`` = its height (a resting object's bottom lies anywhere in it), and the clearance
-    up to the next receptacle above that overlaps it in plan (else unlimited)."""
-    from ..scene import geometry as geo
-    from ..assets.surfaces import Surface
-
-    recs = obj.params.get("receptacles") or []
-    M = geo.rot_z(obj.yaw).T @ geo.quat_to_matrix(obj.rotation)
-    boxes = [(M @ np.asarray(r["center"], float), np.abs(M) @ np.asarray(r["half"], float)) for r in recs]
-    out = []
-    for k, (c, h) in enumerate(boxes):
-        z0 = c[2] - h[2]
-        above = [c2[2] - h2[2] for j, (c2, h2) in enumerate(boxes)
-                 if j != k and c2[2] - h2[2] > z0 + 0.02 and abs(c2[0] - c[0]) < h2[0] + h[0] and abs(c2[1] - c[1]) < h2[1] + h[1]]
-        clearance = (min(above) - z0) if above else math.inf
-        out.append(Surface(z=float(z0), xmin=float(c[0] - h[0]), xmax=float(c[0] + h[0]), ymin=float(c[1] - h[1]),
-                           ymax=float(c[1] + h[1]), clearance=float(clearance), band=float(2 * h[2])))
     return out

@@ -30,9 +30,12 @@ from pathlib import Path
 
 import numpy as np
 
+from formats.fields import inside_root
+
 from ..scene import geometry as geo
-from .habitat_format import Y_UP_TO_Z_UP, dataset_root, inside_root, owning_root
+from ..scene.geometry import Y_UP_TO_Z_UP
 from ..scene.model import GLB_ASSET_PREFIX, URDF_ASSET_PREFIX
+from .roots import dataset_root, owning_root
 
 log = logging.getLogger(__name__)
 
@@ -73,13 +76,13 @@ def _box_vertices(size, T) -> np.ndarray:
 @functools.lru_cache(maxsize=64)
 def _urdf_collision_elements(path: str) -> tuple:
     """(link, origin 4x4 habitat frame, ("box", size) | ("mesh", glb path, scale)) per <collision>."""
-    from .urdf import _origin
+    from .urdf import origin_matrix
 
     root = ET.parse(path).getroot()
     out = []
     for link in root.findall("link"):
         for k, col in enumerate(link.findall("collision")):
-            T = _origin(Path(path), col, f"link[{link.get('name')}].collision[{k}]")
+            T = origin_matrix(Path(path), col, f"link[{link.get('name')}].collision[{k}]")
             geom = col.find("geometry")
             if geom is None:
                 continue

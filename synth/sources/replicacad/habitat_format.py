@@ -1,7 +1,7 @@
 """Reading habitat-sim / ReplicaCAD files: the frame conversion, typed field checks whose errors
-name the file and the field, dataset paths and config lookup. Shared by ``synth.replicacad.importer``
-(scene instances, objects, stages), ``synth.replicacad.urdf`` (articulated objects) and
-``synth.replicacad.habitat_lighting``; no Blender here.
+name the file and the field, dataset paths and config lookup. Shared by ``synth.sources.replicacad.importer``
+(scene instances, objects, stages), ``synth.mesh.urdf`` (articulated objects) and
+``synth.sources.replicacad.habitat_lighting``; no Blender here.
 
 Frames: habitat-sim (and glTF) is right-handed with +Y up and -Z forward; ours is right-handed with
 +Z up. ``Y_UP_TO_Z_UP`` (C) maps habitat coordinates to ours, ``(x, y, z) -> (x, -z, y)``, a proper
@@ -11,7 +11,6 @@ rotation (+90 deg about X). A habitat pose ``T_h`` becomes ``C T_h C^T``, a vert
 
 from __future__ import annotations
 
-import functools
 import os
 from pathlib import Path
 
@@ -21,12 +20,13 @@ from formats.fields import fail, inside_root, mapping, number, numbers, string  
 from formats.fields import unit_quat as quat  # noqa: F401
 from formats.yamlfile import read_json  # noqa: F401  (re-exported: every habitat config is read with it)
 
-from ..scene.geometry import Y_UP_TO_Z_UP  # noqa: F401  (the readers import it from here too)
-from ..scene.model import GLB_ASSET_PREFIX, URDF_ASSET_PREFIX
+from ...scene.geometry import Y_UP_TO_Z_UP  # noqa: F401  (the readers import it from here too)
+from ...mesh.roots import DATASET_CONFIG_GLOB, dataset_config_path, dataset_root, owning_root  # noqa: F401  (re-exported)
+from ...scene.model import GLB_ASSET_PREFIX, URDF_ASSET_PREFIX
 
 
 ASSET_PREFIX = GLB_ASSET_PREFIX  # a GLB, relative to the dataset root (names: synth.scene.model)
-URDF_PREFIX = URDF_ASSET_PREFIX  # an articulated object's URDF, relative to the dataset root (synth.replicacad.urdf)
+URDF_PREFIX = URDF_ASSET_PREFIX  # an articulated object's URDF, relative to the dataset root (synth.mesh.urdf)
 MOTION_TYPES = ("STATIC", "KINEMATIC", "DYNAMIC")
 UNKNOWN_CLASS = "other"
 MIN_EXTENT = 1e-3  # metres; flat meshes (pictures, rugs) get boxes at least this thick
@@ -67,55 +67,7 @@ def translation_origin(file, v, field: str) -> str | None:
 # dataset paths
 
 
-DATASET_CONFIG_GLOB = "*.scene_dataset_config.json"
-
-
-def owning_root(path) -> Path:
-    """The dataset folder a file belongs to: its nearest ancestor holding a
-    ``*.scene_dataset_config.json``, else the file's own folder. Paths a file names (a URDF's
-    meshes, a GLB's textures) must stay inside it (``formats.fields.inside_root``)."""
-    p = Path(path).resolve().parent
-    return _owning(p)
-
-
-@functools.lru_cache(maxsize=4096)
-def _owning(folder: Path) -> Path:
-    for d in (folder, *folder.parents):
-        try:
-            if any(d.glob(DATASET_CONFIG_GLOB)):
-                return d
-        except OSError:
-            break
-    return folder
-
-
-def dataset_root(root, require_config: bool = False) -> Path:
-    """The dataset folder, resolved. SceneFormatError when it is not a folder, and with
-    ``require_config`` when it holds no ``*.scene_dataset_config.json`` (:func:`dataset_config_path`)."""
-    p = Path(root).expanduser()
-    if not p.is_dir():
-        fail(p, None, "ReplicaCAD dataset folder not found")
-    p = p.resolve()
-    if require_config:
-        dataset_config_path(p)
-    return p
-
-
-def dataset_config_path(root, required: bool = True) -> Path | None:
-    """``<root>/*.scene_dataset_config.json``, the scene dataset config habitat-sim is pointed at
-    (ReplicaCAD's is ``replicaCAD.scene_dataset_config.json``). None when there is none and not
-    ``required``; SceneFormatError naming the folder when there is none (and it is required) or
-    when there are several (which one habitat would load is the user's choice, not ours)."""
-    r = Path(root)
-    configs = sorted(r.glob(DATASET_CONFIG_GLOB))
-    if not configs:
-        if not required:
-            return None
-        fail(r, None, f"no {DATASET_CONFIG_GLOB} in the ReplicaCAD folder (the dataset's root holds "
-                      "replicaCAD.scene_dataset_config.json next to configs/ and objects/)")
-    if len(configs) > 1:
-        fail(r, None, f"several scene dataset configs ({', '.join(c.name for c in configs)}); keep one")
-    return configs[0]
+# dataset paths: the mesh layer's (synth.mesh.roots), re-exported for the readers
 
 
 class ConfigFinder:

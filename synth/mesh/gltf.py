@@ -161,7 +161,7 @@ def _external(path: Path, uri: str, field: str = "images[].uri") -> Path | None:
         return None
     if "://" in uri:
         raise SceneFormatError(path, field, f"URIs with a scheme are not read: {shown(uri)}")
-    from .habitat_format import owning_root
+    from .roots import owning_root
 
     return inside_root(path, field, path.parent / urllib.parse.unquote(uri), owning_root(path))
 
@@ -371,7 +371,7 @@ def _texture_transforms(path: Path, doc: dict, index: int) -> dict:
     """``{slot: {"offset", "rotation", "scale", "texCoord"}}``: the ``KHR_texture_transform`` of each
     texture slot of glTF material ``index`` that has one, glTF defaults filled in (``texCoord`` None
     when the extension does not override the slot's). SceneFormatError naming the field for bad values."""
-    from .habitat_format import fail, mapping, number, numbers
+    from formats.fields import fail, mapping, number, numbers
 
     mat = _material(doc, index)
     if mat is None:
@@ -506,13 +506,13 @@ def _load(path: Path) -> list[trimesh.Trimesh]:
                 "name": str(gname), "node": str(node)}
         if index >= 0:
             meta.update({k: v for k, v in exact.get(id(mat), {}).items()})
-        parts.append(_make(v, f, uv, mat, normals, meta))
+        parts.append(make_part(v, f, uv, mat, normals, meta))
     if not parts:
         raise SceneFormatError(path, None, "GLB has no triangles")
     return parts
 
 
-def _make(v, f, uv, material, normals, meta) -> trimesh.Trimesh:
+def make_part(v, f, uv, material, normals, meta) -> trimesh.Trimesh:
     m = trimesh.Trimesh(vertices=v, faces=f, process=False, validate=False)
     m.visual = TextureVisuals(uv=uv, material=material)
     if normals is not None:
@@ -526,7 +526,7 @@ def _copy(m: trimesh.Trimesh) -> trimesh.Trimesh:
     meta = m.metadata["gltf"]
     uv = None if m.visual.uv is None else np.array(m.visual.uv)
     normals = np.array(m.vertex_normals) if meta["normals"] else None
-    return _make(np.array(m.vertices), np.array(m.faces), uv, m.visual.material, normals, meta)
+    return make_part(np.array(m.vertices), np.array(m.faces), uv, m.visual.material, normals, meta)
 
 
 def _cached(path: Path) -> list[trimesh.Trimesh]:
@@ -574,7 +574,7 @@ def submesh(mesh: trimesh.Trimesh, faces) -> trimesh.Trimesh:
     meta = mesh.metadata["gltf"]
     uv = None if mesh.visual.uv is None else np.asarray(mesh.visual.uv)[used]
     normals = np.asarray(mesh.vertex_normals)[used] if meta["normals"] else None
-    return _make(np.asarray(mesh.vertices)[used], inverse.reshape(-1, 3), uv, mesh.visual.material, normals, meta)
+    return make_part(np.asarray(mesh.vertices)[used], inverse.reshape(-1, 3), uv, mesh.visual.material, normals, meta)
 
 
 def clear_cache() -> None:

@@ -189,7 +189,7 @@ class Level:
         if shape is None:
             hi = pts.max(axis=0) + 1.0
             shape = tuple(int(v) for v in np.ceil((hi - lo) / cell))
-        from .stage_structure import _rasterise
+        from ...mesh.stage_structure import rasterise
 
         tris = []
         for p in self.polygons:
@@ -197,7 +197,7 @@ class Level:
             for k in range(1, len(v) - 1):
                 tris.append([v[0], v[k], v[k + 1]])
         tri = (np.asarray(tris, float).reshape(-1, 3, 2) - lo) / cell
-        return Grid(_rasterise(tri, tuple(shape)), lo, cell)
+        return Grid(rasterise(tri, tuple(shape)), lo, cell)
 
 
 @dataclass
@@ -649,7 +649,7 @@ def standin_stage(nav: NavMesh, spec: StandinSpec | None = None) -> Standin:
     objects = np.zeros(shape, bool)  # cells any kept footprint reaching above the window sills touches
     keep_info = {"objects": len(spec.keep), "held": 0, "hung": 0, "not_held": [], "added_m2": 0.0}
     if spec.keep:
-        from .stage_structure import _rasterise
+        from ...mesh.stage_structure import rasterise
 
         out_dist = ndimage.distance_transform_edt(~nav_fp) * cell  # distance of a cell centre from the footprint
         grow = spec.keep_margin + cell / 2.0  # a cell whose square meets the footprint + margin
@@ -665,7 +665,7 @@ def standin_stage(nav: NavMesh, spec: StandinSpec | None = None) -> Standin:
             u, v = q[1] - q[0], q[3] - q[0]
             u, v = u / max(float(np.linalg.norm(u)), 1e-9), v / max(float(np.linalg.norm(v)), 1e-9)
             qq = q + g * (np.sign((q - c) @ u)[:, None] * u + np.sign((q - c) @ v)[:, None] * v)
-            return _rasterise((np.array([[qq[0], qq[1], qq[2]], [qq[0], qq[2], qq[3]]]) - lo) / cell, shape)
+            return rasterise((np.array([[qq[0], qq[1], qq[2]], [qq[0], qq[2], qq[3]]]) - lo) / cell, shape)
 
         for k, q in enumerate(spec.keep):
             q = np.asarray(q, float).reshape(-1, 2)

@@ -13,7 +13,7 @@ A spec with this key names ReplicaCAD scenes as its layouts and camera-path *kin
         lightings: [day]
         path: {name: mapping, frames: 6000}
 
-Before anything is planned, ``prepare`` imports every named scene (``synth.replicacad.importer.load_replicacad``:
+Before anything is planned, ``prepare`` imports every named scene (``synth.sources.replicacad.importer.load_replicacad``:
 structure from the stage mesh, articulated objects, supports, light fixtures) into
 ``OUT/replicacad/layouts/<scene>.yaml`` and plans each path on the imported layouts into
 ``OUT/replicacad/paths/<name>.txt`` (+ ``.yaml``): a ``query`` path once on all the layouts of its
@@ -90,10 +90,10 @@ def prepare(spec, out: Path, cli_root: str | None = None, progress=print):
     ``spec`` is a ``synth.jobs.spec.JobSpec`` with ``replicacad`` set. Raises SceneFormatError naming the
     spec file and the field for an unknown scene, a bad dataset file (the dataset file and field), a
     path name that is not a kind, or a path that cannot be planned on the imported layouts."""
-    from ..paths.files import load_path, save_path
-    from ..paths.shipped import plan_path
+    from ...paths.files import load_path, save_path
+    from ...paths.shipped import plan_path
     from .importer import list_scenes, load_replicacad
-    from ..scene.model import dump_yaml, layout_to_dict, load_layout
+    from ...scene.model import dump_yaml, layout_to_dict, load_layout
 
     src = spec.source or "<spec>"
     section = spec.replicacad

@@ -183,7 +183,7 @@ def _bridge(col: np.ndarray, gap: int) -> np.ndarray:
     return col
 
 
-def _rasterise(tri: np.ndarray, shape: tuple[int, int], max_pairs: int = 1_000_000) -> np.ndarray:
+def rasterise(tri: np.ndarray, shape: tuple[int, int], max_pairs: int = 1_000_000) -> np.ndarray:
     """Cells (i, j) of a ``shape`` grid whose centre (i + 0.5, j + 0.5) lies in one of the triangles
     ``tri`` (M, 3, 2), given in cell units; plus the cell of every triangle's centroid (so that
     triangles smaller than a cell still count)."""
@@ -432,7 +432,7 @@ def _pieces(dirs, tri, cen, n, area, vert_idx, floor_z, nrows, report, xrows: in
                     small += 1  # absurdly long plane (an exterior ground skirt...): not a wall
                     continue
                 grid = np.stack([u / WALL_CELL - i_lo, (z - floor_z) / WALL_CELL], axis=-1)
-                full = _rasterise(grid, (W, max(nrows, xrows or nrows)))
+                full = rasterise(grid, (W, max(nrows, xrows or nrows)))
                 mask = full[:, :nrows]
                 anyf = full.any(axis=1)
                 tops_all = np.where(anyf, full.shape[1] - 1 - np.argmax(full[:, ::-1], axis=1), -1)
@@ -489,7 +489,7 @@ def _raised(tri, cen, n, area, floor_z) -> tuple[np.ndarray | None, np.ndarray, 
         out = np.full(shape, -np.inf)
         for z, a, g in _planes_1d(cen[idx, 2], area[idx], PLANE_Z_GAP):
             if a >= min_area:
-                m = _rasterise((tri[idx[g]][:, :, :2] - lo) / cell, shape)
+                m = rasterise((tri[idx[g]][:, :, :2] - lo) / cell, shape)
                 out[m] = np.maximum(out[m], z)
         return out
 
@@ -498,7 +498,7 @@ def _raised(tri, cen, n, area, floor_z) -> tuple[np.ndarray | None, np.ndarray, 
     for z, a, g in _planes_1d(cen[up, 2], area[up], PLANE_Z_GAP):
         if a < RAISED_MIN_AREA:
             continue
-        m = _rasterise((tri[up[g]][:, :, :2] - lo) / cell, shape) & (top_down >= z + MIN_COVER_Z)
+        m = rasterise((tri[up[g]][:, :, :2] - lo) / cell, shape) & (top_down >= z + MIN_COVER_Z)
         best[m] = np.maximum(best[m], z)
     return best, lo, cell
 
@@ -1002,7 +1002,7 @@ def _rooms(tri, cen, n, floor_z, walls: list[Wall], need_cover: bool, report):
     shape = tuple(int(v) for v in np.ceil((hi - lo) / cell))
 
     def grid(sel):
-        return _rasterise((tri[sel][:, :, :2] - lo) / cell, shape)
+        return rasterise((tri[sel][:, :, :2] - lo) / cell, shape)
 
     floor = grid((n[:, 2] > HORIZONTAL_NZ) & (np.abs(cen[:, 2] - floor_z) <= FLOOR_TOL))
     cover = grid((n[:, 2] < -HORIZONTAL_NZ) & (cen[:, 2] >= floor_z + MIN_COVER_Z))
@@ -1013,7 +1013,7 @@ def _rooms(tri, cen, n, floor_z, walls: list[Wall], need_cover: bool, report):
         s, e = np.asarray(w.start), np.asarray(w.end)
         q = [s - nv, e - nv, e + nv, s + nv]
         foot += [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]
-    wallm = _rasterise((np.asarray(foot) - lo) / cell, shape) if foot else np.zeros(shape, bool)
+    wallm = rasterise((np.asarray(foot) - lo) / cell, shape) if foot else np.zeros(shape, bool)
     free_raw = floor & ~wallm
     k = max(1, int(round(ROOM_OPEN / cell)))
     sq = np.ones((k, k), bool)
