@@ -15,7 +15,7 @@ import pytest
 
 from formats import camera as cam
 from formats.tour import tonemap
-from formats.tour import write_tour
+from conftest import make_tour
 from synth.cli import main as synth_main
 from synth.tour.check import DARK_P99_LUMINANCE, check_tour, format_report, frame_brightness
 
@@ -37,9 +37,8 @@ def pattern() -> np.ndarray:
     return (base * (0.35 + 0.65 * check)).astype(np.float32)
 
 
-def make_tour(root, levels, lighting="night"):
+def wall_tour(root, levels, lighting="night"):
     """A tour whose frame k has RGB = pattern() * levels[k] (None: no RGB, geometry only); returns root."""
-    root.mkdir(parents=True)
     poses, frames = [], {}
     for k, level in enumerate(levels):
         T = np.eye(4)
@@ -54,9 +53,8 @@ def make_tour(root, levels, lighting="night"):
                "boxes": [{"id": WALL_ID, "class": "wall", "kind": "wall", "center": [3.1, 0.0, 1.3],
                           "size": [0.2, 20.0, 2.6], "yaw": 0.0, "movable": False}]}
     lit = any(x is not None for x in levels)
-    write_tour(root, poses, INTR, frames, fps=FPS, objects=objects,
-               meta={"layout": "flatwall", "lighting": lighting if lit else None, "path": "slide", "renderer": "test"})
-    return root
+    return make_tour(root, poses, frames, intrinsics=INTR, fps=FPS, objects=objects, layout="flatwall",
+                     lighting=lighting if lit else None, path="slide", renderer="test")
 
 
 def dark_lines(rep):
@@ -64,7 +62,7 @@ def dark_lines(rep):
 
 
 def test_normally_lit_tour_passes_with_its_brightness_reported(tmp_path):
-    rep = check_tour(make_tour(tmp_path / "flatwall__day__slide", [1.0] * N, lighting="day"), progress=False)
+    rep = check_tour(wall_tour(tmp_path / "flatwall__day__slide", [1.0] * N, lighting="day"), progress=False)
     assert rep["ok"], rep["problems"]
     b = rep["brightness"]
     assert b["rgb_frames"] == N and not b["dark"] and b["threshold"] == DARK_P99_LUMINANCE
@@ -76,7 +74,7 @@ def test_normally_lit_tour_passes_with_its_brightness_reported(tmp_path):
 
 def test_nearly_black_tour_fails_with_one_line_naming_tour_and_lighting(tmp_path, capsys):
     # 1/400 of the normal level: the brightest pixels at about 0.002 linear, 12/255 at exposure 1
-    root = make_tour(tmp_path / "apt_0__night__query", [1.0 / 400] * N, lighting="night")
+    root = wall_tour(tmp_path / "apt_0__night__query", [1.0 / 400] * N, lighting="night")
     rep = check_tour(root, progress=False)
     assert not rep["ok"]
     lines = dark_lines(rep)
@@ -110,22 +108,22 @@ def test_dark_threshold_is_in_the_readers_exposure_convention():
 def test_dark_tour_decided_by_the_threshold(tmp_path, scale, dark):
     """Levels chosen so the tour's median 99th-percentile luminance is the threshold x scale."""
     p99 = float(np.percentile(pattern().reshape(-1, 3) @ LUM, 99))
-    rep = check_tour(make_tour(tmp_path / "t", [DARK_P99_LUMINANCE * scale / p99] * N), progress=False)
+    rep = check_tour(wall_tour(tmp_path / "t", [DARK_P99_LUMINANCE * scale / p99] * N), progress=False)
     assert rep["brightness"]["dark"] is dark and rep["ok"] is (not dark)
     assert rep["brightness"]["median_p99_luminance"] == pytest.approx(DARK_P99_LUMINANCE * scale, rel=5e-3)
 
 
 def test_median_over_frames_some_dark_frames_pass_most_fail(tmp_path):
     # a camera facing a dark corner now and then is fine ...
-    rep = check_tour(make_tour(tmp_path / "a", [1.0, 0.001, 1.0, 1.0, 0.001, 1.0]), progress=False)
+    rep = check_tour(wall_tour(tmp_path / "a", [1.0, 0.001, 1.0, 1.0, 0.001, 1.0]), progress=False)
     assert rep["ok"], rep["problems"]
     assert rep["brightness"]["min_p99_luminance"] < DARK_P99_LUMINANCE
     # ... a tour dark on most of its frames is not
-    rep = check_tour(make_tour(tmp_path / "b", [0.001, 0.001, 1.0, 0.001, 0.001, 1.0]), progress=False)
+    rep = check_tour(wall_tour(tmp_path / "b", [0.001, 0.001, 1.0, 0.001, 0.001, 1.0]), progress=False)
     assert not rep["ok"] and len(dark_lines(rep)) == 1
 
 
 def test_geometry_only_tour_has_no_brightness_test(tmp_path):
-    rep = check_tour(make_tour(tmp_path / "g", [None] * N), progress=False)
+    rep = check_tour(wall_tour(tmp_path / "g", [None] * N), progress=False)
     assert rep["ok"], rep["problems"]
     assert rep["brightness"] == {"rgb_frames": 0} and "brightness" not in format_report(rep)

@@ -18,7 +18,8 @@ import formats.frames as frames_mod
 from formats import camera as cam
 from formats.errors import SceneFormatError, UserError
 from formats.frames import FrameFileError, write_frame
-from formats.tour import Tour, tonemap, write_tour
+from conftest import make_tour
+from formats.tour import Tour, tonemap
 from synth.cli import main as synth_main
 from synth.tour.check import check_tour, choose_pairs, depth_consistency, format_report
 from synth.tour.show import contact_sheet, id_colors
@@ -80,24 +81,23 @@ def objects_doc():
             "classes": CLASSES, "boxes": boxes}
 
 
-def make_tour(root, rgb=True, n=N_FRAMES):
+def room_tour(root, rgb=True, n=N_FRAMES):
     """Write a complete tour directory; returns the poses and the images written."""
-    root.mkdir(parents=True, exist_ok=True)
     poses = tour_poses(n)
     truth, frames = [], {}
     for i, T in enumerate(poses):
         depth, inst, sem, col = render(T)
         frames[i] = dict(rgb=col if rgb else None, depth=depth, instance=inst, semantic=sem)
         truth.append((depth, inst, sem, col))
-    write_tour(root, poses, INTR, frames, fps=FPS, objects=objects_doc(),
-               meta={"layout": "testroom", "lighting": "day" if rgb else None, "path": "test", "renderer": "test"})
+    make_tour(root, poses, frames, intrinsics=INTR, fps=FPS, objects=objects_doc(), layout="testroom",
+              lighting="day" if rgb else None, path="test", renderer="test")
     return poses, truth
 
 
 @pytest.fixture
 def tour_dir(tmp_path):
     root = tmp_path / "tour_a"
-    poses, truth = make_tour(root)
+    poses, truth = room_tour(root)
     return root, poses, truth
 
 
@@ -165,7 +165,7 @@ def test_objects_are_read_lazily(tour_dir):
 
 def test_geometry_only_tour(tmp_path):
     root = tmp_path / "geo"
-    make_tour(root, rgb=False, n=4)
+    room_tour(root, rgb=False, n=4)
     tour = Tour(root)
     assert not tour.has_rgb()
     f = tour.frame(1)
@@ -280,7 +280,7 @@ def test_perturbed_pose_fails_consistency(tour_dir, capsys):
 def test_ray_length_depth_fails_consistency(tmp_path):
     """Depth written as ray length instead of planar z is caught by the consistency test."""
     root = tmp_path / "raylen"
-    make_tour(root, n=4)
+    room_tour(root, n=4)
     norm = np.linalg.norm(INTR.pixel_rays(), axis=-1).astype(np.float32)
     for i in range(4):
         _rewrite(root, i, depth=Tour(root).frame(i).depth * norm)

@@ -23,7 +23,7 @@ from formats import camera as cam
 from formats.errors import SceneFormatError, UserError
 from synth.cli import main as synth_main
 from formats.export import FORMATS, export_tour, read_manifest, summary_line
-from formats.tour import write_tour
+from conftest import make_tour
 
 W, H = 48, 36
 INTR = cam.Intrinsics.from_fov(W, H, 70.0)
@@ -38,7 +38,7 @@ def tour_poses(n=N, shift=0.0):
                               pitch=-0.1 + 0.03 * i, roll=0.02 * i) for i in range(n)]
 
 
-def make_tour(root: Path, n=N, rgb_every=RGB_EVERY, shift=0.0, seed=0, rgb=True):
+def random_tour(root: Path, n=N, rgb_every=RGB_EVERY, shift=0.0, seed=0, rgb=True):
     """A tour folder; returns {frame: (pose, depth, rgb or None)} with the values as stored (RGB half-float)."""
     rng = np.random.default_rng(seed)
     poses = tour_poses(n, shift)
@@ -53,16 +53,15 @@ def make_tour(root: Path, n=N, rgb_every=RGB_EVERY, shift=0.0, seed=0, rgb=True)
         inst = np.ones((H, W), np.uint32)
         frames[i] = dict(rgb=col, depth=depth, instance=inst, semantic=inst)
         truth[i] = (T, depth, col)
-    write_tour(root, poses, INTR, frames, fps=FPS, meta={"layout": "testroom", "lighting": "day" if rgb else None,
-                                                         "path": "test", "renderer": "test", "seed": seed,
-                                                         "settings": {"rgb_every": rgb_every}})
+    make_tour(root, poses, frames, intrinsics=INTR, fps=FPS, layout="testroom", lighting="day" if rgb else None,
+              path="test", renderer="test", seed=seed, settings={"rgb_every": rgb_every})
     return truth
 
 
 @pytest.fixture(scope="module")
 def tour(tmp_path_factory):
     root = tmp_path_factory.mktemp("tours") / "tour_a"
-    return root, make_tour(root)
+    return root, random_tour(root)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -378,7 +377,7 @@ def test_different_export_into_same_folder_fails(tour, tmp_path, change, field):
     before = mtimes(out)
     other = tmp_path / "tour_b"
     if change.get("tour"):
-        make_tour(other, shift=0.5, seed=1)
+        random_tour(other, shift=0.5, seed=1)
     args = {"fmt": "7scenes", "role": "query", "exposure": "auto", **change}
     with pytest.raises(SceneFormatError) as e:
         export_tour(other if change.get("tour") else root, args["fmt"], out, role=args["role"], exposure=args["exposure"],
@@ -439,7 +438,7 @@ def test_non_empty_folder_without_export_is_refused(tour, tmp_path):
 
 def test_geometry_only_tour(tmp_path):
     root = tmp_path / "geo"
-    truth = make_tour(root, rgb=False)
+    truth = random_tour(root, rgb=False)
     with pytest.raises(UserError, match="geometry-only"):
         export_tour(root, "colmap", tmp_path / "c")
     assert not (tmp_path / "c").exists()
@@ -522,7 +521,7 @@ def test_cli_different_export_exit_2(tour, tmp_path, capsys):
 
 def test_incomplete_tour_is_refused(tmp_path):
     root = tmp_path / "partial"
-    make_tour(root)
+    random_tour(root)
     os.unlink(root / "frames" / "000004.exr")
     with pytest.raises(UserError, match="frame files missing"):
         export_tour(root, "ace", tmp_path / "o")

@@ -21,7 +21,8 @@ from reloc.geometry import exp_so3, inv_T, make_T, pose_distance
 
 from formats import camera as cam
 from formats.errors import UserError
-from formats.tour import Tour, write_tour
+from conftest import make_tour
+from formats.tour import Tour
 
 
 ROOM_LO = np.array([0.0, 0.0, 0.0])
@@ -77,12 +78,11 @@ def night(rgb, seed=0):
     return np.clip(dim + rng.normal(0.0, 0.003, rgb.shape), 0, None).astype(np.float32)
 
 
-def make_tour(root, poses, images):
-    """A tour directory in the real format (``formats.tour.write_tour``); images[i] = (rgb or None, depth)."""
+def texroom_tour(root, poses, images):
+    """A tour of the textured room; images[i] = (rgb or None, depth)."""
     frames = {i: dict(rgb=rgb, depth=depth) for i, (rgb, depth) in enumerate(images)}
-    write_tour(root, poses, INTR, frames, fps=FPS,
-               meta={"layout": "texroom", "lighting": "day", "path": "test", "renderer": "test"})
-    return root
+    return make_tour(root, poses, frames, intrinsics=INTR, fps=FPS, layout="texroom", lighting="day", path="test",
+                     renderer="test")
 
 
 def mapping_poses():
@@ -107,13 +107,13 @@ def tours(tmp_path_factory):
     for j, T in enumerate(mp):
         rgb, depth = render(T)
         imgs.append((rgb if j % 2 == 0 else None, depth))
-    mapping = make_tour(base / "mapping", mp, imgs)
+    mapping = texroom_tour(base / "mapping", mp, imgs)
     rgb_a, depth_a = render(QUERY_A)
     rgb_b, depth_b = render(QUERY_B)
     q_poses = [QUERY_A, QUERY_B, QUERY_A, QUERY_A, QUERY_B]
     q_imgs = [(rgb_a, depth_a), (None, depth_b), (np.zeros_like(rgb_a), depth_a), (night(rgb_a), depth_a),
               (rgb_b, depth_b)]
-    query = make_tour(base / "query", q_poses, q_imgs)
+    query = texroom_tour(base / "query", q_poses, q_imgs)
     t0 = time.perf_counter()
     amap = AppearanceMap.build(Tour(mapping))
     build_s = time.perf_counter() - t0

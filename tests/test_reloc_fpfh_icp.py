@@ -17,7 +17,8 @@ from reloc.baselines.fpfh_icp import FpfhConfig, PointMap, clip_frames, constrai
 
 from formats import camera as cam
 from formats.errors import UserError
-from formats.tour import Tour, write_tour
+from conftest import make_tour
+from formats.tour import Tour
 from synth.render.fast_render import FastRenderer
 from synth.paths.files import load_path
 from synth.scene.model import load_layout
@@ -31,11 +32,11 @@ BLANK = range(420, 430)  # frames without depth
 SPECK = range(430, 432)  # frames with a handful of depth pixels
 
 
-def make_tour(root, poses: dict[int, np.ndarray], depths: dict[int, np.ndarray]) -> Tour:
-    """A tour directory in the renderers' format (depth-only frames)."""
+def depth_tour(root, poses: dict[int, np.ndarray], depths: dict[int, np.ndarray]) -> Tour:
+    """A tour of depth-only frames."""
     idx = sorted(poses)
-    return write_tour(root, [poses[i] for i in idx], INTR, {i: dict(depth=depths[i]) for i in idx}, fps=FPS,
-                      frame_ids=idx, meta={"layout": "apt_0", "path": "test", "renderer": "fast"})
+    return Tour(make_tour(root, [poses[i] for i in idx], {i: dict(depth=depths[i]) for i in idx}, intrinsics=INTR,
+                          fps=FPS, frame_ids=idx, layout="apt_0", path="test", renderer="fast"))
 
 
 def random_T(rng, t_scale=5.0) -> np.ndarray:
@@ -69,7 +70,7 @@ def world(tmp_path_factory):
     rend = FastRenderer(load_layout("apt_0"))
     mp = load_path("mapping").poses[::MAP_EVERY]
     mposes = {k: T for k, T in enumerate(mp)}
-    mapping = make_tour(base / "mapping", mposes, {k: rend.render(T, INTR)[0] for k, T in mposes.items()})
+    mapping = depth_tour(base / "mapping", mposes, {k: rend.render(T, INTR)[0] for k, T in mposes.items()})
     qp = load_path("query").poses
     qposes = {i: qp[i] for i in (*CLIP, *WALL, *BLANK, *SPECK)}
     depths = {i: rend.render(qp[i], INTR)[0] for i in CLIP}
@@ -81,7 +82,7 @@ def world(tmp_path_factory):
         d = np.zeros((INTR.height, INTR.width), np.float32)
         d[30:33, 40:43] = 1.5
         depths[i] = d
-    query = make_tour(base / "query", qposes, depths)
+    query = depth_tour(base / "query", qposes, depths)
     X = random_T(np.random.default_rng(7))
     Xinv = np.linalg.inv(X)
     clips = {

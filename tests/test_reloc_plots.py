@@ -19,7 +19,7 @@ from reloc.experiments.plots import box_corners, error_colors, per_frame, plot_e
 from reloc.experiments.report import markdown_to_html, split_row, table_to_html, write_report
 
 from formats import camera as cam
-from formats.tour import write_tour
+from conftest import make_tour
 
 
 FPS = 30.0
@@ -35,10 +35,9 @@ def gt_poses(n=N):
             for i in range(n)]
 
 
-def make_tour(root, n=N):
-    root.mkdir(parents=True)
-    write_tour(root, gt_poses(n), cam.Intrinsics.from_fov(64, 48, 75.0), fps=FPS,
-               meta={"layout": "apt_t", "lighting": "day"})
+def poses_tour(root, n=N):
+    make_tour(root, gt_poses(n), intrinsics=cam.Intrinsics.from_fov(64, 48, 75.0), fps=FPS, layout="apt_t",
+              lighting="day")
 
 
 def map_doc():
@@ -76,7 +75,7 @@ def results_dir(tmp_path):
     (rd / "maps").mkdir(parents=True)
     (rd / "maps" / "videoreloc_map.json").write_text(json.dumps(map_doc()))
     tour_dir = tmp_path / "tours" / TOUR
-    make_tour(tour_dir)
+    poses_tour(tour_dir)
     gt = gt_poses()
     est_frames = [i for i in range(N) if i not in MISSING]
     est = []
