@@ -36,7 +36,8 @@ the optional tables::
                                        # points (reloc.experiments.sweep; tables/sweep.md, plots/sweep.png)
     workers: 2
 
-Methods and the rows they give (``key`` = method.mode, used by ``reloc check``):
+Methods and the rows they give (``key`` = method.mode, used by ``reloc check``); each is one module of
+:mod:`reloc.experiments.methods`, registered by name, and a spec may name any registered method:
 
 * ``videoreloc``: ``videoreloc.causal`` and ``videoreloc.closure`` (paper Sec. IV-A), with the spec's
   detector on the queries and a map built with it;
