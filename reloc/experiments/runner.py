@@ -34,10 +34,11 @@ from formats.sensors import load_sensor
 from formats.tour import META_FILE, POSES_FILE, Tour
 from formats.cli import add_quiet, add_workers
 
+from . import methods as registry
 from . import tables
 from .fingerprint import code_fingerprint, file_key, ground_truth_key, key_of
-from .localization_units import DEFAULT_LENGTHS
-from .spec import ORACLE, ExperimentSpec, load_experiment, open_detector, replicate_spec
+from .methods.common import open_detector
+from .spec import ExperimentSpec, load_experiment, replicate_spec
 from .tables import ABLATIONS, ablation_name, reading_name
 from .tasks import DONE, is_done, run_map_task, run_tour_task
 
@@ -118,8 +119,9 @@ def _check_detector_inputs(spec: ExperimentSpec, queries: dict, mapping: dict) -
     for t in {t["dir"]: t for t in queries.values()}.values():  # once per tour, whatever the sensors
         tour = Tour(t["dir"])
         check_rgb_schedule(tour, stride, detector, "observation.stride")
-        if "one_frame" in spec.methods or "units" in spec.tables:
-            check_rgb_schedule(tour, spec.one_frame_stride, detector, "one_frame_stride")
+        for m in registry.active(spec.methods, spec.tables):  # the methods that look at every k-th frame
+            if m.stride_key:
+                check_rgb_schedule(tour, getattr(spec, m.stride_key), detector, m.stride_key)
     mtour = Tour(mapping["dir"])
     if spec.map == "ground-truth":
         open_detector(det, {b["class"] for b in mtour.objects()["boxes"]})
@@ -254,17 +256,18 @@ def _run_experiment(spec: ExperimentSpec, out: Path, workers: int | None, progre
     map_tasks = []
     map_sensors = list(dict.fromkeys(spec.map_sensor_of(s) for s in spec.sensor_names))
     map_files = {ms: _map_files(spec, maps_dir, ms) for ms in map_sensors}
-    options = {"boxes": {}, "boxes_oracle": {}, "fpfh": spec.fpfh_icp, "appearance": spec.appearance}
-    detectors = {"boxes": spec.detector, "boxes_oracle": ORACLE}
+    kinds = {k: registry.map_kind(k) for k in registry.map_names(spec.methods)}
+    options = {k: mk.options(spec) for k, mk in kinds.items()}
     model_key = file_key(spec.detector["model"]) if spec.detector.get("model") else None
     code = code_fingerprint()  # every key below holds it: a change of the code recomputes
     for ms, files in map_files.items():
         for kind, f in files.items():
+            mk = kinds[kind]
             source = det = None
-            if kind.startswith("boxes"):
+            if mk.spec_map:  # built with a detector, or the mapping tour's ground truth (map: ground-truth)
                 source = ground_truth_key(mapping["dir"]) if spec.map == "ground-truth" else spec.map
-                det = None if spec.map == "ground-truth" else detectors[kind]
-            sensor_key = None if spec.map == "ground-truth" and kind.startswith("boxes") else _sensor_key(spec, ms)
+                det = None if spec.map == "ground-truth" else mk.detector(spec)
+            sensor_key = None if spec.map == "ground-truth" and mk.spec_map else _sensor_key(spec, ms)
             key = key_of(kind, file_key(Path(mapping["dir"]) / "poses.txt"), mapping, source, options[kind], code,
                        det, model_key if det is spec.detector else None, sensor_key)
             try:
@@ -274,9 +277,10 @@ def _run_experiment(spec: ExperimentSpec, out: Path, workers: int | None, progre
             if not done:
                 f.parent.mkdir(parents=True, exist_ok=True)
                 map_tasks.append((f"map/{kind}" + ("" if ms == "ideal" else f"@{ms}"), run_map_task,
-                                  {"kind": kind.removesuffix("_oracle"), "file": str(f), "tour": mapping["dir"],
+                                  {"kind": mk.builds_as or kind, "file": str(f), "tour": mapping["dir"],
                                    "source": spec.map, "detector": det, "options": options[kind], "key": key,
-                                   "code": code, "sensor": spec.sensor(ms)["spec"], "sensor_seed": spec.seed}, []))
+                                   "code": code, "sensor": spec.sensor(ms)["spec"], "sensor_seed": spec.seed,
+                                   "module": mk.module}, []))
     runner = _Runner(workers, progress, len(map_tasks), f"{spec.name}: maps")
     try:
         runner.run(map_tasks)
@@ -295,17 +299,18 @@ def _run_experiment(spec: ExperimentSpec, out: Path, workers: int | None, progre
     expected: dict[tuple[str, str], tuple[Path, str]] = {}
     methods = list(spec.methods)
     variants = [v for v in ABLATIONS if v != (True, True, True)] if "ablation" in spec.tables else []
+    ablated = registry.table_method("ablation")  # the method whose variants Table IV compares (VideoReloc)
     for name, t in queries.items():
-        vr_dir = out / "runs" / "videoreloc" / name
         ms = spec.map_sensor_of(t["sensor"])
         files = map_files[ms]
         common = {"map": str(files["boxes"]), "config": spec.config, "detector": spec.detector, "model": model_key,
                   "seed": spec.seed, "code": code, "sensor": spec.sensor(t["sensor"])["spec"]}
 
-        def add(method, deps, uses="boxes", **kw) -> str:
+        def add(method, deps, run_as, uses="boxes", **kw) -> str:
             d = out / "runs" / method / name
             arg = {**common, "method": method, "tour": t["dir"], "tour_name": name, "dir": str(d), **kw}
             arg["key"] = key_of(arg, map_keys[ms][uses], tour_keys[name])
+            arg.update(runs_as=run_as.name, module=run_as.module)  # which registered method runs it (not in the key)
             expected[(method, name)] = (d, arg["key"])
             if not is_done(d, arg["key"]):
                 tasks.append((f"{method}/{name}", run_tour_task, arg, [x for x in deps if x in scheduled]))
@@ -313,22 +318,16 @@ def _run_experiment(spec: ExperimentSpec, out: Path, workers: int | None, progre
             return arg["key"]
 
         scheduled: set[str] = set()
-        # the controls reuse VideoReloc's clips: their key holds VideoReloc's, so they rerun with it
-        vr_key = add("videoreloc", []) if "videoreloc" in methods else None
-        if "videoreloc_oracle" in methods:
-            add("videoreloc_oracle", [], uses="boxes_oracle", map=str(files["boxes_oracle"]), detector=ORACLE, model=None)
-        vr_dep = [f"videoreloc/{name}"]
-        if "fpfh_icp" in methods:
-            add("fpfh_icp", vr_dep, uses="fpfh", fpfh_map=str(files["fpfh"]), clips=str(vr_dir), options=spec.fpfh_icp,
-                vr=vr_key)
-        if "appearance" in methods:
-            add("appearance", vr_dep, uses="appearance", appearance_map=str(files["appearance"]), clips=str(vr_dir),
-                options=spec.appearance, vr=vr_key)
-        if "one_frame" in methods or "units" in spec.tables:
-            add("one_frame", [], stride=spec.one_frame_stride,
-                lengths=list(DEFAULT_LENGTHS if "units" in spec.tables else (1,)))
+        keys: dict[str, str] = {}
+        for m in registry.active(methods, spec.tables):  # in registration order: a method before its controls
+            kw = m.task_args(spec, files)
+            deps = []
+            if m.clips_from is not None:  # the controls reuse that method's clips: their key holds its key,
+                deps = [f"{m.clips_from}/{name}"]  # so they rerun with it
+                kw.update(clips=str(out / "runs" / m.clips_from / name), vr=keys.get(m.clips_from))
+            keys[m.name] = add(m.name, deps, m, uses=m.uses, **kw)
         for v in variants:
-            add(ablation_name(v), [], variant=list(v))
+            add(ablation_name(v), [], ablated, variant=list(v))
     if spec.externals:
         _external_tasks(spec, out, mapping, queries, tour_keys, tasks, expected, progress)
     files = map_files[spec.map_sensor_of(spec.reference_sensor)]
@@ -437,16 +436,10 @@ def _external_tasks(spec: ExperimentSpec, out: Path, mapping: dict, queries: dic
 
 
 def _map_files(spec: ExperimentSpec, maps_dir: Path, sensor: str) -> dict[str, Path]:
-    """The map files of one map sensor: ``maps/`` for the ideal sensor, ``maps/SENSOR/`` for another."""
+    """The map files of one map sensor (every map kind its methods need, ``methods.map_names``):
+    ``maps/`` for the ideal sensor, ``maps/SENSOR/`` for another."""
     d = maps_dir if sensor == "ideal" else maps_dir / sensor
-    files = {"boxes": d / "videoreloc_map.json"}
-    if "videoreloc_oracle" in spec.methods:
-        files["boxes_oracle"] = d / "videoreloc_oracle_map.json"
-    if "fpfh_icp" in spec.methods:
-        files["fpfh"] = d / "fpfh_map.npz"
-    if "appearance" in spec.methods:
-        files["appearance"] = d / "appearance_map.npz"
-    return files
+    return {k: d / registry.map_kind(k).file for k in registry.map_names(spec.methods)}
 
 
 def _sensor_key(spec: ExperimentSpec, name: str) -> dict | None:
@@ -459,9 +452,7 @@ def _degenerate_frames(out: Path, queries: dict, methods: list) -> dict:
     """Per query tour with any, its degenerate frames as VideoReloc's run counted them (``run.json``:
     no usable depth, no RGB where the detector reads it; ``reloc.backend.run.Degenerate``)."""
     found: dict = {}
-    for m in ("videoreloc", "videoreloc_oracle"):
-        if m not in methods:
-            continue
+    for m in registry.clip_methods(methods):
         for name in queries:
             try:
                 dg = read_json(out / "runs" / m / name / "run.json").get("degenerate_frames")

@@ -36,7 +36,8 @@ the optional tables::
                                        # points (reloc.experiments.sweep; tables/sweep.md, plots/sweep.png)
     workers: 2
 
-Methods and the rows they give (``key`` = method.mode, used by ``reloc check``):
+Methods and the rows they give (``key`` = method.mode, used by ``reloc check``); each is one module of
+:mod:`reloc.experiments.methods`, registered by name, and a spec may name any registered method:
 
 * ``videoreloc``: ``videoreloc.causal`` and ``videoreloc.closure`` (paper Sec. IV-A), with the spec's
   detector on the queries and a map built with it;
@@ -79,15 +80,23 @@ from formats.errors import SceneFormatError, UserError
 from formats.sensors import load_sensor
 from formats.yamlfile import read_yaml
 
+from . import methods as registry
 from .intervals import IntervalSettings
+from .methods.common import ORACLE, open_detector  # noqa: F401  (ORACLE: a spec's detector, the rendered labels)
 
-SPEC_KEYS = {"name", "description", "render", "tours", "out", "mapping", "query", "unchanged", "map", "methods",
-             "tables", "one_frame_stride", "detector", "config", "appearance", "fpfh_icp", "workers", "seed",
+# the spec's own keys; each registered method with settings adds its key (Method.options_key: appearance, fpfh_icp)
+BASE_KEYS = {"name", "description", "render", "tours", "out", "mapping", "query", "unchanged", "map", "methods",
+             "tables", "one_frame_stride", "detector", "config", "workers", "seed",
              "sensors", "map_sensor", "intervals", "replicates", "sweep"}
-METHODS = ("videoreloc", "videoreloc_oracle", "fpfh_icp", "appearance", "one_frame")
+SPEC_KEYS = BASE_KEYS | {m.options_key for m in registry.all_methods() if m.options_key}
+METHODS = registry.default_names()  # a spec's methods when it lists none: the in-tree methods
 DETECTORS = ("learned", "oracle", "onnx")
-ORACLE = {"kind": "oracle", "model": None, "corruption": {}}  # a spec's detector: the rendered labels
 TABLES = ("units", "ablation")
+
+
+def spec_keys() -> set:
+    """The keys an experiment spec may have: ``BASE_KEYS`` and every registered method's settings key."""
+    return BASE_KEYS | {m.options_key for m in registry.all_methods() if m.options_key}
 
 
 @dataclasses.dataclass
@@ -118,6 +127,9 @@ class ExperimentSpec:
     intervals: IntervalSettings = IntervalSettings()  # how the figures' intervals are computed
     replicates: int = 1  # the experiment run this many times, its stochastic parts reseeded (replicate_spec)
     sweep: object = None  # reloc.experiments.sweep.Sweep: one graded factor (dose-response, breaking points)
+    # every registered method's settings by its key (Method.options_key: {"appearance": {...}, "fpfh_icp": {...}});
+    # the in-tree ones also as the fields appearance and fpfh_icp
+    method_options: dict = dataclasses.field(default_factory=dict)
 
     def __post_init__(self):
         if not self.sensors:
@@ -153,6 +165,9 @@ class ExperimentSpec:
             return f"{d['kind']} ({Path(d['model']).name})"
         corr = {k: v for k, v in d.get("corruption", {}).items() if v and k != "seed"}
         return d["kind"] + (" (corrupted: " + ", ".join(f"{k} {v}" for k, v in corr.items()) + ")" if corr else "")
+
+
+_FIELDS = {f.name: f for f in dataclasses.fields(ExperimentSpec)}
 
 
 def _fail(src, field, msg):
@@ -230,9 +245,10 @@ def load_experiment(path) -> ExperimentSpec:
     doc = read_yaml(src)
     if not isinstance(doc, dict):
         _fail(src, None, "expected a mapping at the top level")
-    unknown = sorted(map(str, set(doc) - SPEC_KEYS))
+    keys = spec_keys()
+    unknown = sorted(map(str, set(doc) - keys))
     if unknown:
-        _fail(src, unknown[0], f"unknown key; allowed: {', '.join(sorted(SPEC_KEYS))}")
+        _fail(src, unknown[0], f"unknown key; allowed: {', '.join(sorted(keys))}")
     for k in ("name", "render", "out", "mapping", "query", "unchanged"):
         if doc.get(k) in (None, ""):
             _fail(src, k, "missing")
@@ -247,30 +263,36 @@ def load_experiment(path) -> ExperimentSpec:
     for k in ("layout", "lighting", "path"):
         if not isinstance(mapping.get(k), str):
             _fail(src, f"mapping.{k}", "expected a name")
-    methods = doc.get("methods", list(METHODS))
+    known = registry.names()  # the registered methods (reloc.experiments.methods)
+    methods = doc.get("methods", list(registry.default_names()))
     if isinstance(methods, str):
         methods = [methods]
     if not isinstance(methods, list) or not methods:
-        _fail(src, "methods", f"expected a non-empty list of {', '.join(METHODS)} or external methods")
+        _fail(src, "methods", f"expected a non-empty list of {', '.join(known)} or external methods")
     externals = []
     for i, m in enumerate(methods):
         if isinstance(m, dict):  # another relocalizer: a command on exported tours, or trajectories (external.py)
             from .external import parse_external
 
-            externals.append(parse_external(m, src, f"methods[{i}]", METHODS))
+            externals.append(parse_external(m, src, f"methods[{i}]", known))
             if externals[-1].name in [e.name for e in externals[:-1]]:
                 _fail(src, f"methods[{i}].name", f"{externals[-1].name!r} is used twice")
-        elif m not in METHODS:
-            _fail(src, f"methods[{i}]", f"unknown method {m!r}; known: {', '.join(METHODS)}, or a mapping with name and "
+        elif m not in known:
+            _fail(src, f"methods[{i}]", f"unknown method {m!r}; known: {', '.join(known)}, or a mapping with name and "
                                         "command (or trajectories)")
     methods = [m["name"] if isinstance(m, dict) else m for m in methods]
-    if "videoreloc" not in methods and {"fpfh_icp", "appearance"} & set(methods):
-        _fail(src, "methods", "the clip-rigid controls reuse VideoReloc's clips: add videoreloc")
+    listed = [registry.get(m) for m in methods if m in known]
+    for m in listed:  # a clip-rigid control runs on the clips of another method's runs
+        if m.clips_from is not None and m.clips_from not in methods:
+            _fail(src, "methods", f"the clip-rigid controls reuse {registry.get(m.clips_from).label}'s clips: "
+                                  f"add {m.clips_from}")
     tables = doc.get("tables") or []
     if not isinstance(tables, list) or any(t not in TABLES for t in tables):
         _fail(src, "tables", f"expected a list of {', '.join(TABLES)} (main and factors are always made), got {tables!r}")
-    if "ablation" in tables and "videoreloc" not in methods:
-        _fail(src, "tables", "the ablation table needs the videoreloc method")
+    for t in tables:  # a table of a method's runs needs the method listed, unless the table runs it
+        tm = registry.table_method(t)
+        if tm is not None and not tm.runs_for_tables and tm.name not in methods:
+            _fail(src, "tables", f"the {t} table needs the {tm.name} method")
     if doc.get("map", "build") not in ("build", "ground-truth"):
         _fail(src, "map", f"expected build or ground-truth, got {doc.get('map')!r}")
     for k in ("one_frame_stride", "workers", "replicates"):
@@ -283,24 +305,22 @@ def load_experiment(path) -> ExperimentSpec:
     except (ValueError, TypeError) as e:
         raise UserError(str(e) if str(src) in str(e) else f"{src}: config: {e}") from None
     det = _detector_spec(doc.get("detector", "learned"), src)
-    if det["kind"] == "oracle" and "videoreloc_oracle" in methods:
-        _fail(src, "methods", "videoreloc_oracle is the oracle row beside another detector; "
-                              "with detector: oracle it would repeat videoreloc")
+    oracle_rows = [m for m in listed if m.oracle_of is not None]
+    if det["kind"] == "oracle" and oracle_rows:
+        m = oracle_rows[0]
+        _fail(src, "methods", f"{m.name} is the oracle row beside another detector; "
+                              f"with detector: oracle it would repeat {m.oracle_of}")
     if det["kind"] != "oracle":
         strides = {"config.observation.stride": config.observation.stride}
-        if "one_frame" in methods or "units" in tables:
-            strides["one_frame_stride"] = int(doc.get("one_frame_stride", 15))
+        for m in registry.active(methods, tables):  # the methods that look at every k-th frame
+            if m.stride_key:
+                strides[m.stride_key] = int(doc.get(m.stride_key, _FIELDS[m.stride_key].default))
         _check_render_rgb(render, render_doc, str(doc["query"]), mapping, strides, det["kind"])
-    app = _mapping_of(doc.get("appearance"), src, "appearance")
-    fp = _mapping_of(doc.get("fpfh_icp"), src, "fpfh_icp")
-    if app:
-        from ..baselines.appearance import AppearanceConfig
-
-        _check_overrides(AppearanceConfig, app, src, "appearance")
-    if fp:
-        from ..baselines.fpfh_icp import FpfhConfig
-
-        _check_overrides(FpfhConfig, fp, src, "fpfh_icp")
+    with_options = sorted((m for m in registry.all_methods() if m.options_key), key=lambda m: m.options_key)
+    options = {m.options_key: _mapping_of(doc.get(m.options_key), src, m.options_key) for m in with_options}
+    for m in with_options:  # each method's settings: its settings class's fields
+        if options[m.options_key]:
+            _check_overrides(m.options_class(), options[m.options_key], src, m.options_key)
     tours_root = Path(doc["tours"]) if doc.get("tours") else Path(job_out)
     sensors, map_sensor = _sensors_of(doc, src)
     seed = doc.get("seed", 0)
@@ -311,7 +331,8 @@ def load_experiment(path) -> ExperimentSpec:
         out=Path(fields.out_folder(src, doc["out"])), mapping=mapping, query=fields.string(src, doc["query"], "query"),
         unchanged=fields.string(src, doc["unchanged"], "unchanged"), map=doc.get("map", "build"),
         methods=tuple(methods), tables=tuple(tables), one_frame_stride=int(doc.get("one_frame_stride", 15)),
-        detector=det, config=cfg, appearance=app, fpfh_icp=fp, workers=int(doc.get("workers", 2)),
+        detector=det, config=cfg, workers=int(doc.get("workers", 2)), method_options=options,
+        **{k: v for k, v in options.items() if k in _FIELDS},
         seed=seed, description=fields.text(src, doc.get("description", ""), "description"), externals=tuple(externals),
         sensors=sensors, map_sensor=map_sensor, intervals=IntervalSettings.from_spec(src, doc.get("intervals")),
         replicates=int(doc.get("replicates", 1)), sweep=_sweep_of(doc, src, sensors),
@@ -414,17 +435,6 @@ def _perturbation(v, src) -> dict:
     except ValueError as e:
         _fail(src, "detector.perturbation", str(e))
     return {k: v for k, v in dataclasses.asdict(p).items() if v != getattr(Perturbation(), k)}
-
-
-def open_detector(det: dict, vocabulary, classes=None, cfg=None):
-    """The detector a spec's ``detector`` names (``_detector_spec``'s dict)."""
-    from ..detection.factory import DetectorSpec, build_detector
-    from ..detection.learned import Perturbation
-    from ..detection.oracle import Corruption
-
-    spec = DetectorSpec(kind=det["kind"], corruption=Corruption(**det.get("corruption", {})), model=det.get("model"),
-                        class_map=det.get("class_map"), perturbation=Perturbation(**det.get("perturbation", {})))
-    return build_detector(spec, classes or {}, vocabulary=vocabulary, config=cfg)
 
 
 def _check_render_rgb(render: Path, doc, query: str, mapping: dict, strides: dict, kind: str) -> None:

@@ -3,7 +3,8 @@ in the paper (``PAPER_TABLES``):
 
 * ``main``, Table I: map size, median position/rotation error over returned poses, recall at
   1 m/10 deg and 0.25 m/5 deg over all frames (a missing pose is a failure), pose coverage; one row
-  per method and cutoff (``ROWS``), pooled over every query tour;
+  per method and cutoff (the registered methods' rows, :mod:`reloc.experiments.methods`), pooled
+  over every query tour;
 * ``factors``, Table II: recall at 1 m/10 deg by lighting (day, evening, night, Delta_L = night -
   day; each a mean over layouts) and by layout (unchanged, rearranged, Delta_R, kept = rearranged /
   unchanged; means over tours);
@@ -39,9 +40,11 @@ from formats.camera import read_tum
 from formats.errors import SceneFormatError
 from formats.yamlfile import read_json
 
+from . import methods as registry
 from .evaluation import END_REASONS, THRESHOLDS, end_reason_kind, odometry_drift, pose_errors, summarize
 from .intervals import (OK_COARSE, OK_FINE, Bootstrap, IntervalSettings, factor_figures, figure_values, n_segments,
                         pooled_figures, segment_counts, tour_figures, units_note)
+from .methods.common import map_report_path, unit_file  # noqa: F401  (where the runs and maps keep them)
 
 FORMAT = "videoreloc-experiment/1"
 LIGHTINGS = ("day", "evening", "night")
@@ -61,24 +64,9 @@ PAPER_TABLES = {
     "ablation": ("IV", "Effects of refinement, run-level decisions and adaptive clips"),
 }
 
-# Table I rows: (method, mode, label, dagger), in the paper's order (per frame, clip-rigid, ours)
-ROWS = (
-    ("appearance", "causal", "Appearance ({feature} + PnP), per frame", False),
-    ("one_frame", "causal", "One-frame object unit", False),
-    ("fpfh_icp", "closure", "FPFH-ICP", True),
-    ("appearance", "closure", "Appearance ({feature} + PnP)", True),
-    ("videoreloc", "causal", "VideoReloc, causal", False),
-    ("videoreloc", "closure", "VideoReloc, with clip closure", False),
-    # the upper bound: the same relocalizer on the rendered labels (map and queries), beside the
-    # detector the experiment uses
-    ("videoreloc_oracle", "causal", "VideoReloc (oracle detections), causal", False),
-    ("videoreloc_oracle", "closure", "VideoReloc (oracle detections), with clip closure", False),
-)
-# the cutoff ``reloc check`` reads for METHOD.KEY
-PRIMARY = {"videoreloc": "closure", "videoreloc_oracle": "closure", "fpfh_icp": "closure", "appearance": "causal",
-           "one_frame": "causal"}
-LABELS = {"videoreloc": "VideoReloc", "videoreloc_oracle": "VideoReloc (oracle detections)", "fpfh_icp": "FPFH-ICP",
-          "appearance": "Appearance ({feature} + PnP)", "one_frame": "One-frame object unit"}
+# Table I's rows, each method's label and the cutoff ``reloc check`` reads for METHOD.KEY (its primary
+# mode) are the registered methods' (reloc.experiments.methods: Method.rows, .label, .primary); rows in
+# the paper's order (per frame, clip-rigid, ours, the oracle's upper bound), then external methods.
 
 # Table IV rows, in the paper's order: (orientation-aware, run-level, adaptive); False = point-to-point
 # refinement, no run-level decision, fixed 100-frame clips. The last is VideoReloc itself.
@@ -92,6 +80,12 @@ def reading_name(tour: str, sensor: str) -> str:
     """The name of a query tour read through a sensor: the tour's name for ``ideal`` (the render as it
     is), ``TOUR@SENSOR`` otherwise; runs, results and check keys use it."""
     return tour if sensor == "ideal" else f"{tour}{SENSOR_SEP}{sensor}"
+
+
+def _table_method(table: str) -> str:
+    """The registered method whose runs make an optional table (units: one_frame; ablation: videoreloc,
+    its variants' runs ``ablation_name``)."""
+    return registry.table_method(table).name
 
 
 def ablation_name(variant) -> str:
@@ -122,11 +116,14 @@ def _estimates(path: Path, fps: float) -> dict[int, np.ndarray]:
 def evaluation_frames(method: str, mode: str, frames: list[int], rgb_every: int, stride: int,
                       sees_rgb_only: bool = False) -> list[int]:
     """The frames a row is evaluated on: all, except per-frame methods that see only some frames
-    (``sees_rgb_only``: an external method run on an image export, which leaves out geometry-only frames)."""
-    if (method == "appearance" and mode == "causal") or sees_rgb_only:
+    (a registered method's ``Method.frames``: per-frame appearance, the frames with RGB; the one-frame
+    unit, every ``stride``-th; ``sees_rgb_only``: an external method run on an image export, which
+    leaves out geometry-only frames)."""
+    if sees_rgb_only:
         return [i for i in frames if i % rgb_every == 0]
-    if method == "one_frame":
-        return frames[::stride]
+    m = registry.get(method) if method in registry.names() else None
+    if m is not None and m.frames is not None:
+        return m.frames(mode, frames, rgb_every, stride)
     return frames
 
 
@@ -171,15 +168,14 @@ def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: li
     """Every row on every tour; ``valid``: the (method, tour) runs that finished with the current
     inputs (others, failed or stale, count as no poses). ``files``: the reference sensor's maps;
     ``map_files``: sensor -> its maps (the quality of each sensor's box map)."""
-    from ..baselines.appearance import AppearanceConfig
-
-    feature = str(spec.appearance.get("feature", AppearanceConfig().feature)).upper()
+    fields: dict = {}  # the labels' fields ({feature}: the appearance baseline's feature)
+    for method in registry.all_methods():
+        fields.update(method.label_fields(spec))
     by_dir: dict = {}
     gts = {n: by_dir[t["dir"]] if t["dir"] in by_dir else by_dir.setdefault(t["dir"], _gt(t["dir"]))
            for n, t in queries.items()}
     map_bytes = {k: f.stat().st_size for k, f in files.items() if f.is_file()}
-    method_map = {"videoreloc": "boxes", "one_frame": "boxes", "videoreloc_oracle": "boxes_oracle", "fpfh_icp": "fpfh",
-                  "appearance": "appearance"}
+    registered = {m: registry.get(m) for m in methods if m in registry.names()}
     sensors = list(getattr(spec, "sensor_names", ["ideal"]))
     reference = getattr(spec, "reference_sensor", "ideal")
     settings = getattr(spec, "intervals", None) or IntervalSettings()
@@ -193,7 +189,7 @@ def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: li
     if getattr(spec, "map_sensor", None) is not None:
         res["map_sensor"] = spec.map_sensor["name"]
     externals = {e.name: e for e in getattr(spec, "externals", ())}
-    modes_of = {m: ([externals[m].mode] if m in externals else [mode for (mm, mode, _, _) in ROWS if mm == m])
+    modes_of = {m: ([externals[m].mode] if m in externals else registered[m].modes if m in registered else [])
                 for m in methods}
     for v in variants:
         modes_of[ablation_name(v)] = ["causal", "closure"]
@@ -203,8 +199,9 @@ def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: li
             entry = {"label": ext.label, "map_bytes": _folder_bytes(out / "maps" / m) if ext.map_command else None,
                      "primary": ext.mode, "external": ext.kind, "modes": {}}
         else:
-            entry = {"label": LABELS.get(m, m).format(feature=feature), "map_bytes": map_bytes.get(method_map.get(m, "boxes")),
-                     "primary": PRIMARY.get(m, "closure"), "modes": {}}
+            rm = registered.get(m)  # None: an ablation variant (labelled by its name, its key the closure mode)
+            entry = {"label": rm.label.format(**fields) if rm else m, "map_bytes": map_bytes.get(rm.uses if rm else "boxes"),
+                     "primary": rm.primary if rm else "closure", "modes": {}}
         for mode in modes:
             per, pooled_est, pooled_gt, units = {}, {}, {}, {}
             by_sensor: dict = {s: ({}, {}) for s in sensors}
@@ -236,10 +233,9 @@ def evaluate_experiment(spec, out: Path, queries: dict, files: dict, methods: li
                    and (q := map_quality(map_report_path(files[k]))) is not None}
     if len(sensors) > 1:
         res["sensor_figures"] = sensor_figures(out, queries, sensors, gts, map_files or {}, spec, valid)
-    for m, mode, label, dagger in ROWS:
-        if m in methods:
-            res["rows"].append({"key": f"{m}.{mode}", "method": m, "mode": mode, "label": label.format(feature=feature),
-                                "dagger": dagger})
+    for m, row in registry.rows(methods):
+        res["rows"].append({"key": f"{m}.{row.mode}", "method": m, "mode": row.mode, "label": row.label.format(**fields),
+                            "dagger": row.dagger})
     for m in methods:  # external methods after the built-in rows, in the spec's order
         if m in externals:
             e = externals[m]
@@ -341,7 +337,8 @@ def add_table_intervals(res: dict) -> None:
                                                                          ("recall_25cm_5deg", OK_FINE))}
     reference = res.get("reference_sensor", "ideal")
     coarse = pooled_figures([n for n, t in res["tours"].items() if t.get("sensor", "ideal") == reference])
-    full = next((r for r in res.get("ablation") or () if r["method"] == "videoreloc"), None)
+    ablated = _table_method("ablation")
+    full = next((r for r in res.get("ablation") or () if r["method"] == ablated), None)
     for a in res.get("ablation") or ():
         m = a["method"]
         iv = {}
@@ -352,7 +349,7 @@ def add_table_intervals(res: dict) -> None:
         if full is not None and a is not full and coarse and f"{m}.closure" in boot.units \
                 and a["closure_coarse"] is not None and full["closure_coarse"] is not None:
             fig = coarse["recall_1m_10deg"]
-            d = figure_values(boot, f"{m}.closure", fig)[1] - figure_values(boot, "videoreloc.closure", fig)[1]
+            d = figure_values(boot, f"{m}.closure", fig)[1] - figure_values(boot, f"{ablated}.closure", fig)[1]
             a["closure_coarse_delta"] = a["closure_coarse"] - full["closure_coarse"]
             iv["closure_coarse_delta"] = boot.interval(d)
         a["intervals"] = iv
@@ -392,7 +389,7 @@ def sensor_figures(out: Path, queries: dict, sensors: list, gts: dict, map_files
     ended (``clips.json``, counted by ``end_reason_kind``), and the quality of the sensor's box map."""
     from ..backend.run import load_clip_poses
 
-    method = next((m for m in ("videoreloc", "videoreloc_oracle") if m in spec.methods), None)
+    method = next(iter(registry.clip_methods(spec.methods)), None)  # whose clips give the odometry
     out_figs: dict = {}
     for s in sensors:
         names = [n for n, t in queries.items() if t.get("sensor", "ideal") == s]
@@ -430,13 +427,6 @@ def _folder_bytes(d: Path) -> int | None:
     return sum(f.stat().st_size for f in d.rglob("*") if f.is_file())
 
 
-def map_report_path(map_file) -> Path:
-    """Where an experiment keeps a built map's report (build counts, errors against the ground
-    truth): ``videoreloc_map.json`` -> ``videoreloc_map.report.json``."""
-    p = Path(map_file)
-    return p.with_name(p.stem + ".report.json")
-
-
 def map_quality(report_path: Path) -> dict | None:
     """A built box map against the mapping layout's ground truth (``reloc.map.scoring.box_errors``
     in the map's build report): boxes built, matched, missing and extra, median errors by kind."""
@@ -468,12 +458,6 @@ def map_line(label: str, q: dict) -> str:
             f"median center error).")
 
 
-def unit_file(length: int) -> str:
-    """The trajectory of a localization unit's poses in a ``one_frame`` run folder (Table III):
-    ``causal.txt`` for the one-frame unit, ``unit_L.txt`` for L-frame clips."""
-    return "causal.txt" if int(length) == 1 else f"unit_{int(length)}.txt"
-
-
 def unit_key(length: int) -> str:
     """The run key of a localization unit's segment counts in the bootstrap (``bootstrap_of``)."""
     return f"unit_{int(length)}"
@@ -483,7 +467,7 @@ def _units(out: Path, queries: dict, unchanged: str, gts: dict | None = None,
            settings: IntervalSettings | None = None, stride: int = 1) -> list[dict]:
     reps = {}
     for name in queries:
-        p = out / "runs" / "one_frame" / name / "units.json"
+        p = out / "runs" / _table_method("units") / name / "units.json"
         if p.is_file():
             reps[name] = read_json(p)
     rows = []
@@ -493,7 +477,7 @@ def _units(out: Path, queries: dict, unchanged: str, gts: dict | None = None,
         if gts is not None and reps:  # per-segment outcomes for the intervals, when every tour has the unit's poses
             seg = {}
             for name in reps:
-                f = out / "runs" / "one_frame" / name / unit_file(L)
+                f = out / "runs" / _table_method("units") / name / unit_file(L)
                 if not f.is_file():
                     break
                 tour, gt = gts[name]
@@ -520,7 +504,7 @@ def _units(out: Path, queries: dict, unchanged: str, gts: dict | None = None,
 def _ablation(res: dict, variants: list) -> list[dict]:
     rows = []
     for v in ABLATIONS:
-        m = "videoreloc" if v == (True, True, True) else ablation_name(v)
+        m = _table_method("ablation") if v == (True, True, True) else ablation_name(v)
         if m not in res["methods"]:
             continue
         modes = res["methods"][m]["modes"]
