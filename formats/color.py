@@ -6,7 +6,7 @@ goes through (``srgb8``: previews, ``formats.tour.tonemap``, the detectors' inpu
 
 These work on numpy arrays. The detector's training runs the same curve on PyTorch tensors
 (``reloc.detector.augment.srgb_encode`` / ``srgb_decode``), written with these constants
-(``tests/test_detector_augment.py`` compares them).
+(``tests/reloc/detector/test_detector_augment.py`` compares them).
 """
 
 from __future__ import annotations

@@ -23,7 +23,7 @@ the linear scene radiance is recovered as ``srgb_decode(x) / scale`` (up to the 
 5. JPEG-like compression (``jpeg_prob`` of the frames): 8x8 DCT blocks quantised with the JPEG
    luminance table at a random quality in ``jpeg_quality``.
 
-``tests/test_detector_augment.py`` checks steps 3 and 4 against ``formats.sensors`` and
+``tests/reloc/detector/test_detector_augment.py`` checks steps 3 and 4 against ``formats.sensors`` and
 ``formats.tour.tonemap`` on the same frames.
 """
 

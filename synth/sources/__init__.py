@@ -14,7 +14,7 @@ is what the jobs, the trainsets and the command line need of a dataset of scenes
 
 Sources sit above the mesh layer (``synth.mesh``: glTF, URDF, collision, support surfaces), ``paths``
 and ``layout``; below the renderers, the jobs and the command line. Nothing below this layer imports a
-source (tests/test_structure.py). A second source (HSSD, 3D-FRONT) is a package ``synth/sources/<name>/``
+source (tests/project/test_structure.py). A second source (HSSD, 3D-FRONT) is a package ``synth/sources/<name>/``
 with a ``source.py`` giving such an object, added to ``SOURCES`` (docs/architecture.md).
 """
 
