@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import os
 import sys
+import shutil
 import tempfile
 import time
 from pathlib import Path
@@ -91,36 +92,39 @@ def run(job: dict) -> int:
         previews = Path(job["previews_dir"]) if job.get("previews_dir") else None
     emit(event="ready", device=device, parts=len(parts))
 
-    tmpdir = tempfile.mkdtemp(prefix="synth_render_")
+    tmpdir = tempfile.mkdtemp(prefix="synth_render_")  # removed when the chunk ends (a SIGKILL leaves it to the OS)
     tmp_exr = os.path.join(tmpdir, "render.exr")
     sb.configure_output(scene, tmp_exr)
-    for i in todo:
-        t0, c0 = time.time(), time.process_time()
-        sb.place_camera(cam, pose_of[i])
-        bpy.ops.render.render(write_still=True)
-        p = read_blender_exr(tmp_exr)
-        target = out_dir / fr.frame_name(i)
-        if mode == "geometry":
-            inst = np.rint(p["IndexOB"]).astype(np.uint32)
-            depth = p["Depth"].astype(np.float32)
-            miss = (inst == 0) | ~np.isfinite(depth) | (depth > 1e5)
-            depth[miss] = 0.0
-            inst[miss] = 0
-            fr.write_frame(target, depth=depth, instance=inst, semantic=lut[np.minimum(inst, len(lut) - 1)])
-        else:
-            rgb = p["Combined"][..., :3].astype(np.float32)
-            g = fr.read_frame(geom_dir / fr.frame_name(i), rgb=False, require=("depth", "instance", "semantic"))
-            if previews is not None:
-                import cv2
+    try:
+        for i in todo:
+            t0, c0 = time.time(), time.process_time()
+            sb.place_camera(cam, pose_of[i])
+            bpy.ops.render.render(write_still=True)
+            p = read_blender_exr(tmp_exr)
+            target = out_dir / fr.frame_name(i)
+            if mode == "geometry":
+                inst = np.rint(p["IndexOB"]).astype(np.uint32)
+                depth = p["Depth"].astype(np.float32)
+                miss = (inst == 0) | ~np.isfinite(depth) | (depth > 1e5)
+                depth[miss] = 0.0
+                inst[miss] = 0
+                fr.write_frame(target, depth=depth, instance=inst, semantic=lut[np.minimum(inst, len(lut) - 1)])
+            else:
+                rgb = p["Combined"][..., :3].astype(np.float32)
+                g = fr.read_frame(geom_dir / fr.frame_name(i), rgb=False, require=("depth", "instance", "semantic"))
+                if previews is not None:
+                    import cv2
 
-                previews.mkdir(parents=True, exist_ok=True)
-                ok, png = cv2.imencode(".png", srgb8(rgb)[..., ::-1])
-                if not ok:
-                    raise RuntimeError(f"frame {i}: the preview could not be encoded as PNG")
-                with replacing(previews / f"{i:06d}.png") as tmp:
-                    tmp.write_bytes(png.tobytes())
-            fr.write_frame(target, rgb=rgb, depth=g.depth, instance=g.instance, semantic=g.semantic)
-        emit(event="frame", frame=i, seconds=round(time.time() - t0, 4), cpu=round(time.process_time() - c0, 4))
+                    previews.mkdir(parents=True, exist_ok=True)
+                    ok, png = cv2.imencode(".png", srgb8(rgb)[..., ::-1])
+                    if not ok:
+                        raise RuntimeError(f"frame {i}: the preview could not be encoded as PNG")
+                    with replacing(previews / f"{i:06d}.png") as tmp:
+                        tmp.write_bytes(png.tobytes())
+                fr.write_frame(target, rgb=rgb, depth=g.depth, instance=g.instance, semantic=g.semantic)
+            emit(event="frame", frame=i, seconds=round(time.time() - t0, 4), cpu=round(time.process_time() - c0, 4))
+    finally:
+        shutil.rmtree(tmpdir, ignore_errors=True)
     return 0
 
 

@@ -234,3 +234,16 @@ def test_lighting_presets_follow_the_paper_design(tmp_path):
         assert np.array_equal(a.depth, b.depth) and np.array_equal(a.instance, b.instance)
         assert not np.array_equal(a.rgb, b.rgb)
     assert metas["day"]["blender"].startswith("4.5")
+
+
+@pytest.mark.blender
+def test_a_blender_chunk_leaves_no_scratch_folder(tmp_path, monkeypatch):
+    """The Blender worker renders each frame into a scratch folder (synth_render_*) and removes it when
+    its chunk ends: a render leaves nothing in the temporary folder."""
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    monkeypatch.setenv("TMPDIR", str(scratch))  # the worker processes inherit it
+    spec = TourSpec(layout="apt_0", path=spread_path(tmp_path, 2), out=str(tmp_path / "t"), renderer="blender",
+                    width=16, height=12)
+    assert render_tour(spec, progress=False)["complete"]
+    assert sorted((tmp_path / "t" / "frames").glob("*.exr")) and list(scratch.iterdir()) == []
