@@ -325,13 +325,17 @@ def test_stability_benchmark_options_are_bounded(capsys, args, says):
 
 def test_stability_benchmark_out_inside_a_render_folder_is_refused(tmp_path, capsys):
     job = tmp_path / "job"
-    job.mkdir()
+    tour = job / "apt_0__day__query"
+    tour.mkdir(parents=True)
     (job / "design.json").write_text("{}")
-    for out in (job, job / "sub"):
+    (tour / "meta.json").write_text("{}")
+    (tour / "poses.txt").write_text("")
+    for out, what in ((job, "holds a rendered design ("), (tour, "lies inside a rendered tour ("),
+                      (tour / "sub", "lies inside a rendered tour (")):
         code = _exit_code(["reloc", "bench", "stability", "demo_experiment", "--out", str(out)])
-        err = _one_line(capsys, code, "a rendered design (")
+        err = _one_line(capsys, code, what)
         assert err.endswith("write the stability benchmark into another folder"), err
-    assert sorted(p.name for p in job.iterdir()) == ["design.json"]  # nothing written into it
+    assert sorted(p.name for p in job.rglob("*")) == ["apt_0__day__query", "design.json", "meta.json", "poses.txt"]
 
 
 # ---------------------------------------------------------------------------------------------
