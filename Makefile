@@ -5,6 +5,8 @@ PY ?= $(shell command -v python3.11 || command -v python3)
 VENV ?= .venv
 OUT ?= out
 PYTEST_ARGS ?=
+# make test runs the suite in TEST_WORKERS pytest-xdist processes, each taking whole test files (--dist loadfile)
+TEST_WORKERS ?= 2
 
 .PHONY: setup demo test clean
 .DEFAULT_GOAL := demo
@@ -33,7 +35,7 @@ demo: setup
 	$(VENV)/bin/reloc check demo_checks $(OUT)/demo/experiment
 
 test: setup $(VENV)/.installed-train
-	$(VENV)/bin/python -m pytest $(PYTEST_ARGS)
+	$(VENV)/bin/python -m pytest -n $(TEST_WORKERS) --dist loadfile $(PYTEST_ARGS)
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache
