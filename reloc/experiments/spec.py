@@ -278,10 +278,7 @@ def load_experiment(path) -> ExperimentSpec:
         if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
             _fail(src, k, f"expected a positive integer, got {v!r}")
     cfg = _mapping_of(doc.get("config"), src, "config")
-    try:
-        config = Config.from_dict(cfg, source=str(src))
-    except (ValueError, TypeError) as e:
-        raise UserError(str(e) if str(src) in str(e) else f"{src}: config: {e}") from None
+    config = Config.from_dict(cfg, source=str(src), under="config")
     det = _detector_spec(doc.get("detector", "learned"), src)
     if det["kind"] == "oracle" and "videoreloc_oracle" in methods:
         _fail(src, "methods", "videoreloc_oracle is the oracle row beside another detector; "
