@@ -127,6 +127,13 @@ def positive_int(file, v, field: str) -> int:
     return v
 
 
+def nonneg_int(file, v, field: str) -> int:
+    """An integer >= 0 (a seed, a count, a retry budget)."""
+    if not is_integer(v) or v < 0:
+        fail(file, field, f"expected a non-negative integer, got {shown(v)}")
+    return v
+
+
 def whole_number(file, v, field: str, positive: bool = False) -> int:
     """A finite number that is whole (640 or 640.0, as JSON writers may give it), as an int."""
     x = number(file, v, field, positive=positive)
