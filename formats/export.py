@@ -109,6 +109,7 @@ import numpy as np
 from formats.atomic import replacing, write_json_atomic, write_text_atomic
 from formats.camera import matrix_to_quat
 from formats.errors import SceneFormatError, UserError, check_output_folder
+from formats.fields import is_integer, is_number
 from formats.tour import CAMERA_FILE, META_FILE, POSES_FILE, Tour, ranges_text, tonemap
 from formats.yamlfile import read_json
 
@@ -134,7 +135,7 @@ def parse_exposure(value) -> str | float:
             value = float(v)
         except ValueError:
             raise UserError(f"--exposure {value!r}: expected auto, fixed or a positive number") from None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+    if not is_number(value) or value <= 0:
         raise UserError(f"--exposure {value!r}: expected auto, fixed or a positive number")
     return float(value)
 
@@ -575,18 +576,18 @@ def read_manifest(out_dir) -> dict:
     tour = doc.get("tour")
     if not isinstance(tour, dict) or not isinstance(tour.get("key"), str) or not isinstance(tour.get("path"), str):
         raise SceneFormatError(path, "tour", "expected {path, key, ...}")
-    if not isinstance(tour.get("fps"), (int, float)) or isinstance(tour.get("fps"), bool) or tour["fps"] <= 0:
+    if not is_number(tour.get("fps")) or tour["fps"] <= 0:
         raise SceneFormatError(path, "tour.fps", f"expected a positive number, got {tour.get('fps')!r}")
     frames = doc.get("frames")
     if not isinstance(frames, dict):
         raise SceneFormatError(path, "frames", "expected a mapping of file name -> frame index")
     for name, i in frames.items():
-        if isinstance(i, bool) or not isinstance(i, int) or i < 0:
+        if not is_integer(i) or i < 0:
             raise SceneFormatError(path, f"frames.{name}", f"expected a frame index, got {i!r}")
     exp = doc.get("exposure")
     if not isinstance(exp, dict) or exp.get("mode") not in ("auto", "fixed"):
         raise SceneFormatError(path, "exposure.mode", "expected 'auto' or 'fixed'")
-    if exp["mode"] == "fixed" and not (isinstance(exp.get("factor"), (int, float)) and exp["factor"] > 0):
+    if exp["mode"] == "fixed" and not (is_number(exp.get("factor")) and exp["factor"] > 0):
         raise SceneFormatError(path, "exposure.factor", f"expected a positive number, got {exp.get('factor')!r}")
     if exp["mode"] == "auto" and not isinstance(exp.get("factors"), dict):
         raise SceneFormatError(path, "exposure.factors", "expected a mapping of frame index -> factor")
@@ -757,7 +758,7 @@ def _fixed_factor(tour: Tour, rgb_frames: list[_Frame], out: Path, manifest: dic
     req_path = out / REQUEST_FILE
     try:
         req = read_json(req_path, expect_object=False)
-        if isinstance(req.get("fixed_factor"), (int, float)):
+        if is_number(req.get("fixed_factor")):
             return float(req["fixed_factor"])
     except (SceneFormatError, OSError, ValueError, AttributeError):
         pass

@@ -87,39 +87,79 @@ def name_text(file, v, field: str = "name") -> str:
     return clean_name(string(file, v, field), file, field)
 
 
-def _is_number(v) -> bool:
+def is_number(v) -> bool:
+    """A finite int or float; never a bool (``True`` is not 1). The one number test of the toolkit."""
     return not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(float(v))
 
 
-def number(file, v, field: str, positive: bool = False, lo: float | None = None) -> float:
-    """A finite number (int or float); ``positive``: > 0; ``lo``: >= lo."""
-    if not _is_number(v):
+def is_integer(v) -> bool:
+    """An int, never a bool (``True`` is not 1) and never a float (2.0 is not an integer here)."""
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def number(file, v, field: str, positive: bool = False, lo: float | None = None, hi: float | None = None) -> float:
+    """A finite number (int or float); ``positive``: > 0; ``lo``: >= lo; ``hi``: <= hi."""
+    if not is_number(v):
         fail(file, field, f"expected a finite number, got {shown(v)}")
     if positive and v <= 0:
         fail(file, field, f"must be > 0, got {shown(v)}")
     if lo is not None and v < lo:
         fail(file, field, f"must be >= {lo}, got {shown(v)}")
+    if hi is not None and v > hi:
+        fail(file, field, f"must be <= {hi}, got {shown(v)}")
     return float(v)
 
 
-def integer(file, v, field: str, lo: int | None = None) -> int:
-    """An integer (not a bool, not 2.0); ``lo``: >= lo."""
-    if isinstance(v, bool) or not isinstance(v, int):
+def integer(file, v, field: str, lo: int | None = None, hi: int | None = None) -> int:
+    """An integer (not a bool, not 2.0); ``lo``: >= lo; ``hi``: <= hi."""
+    if not is_integer(v):
         fail(file, field, f"expected an integer, got {shown(v)}")
     if lo is not None and v < lo:
         fail(file, field, f"expected an integer >= {lo}, got {shown(v)}")
+    if hi is not None and v > hi:
+        fail(file, field, f"expected an integer <= {hi}, got {shown(v)}")
     return v
 
 
 def positive_int(file, v, field: str) -> int:
-    if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
+    if not is_integer(v) or v <= 0:
         fail(file, field, f"expected a positive integer, got {shown(v)}")
     return v
 
 
+def nonneg_int(file, v, field: str) -> int:
+    """An integer >= 0 (a seed, a count, a retry budget)."""
+    if not is_integer(v) or v < 0:
+        fail(file, field, f"expected a non-negative integer, got {shown(v)}")
+    return v
+
+
+def whole_number(file, v, field: str, positive: bool = False) -> int:
+    """A finite number that is whole (640 or 640.0, as JSON writers may give it), as an int."""
+    x = number(file, v, field, positive=positive)
+    if x != int(x):
+        fail(file, field, f"expected an integer, got {shown(v)}")
+    return int(x)
+
+
+def required(file, d: dict, key: str, field: str | None = None):
+    """``d[key]``, or a one-line error naming the field (``field``, default ``key``) when it is missing."""
+    if key not in d:
+        fail(file, field or key, "missing")
+    return d[key]
+
+
+def vector(file, v, field: str, n: int, positive: bool = False) -> tuple[float, ...]:
+    """A list of exactly ``n`` finite numbers as a tuple of floats; an element that is not one is
+    named by its index (``position[2]``), ``positive``: each > 0."""
+    if not isinstance(v, (list, tuple)) or len(v) != n:
+        fail(file, field, f"expected a list of {n} numbers, got {shown(v)}")
+    return tuple(number(file, x, f"{field}[{i}]", positive=positive) for i, x in enumerate(v))
+
+
 def numbers(file, v, field: str, n: int, what: str = "", positive: bool = False) -> np.ndarray:
     """A list of exactly ``n`` finite numbers (``what`` names them in the message: " (w, x, y, z)")."""
-    if not (isinstance(v, list) and len(v) == n and all(_is_number(x) for x in v)):
+    if not (isinstance(v, list) and len(v) == n and all(is_number(x) for x in v)):
         fail(file, field, f"expected {n} numbers{what}, got {shown(v)}")
     if positive and any(x <= 0 for x in v):
         fail(file, field, f"expected {n} numbers > 0{what}, got {shown(v)}")
@@ -158,18 +198,31 @@ def names(file, v, field: str) -> list[str]:
 
 
 def boolean(file, v, field: str) -> bool:
+    """``true`` or ``false``; not 1, not "yes"."""
     if not isinstance(v, bool):
         fail(file, field, f"expected true or false, got {shown(v)}")
     return v
 
 
-def mapping(file, v, field: str | None) -> dict:
+def mapping(file, v, field: str | None, allowed=None, required=(), what: str = "a JSON object") -> dict:
+    """A mapping (``what`` names it in the message: a YAML file says "a mapping"); ``allowed``: the
+    keys it may have (others are refused, naming them), ``required``: the keys it must have."""
     if not isinstance(v, dict):
-        fail(file, field, f"expected a JSON object, got {type(v).__name__}")
+        fail(file, field, f"expected {what}, got {type(v).__name__}")
+    if allowed is not None:
+        unknown = set(v) - set(allowed)
+        if unknown:
+            fail(file, field, f"unknown key(s) {sorted(map(str, unknown))}; allowed: {sorted(allowed)}")
+    missing = set(required) - set(v)
+    if missing:
+        fail(file, field, f"missing key(s) {sorted(missing)}")
     return v
 
 
-def listing(file, v, field: str) -> list:
+def listing(file, v, field: str, none_is_empty: bool = False) -> list:
+    """A list; ``none_is_empty``: a missing (None) value is an empty list."""
+    if v is None and none_is_empty:
+        return []
     if not isinstance(v, list):
         fail(file, field, f"expected a list, got {type(v).__name__}")
     return v

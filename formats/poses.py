@@ -76,6 +76,7 @@ import numpy as np
 from .atomic import write_text_atomic
 from .camera import matrix_to_quat, quat_to_matrix
 from .errors import SceneFormatError, UserError
+from .fields import is_integer
 from .yamlfile import read_json
 
 CONVENTIONS = ("tum", "ace", "colmap", "mapfree")
@@ -120,7 +121,7 @@ def load_names(path) -> dict[str, int]:
     if not isinstance(frames, dict):
         raise SceneFormatError(f, "frames", f"expected a mapping file name -> frame index, got {type(frames).__name__}")
     for k, v in frames.items():
-        if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+        if not is_integer(v) or v < 0:
             raise SceneFormatError(f, f"frames[{k!r}]", f"expected a frame index (integer >= 0), got {v!r}")
     return dict(frames)
 

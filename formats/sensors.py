@@ -132,7 +132,7 @@ import numpy as np
 
 from .camera import Intrinsics
 from .errors import SceneFormatError
-from .fields import number, shown
+from .fields import boolean, is_integer, is_number, number, shown
 from .yamlfile import read_yaml
 
 PRESET_DIR = Path(__file__).parent / "sensor_presets"
@@ -265,9 +265,7 @@ def _section(doc, cls, file: str, key: str):
             out[k] = _NULLABLE[k]
             continue
         if k in _BOOLS:
-            if not isinstance(v, bool):
-                raise SceneFormatError(file, field, f"expected true or false, got {v!r}")
-            out[k] = v
+            out[k] = boolean(file, v, field)
             continue
         if k in _INF_OK and isinstance(v, float) and v == math.inf:
             x = math.inf  # "no limit": the one non-finite value these keys take (formats.fields.number refuses it)
@@ -349,7 +347,7 @@ def parse_sensor(doc, source: str, _chain: tuple = ()) -> Sensor:
     res = doc.get("resolution")
     if res is not None:
         if (not isinstance(res, list) or len(res) != 2
-                or any(isinstance(v, bool) or not isinstance(v, int) or v <= 0 for v in res)):
+                or any(not is_integer(v) or v <= 0 for v in res)):
             raise SceneFormatError(source, "resolution", f"expected [width, height] in pixels, got {res!r}")
         res = (int(res[0]), int(res[1]))
     return Sensor(name, _section(doc.get("depth"), DepthModel, source, "depth"),
@@ -364,7 +362,7 @@ def scale_noise(sensor: Sensor, scale: float, name: str | None = None) -> Sensor
     the read noise by ``scale``: the auto exposure picks the same time and gain, and shot and read
     noise relative to the signal both grow by ``scale``, in bright and dark frames alike. What is not noise stays: ranges, grazing and brightness dropouts, motion
     blur, resolution."""
-    if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not math.isfinite(scale) or scale < 0:
+    if not is_number(scale) or scale < 0:
         raise ValueError(f"noise_scale: expected a number >= 0 (0 ideal, 1 the preset, 2-3 worse), got {scale!r}")
     label = name or f"{sensor.name}_x{scale:g}".replace(".", "p")
     if scale == 0:

@@ -34,7 +34,7 @@ from .atomic import write_json_atomic
 from .camera import DEFAULT_FPS, Intrinsics, camera_document, read_tum, write_tum
 from .color import srgb_encode
 from .errors import SceneFormatError, UserError
-from .fields import fail, number
+from .fields import is_integer, number, required, whole_number
 from .yamlfile import read_json
 
 CAMERA_FILE = "camera.json"
@@ -94,27 +94,14 @@ def _read_json(path: Path, what: str) -> dict:
     return read_json(path, missing=f"{what} not found")
 
 
-def _number(d: dict, key: str, path: Path, positive: bool = False, integer: bool = False) -> float:
-    """``d[key]`` checked by ``formats.fields.number``; ``integer``: a whole number (640 or 640.0)."""
-    if key not in d:
-        fail(path, key, "missing")
-    v = number(path, d[key], key, positive=positive)
-    if integer and v != int(v):
-        fail(path, key, f"expected an integer, got {d[key]!r}")
-    return int(v) if integer else v
-
-
 def read_camera(path: Path) -> tuple[Intrinsics, float, dict]:
     """A tour's ``camera.json``: (intrinsics, fps, the whole document), every field checked (a
     SceneFormatError naming the file and the field)."""
     d = _read_json(path, "camera file")
-    w = _number(d, "width", path, positive=True, integer=True)
-    h = _number(d, "height", path, positive=True, integer=True)
-    fx = _number(d, "fx", path, positive=True)
-    fy = _number(d, "fy", path, positive=True)
-    cx = _number(d, "cx", path)
-    cy = _number(d, "cy", path)
-    fps = _number(d, "fps", path, positive=True)
+    w = whole_number(path, required(path, d, "width"), "width", positive=True)
+    h = whole_number(path, required(path, d, "height"), "height", positive=True)
+    fx, fy, cx, cy, fps = (number(path, required(path, d, k), k, positive=k not in ("cx", "cy"))
+                           for k in ("fx", "fy", "cx", "cy", "fps"))
     intr = Intrinsics(w, h, fx, fy, cx, cy)
     if "K" in d:
         try:
@@ -263,7 +250,7 @@ class Tour:
     def disagreeing_n_frames(self) -> int | None:
         """meta.json's ``n_frames`` when it is given and differs from the number of poses, else None."""
         n_meta = self.meta.get("n_frames")
-        ok = not isinstance(n_meta, int) or isinstance(n_meta, bool) or n_meta == len(self.frame_indices)
+        ok = not is_integer(n_meta) or n_meta == len(self.frame_indices)
         return None if ok else n_meta
 
     def pose(self, index: int) -> np.ndarray:
@@ -353,10 +340,10 @@ class Tour:
             if not isinstance(d.get("classes"), dict):
                 raise SceneFormatError(path, "classes", "expected a mapping of class name -> semantic id")
             for k, b in enumerate(d["boxes"]):
-                if not isinstance(b, dict) or isinstance(b.get("id"), bool) or not isinstance(b.get("id"), int):
+                if not isinstance(b, dict) or not is_integer(b.get("id")):
                     raise SceneFormatError(path, f"boxes[{k}].id", f"expected an integer id, got {b!r:.80}")
             for name, v in d["classes"].items():
-                if isinstance(v, bool) or not isinstance(v, int):
+                if not is_integer(v):
                     raise SceneFormatError(path, f"classes.{name}", f"expected an integer id, got {v!r}")
             self._objects = d
         return self._objects

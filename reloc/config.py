@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 
+from formats import fields
 from formats.errors import UserError
 from formats.yamlfile import read_yaml
 
@@ -247,35 +248,37 @@ class Config:
         return dataclasses.asdict(self)
 
     @staticmethod
-    def from_dict(d: dict | None, source: str = "<config>") -> "Config":
-        """Overrides on top of the defaults; unknown sections or keys are errors naming them."""
+    def from_dict(d: dict | None, source: str = "<config>", under: str = "") -> "Config":
+        """Overrides on top of the defaults; unknown sections or keys and values of the wrong type are
+        a SceneFormatError naming ``source`` and the key (``under``: where the overrides sit in the
+        file, e.g. ``config`` in an experiment spec, prefixed to the key), checked by formats.fields."""
         cfg = Config()
+        at = f"{under}." if under else ""
         sections = {f.name for f in dataclasses.fields(Config)}
         for section, values in (d or {}).items():
             if section not in sections:
-                raise ValueError(f"{source}: {section}: unknown section; known: {', '.join(sorted(sections))}")
-            if not isinstance(values, dict):
-                raise ValueError(f"{source}: {section}: expected a mapping")
+                fields.fail(source, f"{at}{section}", f"unknown section; known: {', '.join(sorted(sections))}")
+            fields.mapping(source, values, f"{at}{section}", what="a mapping")
             names = {f.name for f in dataclasses.fields(getattr(cfg, section))}
             for name, v in values.items():
+                key = f"{at}{section}.{name}"
                 if name not in names:
-                    raise ValueError(f"{source}: {section}.{name}: unknown setting")
+                    fields.fail(source, key, "unknown setting")
                 cur = getattr(getattr(cfg, section), name)
                 if isinstance(cur, tuple):
-                    if not isinstance(v, (list, tuple)) or not all(isinstance(x, int) and not isinstance(x, bool) for x in v):
-                        raise ValueError(f"{source}: {section}.{name}: expected a list of integers, got {v!r}")
-                    v = tuple(v)
+                    if not isinstance(v, (list, tuple)):
+                        fields.fail(source, key, f"expected a list of integers, got {fields.shown(v)}")
+                    v = tuple(fields.integer(source, x, f"{key}[{i}]") for i, x in enumerate(v))
                 elif isinstance(cur, bool):
-                    if not isinstance(v, bool):
-                        raise ValueError(f"{source}: {section}.{name}: expected true or false, got {v!r}")
+                    v = fields.boolean(source, v, key)
                 elif isinstance(cur, str):
                     if not isinstance(v, str):
-                        raise ValueError(f"{source}: {section}.{name}: expected a name, got {v!r}")
-                elif isinstance(v, bool) or not isinstance(v, (int, float)):
-                    raise ValueError(f"{source}: {section}.{name}: expected a number, got {v!r}")
-                elif isinstance(cur, int) and isinstance(v, float) and not v.is_integer():
-                    raise ValueError(f"{source}: {section}.{name}: expected an integer, got {v!r}")
-                cfg = cfg.replace(f"{section}.{name}", v if isinstance(cur, tuple) else type(cur)(v))
+                        fields.fail(source, key, f"expected a name, got {fields.shown(v)}")
+                elif isinstance(cur, int):
+                    v = fields.whole_number(source, v, key)
+                else:
+                    v = fields.number(source, v, key)
+                cfg = cfg.replace(f"{section}.{name}", v)
         return cfg
 
 
@@ -287,7 +290,4 @@ def load_config(path) -> Config:
     d = read_yaml(p)
     if d is not None and not isinstance(d, dict):
         raise UserError(f"{p}: expected a mapping of sections (map, odometry, clips, registration, ...)")
-    try:
-        return Config.from_dict(d, source=str(p))
-    except (ValueError, KeyError, TypeError) as e:
-        raise UserError(str(e).strip("'\"")) from None
+    return Config.from_dict(d, source=str(p))

@@ -42,6 +42,7 @@ from scipy.spatial import cKDTree
 from formats.atomic import save_npz_atomic, write_json_atomic
 from formats.camera import write_tum
 from formats.errors import UserError
+from formats.fields import is_number
 
 
 
@@ -353,7 +354,7 @@ class PointMap:
         if not (np.isfinite(pts).all() and np.isfinite(nrm).all() and np.isfinite(feat).all()):
             raise UserError(f"{path}: non-finite values in the map")
         voxel = meta.get("voxel")
-        if isinstance(voxel, bool) or not isinstance(voxel, (int, float)) or not voxel > 0:
+        if not is_number(voxel) or not voxel > 0:
             raise UserError(f"{path}: meta.voxel: expected a positive number, got {voxel!r}")
         return PointMap(pts.astype(np.float32), nrm.astype(np.float32), keys.astype(np.int32),
                         feat.astype(np.float32), float(voxel), meta, str(path))

@@ -29,7 +29,7 @@ import numpy as np
 
 from formats.cli import MAX_WORKERS as MAX_THREADS
 from formats.errors import UserError, one_line
-from formats.fields import shown
+from formats.fields import is_integer, shown
 from formats.tour import tonemap
 
 from .. import resources
@@ -62,9 +62,9 @@ class Perturbation:
     def __post_init__(self):
         for k in ("input_jitter", "seed"):
             v = getattr(self, k)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+            if not is_integer(v) or v < 0:
                 raise ValueError(f"perturbation.{k}: expected a non-negative integer, got {v!r}")
-        if isinstance(self.threads, bool) or not isinstance(self.threads, int) or not 1 <= self.threads <= MAX_THREADS:
+        if not is_integer(self.threads) or not 1 <= self.threads <= MAX_THREADS:
             raise ValueError(f"perturbation.threads: expected an integer from 1 to {MAX_THREADS}, got {shown(self.threads)}")
         if self.input_jitter > 255 or self.seed >= 2**32:
             raise ValueError(f"perturbation: input_jitter is at most 255 levels and seed below 2^32, got "

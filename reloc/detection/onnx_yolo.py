@@ -23,6 +23,7 @@ import numpy as np
 import yaml
 
 from formats.errors import UserError, one_line
+from formats.fields import is_integer
 from formats.yamlfile import read_yaml
 from formats.color import srgb8
 
@@ -112,7 +113,7 @@ def _normalize_class_map(data, where: str) -> dict[int | str, str | None]:
         raise UserError(f"{where}: the class map is empty")
     out: dict[int | str, str | None] = {}
     for k, v in data.items():
-        if isinstance(k, bool) or not isinstance(k, (int, str)):
+        if not (is_integer(k) or isinstance(k, str)):
             raise UserError(f"{where}: key {k!r}: expected a class index or a model class name")
         if isinstance(k, str):
             k = k.strip()
@@ -387,10 +388,8 @@ def _literal(text):
 
 def _size_pair(v) -> tuple[int, int] | None:
     """imgsz as (h, w): an int, or a pair; None if not usable."""
-    if isinstance(v, bool):
-        return None
-    if isinstance(v, int) and v > 0:
+    if is_integer(v) and v > 0:
         return (v, v)
-    if isinstance(v, (list, tuple)) and len(v) == 2 and all(isinstance(x, int) and x > 0 for x in v):
+    if isinstance(v, (list, tuple)) and len(v) == 2 and all(is_integer(x) and x > 0 for x in v):
         return (int(v[0]), int(v[1]))
     return None

@@ -55,6 +55,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from formats.errors import SceneFormatError, UserError
+from formats.fields import is_number
 from formats.atomic import write_text_atomic
 
 PLACEHOLDERS = ("mapping", "query", "scene", "out", "map_out", "tour", "name")
@@ -139,7 +140,7 @@ def parse_external(doc, src, field: str, builtin: tuple) -> ExternalMethod:
     if not isinstance(label, str) or not label:
         raise SceneFormatError(src, f"{field}.label", f"expected a string, got {label!r}")
     version = doc.get("version", "")
-    if not isinstance(version, (str, int, float)) or isinstance(version, bool):
+    if not (isinstance(version, str) or is_number(version)):
         raise SceneFormatError(src, f"{field}.version", f"expected a string or number, got {version!r}")
     common = {"name": name, "kind": kind, "poses": poses, "mode": mode, "label": label, "version": str(version)}
     if kind == "command":
@@ -157,11 +158,10 @@ def parse_external(doc, src, field: str, builtin: tuple) -> ExternalMethod:
             raise SceneFormatError(src, f"{field}.command", "{map_out} is what map_command writes: add a map_command")
         poses_file = check_template(doc.get("poses_file", "{out}/poses.txt"), src, f"{field}.poses_file", PLACEHOLDERS)
         exposure = doc.get("exposure", "auto")
-        if not (exposure in ("auto", "fixed") or (isinstance(exposure, (int, float)) and not isinstance(exposure, bool)
-                                                  and exposure > 0)):
+        if not (exposure in ("auto", "fixed") or (is_number(exposure) and exposure > 0)):
             raise SceneFormatError(src, f"{field}.exposure", f"expected auto, fixed or a positive factor, got {exposure!r}")
         timeout = doc.get("timeout_s")
-        if timeout is not None and (isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or timeout <= 0):
+        if timeout is not None and (not is_number(timeout) or timeout <= 0):
             raise SceneFormatError(src, f"{field}.timeout_s", f"expected a positive number of seconds, got {timeout!r}")
         return ExternalMethod(**common, command=command, map_command=map_command, export=export, poses_file=poses_file,
                               exposure=exposure, timeout_s=None if timeout is None else float(timeout))

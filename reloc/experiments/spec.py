@@ -296,14 +296,9 @@ def load_experiment(path) -> ExperimentSpec:
     if doc.get("map", "build") not in ("build", "ground-truth"):
         _fail(src, "map", f"expected build or ground-truth, got {doc.get('map')!r}")
     for k in ("one_frame_stride", "workers", "replicates"):
-        v = doc.get(k, 1)
-        if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
-            _fail(src, k, f"expected a positive integer, got {v!r}")
+        fields.positive_int(src, doc.get(k, 1), k)
     cfg = _mapping_of(doc.get("config"), src, "config")
-    try:
-        config = Config.from_dict(cfg, source=str(src))
-    except (ValueError, TypeError) as e:
-        raise UserError(str(e) if str(src) in str(e) else f"{src}: config: {e}") from None
+    config = Config.from_dict(cfg, source=str(src), under="config")
     det = _detector_spec(doc.get("detector", "learned"), src)
     oracle_rows = [m for m in listed if m.oracle_of is not None]
     if det["kind"] == "oracle" and oracle_rows:
@@ -323,9 +318,7 @@ def load_experiment(path) -> ExperimentSpec:
             _check_overrides(m.options_class(), options[m.options_key], src, m.options_key)
     tours_root = Path(doc["tours"]) if doc.get("tours") else Path(job_out)
     sensors, map_sensor = _sensors_of(doc, src)
-    seed = doc.get("seed", 0)
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        _fail(src, "seed", f"expected a non-negative integer, got {seed!r}")
+    seed = fields.nonneg_int(src, doc.get("seed", 0), "seed")
     return ExperimentSpec(
         name=fields.name_text(src, doc["name"], "name"), source=src, render=render, tours_root=tours_root,
         out=Path(fields.out_folder(src, doc["out"])), mapping=mapping, query=fields.string(src, doc["query"], "query"),

@@ -30,6 +30,7 @@ import math
 from dataclasses import dataclass
 
 from formats.errors import SceneFormatError
+from formats.fields import is_number
 from formats.atomic import save_figure
 
 from .intervals import OK_COARSE, figure_values
@@ -69,7 +70,7 @@ def parse_sweep(doc, source) -> Sweep | None:
         raise SceneFormatError(source, "sweep.levels", "expected a mapping of level -> name (layout, lighting or sensor)")
     out = []
     for lv, name in levels.items():
-        if isinstance(lv, bool) or not isinstance(lv, (int, float)) or not math.isfinite(lv) or lv < 0:
+        if not is_number(lv) or lv < 0:
             raise SceneFormatError(source, f"sweep.levels.{lv}", f"expected a level >= 0, got {lv!r}")
         if not isinstance(name, str) or not name:
             raise SceneFormatError(source, f"sweep.levels.{lv}", f"expected the name of a {FACTORS[factor]}, got {name!r}")
@@ -80,7 +81,7 @@ def parse_sweep(doc, source) -> Sweep | None:
     if len(set(names)) != len(names):
         raise SceneFormatError(source, "sweep.levels", "two levels name the same tours")
     fraction = doc.get("fraction", 0.8)
-    if isinstance(fraction, bool) or not isinstance(fraction, (int, float)) or not 0 < fraction < 1:
+    if not is_number(fraction) or not 0 < fraction < 1:
         raise SceneFormatError(source, "sweep.fraction", f"expected a fraction in (0, 1), got {fraction!r}")
     return Sweep(factor, tuple(sorted(out)), float(fraction))
 

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from formats.boxes import BOXES_FORMAT, STRUCTURE_KINDS
+from formats import fields
 from formats.errors import SceneFormatError
 from formats.yamlfile import read_json
 
@@ -233,9 +234,7 @@ def _validate(doc, source: str) -> list[dict]:
         where = f"boxes[{k}]"
         if not isinstance(b, dict):
             raise SceneFormatError(source, where, "expected a mapping")
-        bid = b.get("id")
-        if isinstance(bid, bool) or not isinstance(bid, int):
-            raise SceneFormatError(source, f"{where}.id", f"expected an integer, got {bid!r}")
+        bid = fields.integer(source, b.get("id"), f"{where}.id")
         if bid in seen:
             raise SceneFormatError(source, f"{where}.id", f"duplicate id {bid}")
         seen.add(bid)
@@ -247,13 +246,13 @@ def _validate(doc, source: str) -> list[dict]:
         for key in ("center", "size"):
             v = b.get(key)
             if (not isinstance(v, list) or len(v) != 3
-                    or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v)):
+                    or not all(fields.is_number(x) for x in v)):
                 raise SceneFormatError(source, f"{where}.{key}", f"expected a list of 3 finite numbers, got {v!r}")
         if any(x <= 0 for x in b["size"]):
             raise SceneFormatError(source, f"{where}.size", f"sizes must be positive, got {b['size']}")
         yaw = b.get("yaw")
-        if isinstance(yaw, bool) or not isinstance(yaw, (int, float)) or not math.isfinite(yaw):
+        if not fields.is_number(yaw):
             raise SceneFormatError(source, f"{where}.yaw", f"expected a number (radians), got {yaw!r}")
-        if "movable" in b and not isinstance(b["movable"], bool):
-            raise SceneFormatError(source, f"{where}.movable", f"expected true or false, got {b['movable']!r}")
+        if "movable" in b:
+            fields.boolean(source, b["movable"], f"{where}.movable")
     return boxes

@@ -43,10 +43,10 @@ Not modelled: Ray installing the runtime environment on a node's first task (min
 from __future__ import annotations
 
 import heapq
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
+from formats import fields
 from formats.errors import SceneFormatError, UserError
 from formats.yamlfile import read_json
 
@@ -124,68 +124,57 @@ def parse_nodes(text) -> list[int]:
 # the calibration document
 
 
-def _cal_fail(source, field: str, msg: str):
-    raise UserError(f"{source}: {field}: {msg}")
-
-
-def _number(v) -> bool:
-    return not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
-
-
 def validate_calibration(doc, source: str) -> dict:
-    """Check a calibration document (``--calibration FILE``); a UserError names the file and the field."""
+    """Check a calibration document (``--calibration FILE``); a SceneFormatError (a UserError) names the
+    file and the field."""
     if not isinstance(doc, dict):
         raise UserError(f"{source}: expected a JSON object (a file written by --save-calibration)")
     if doc.get("format") != CALIBRATION_FORMAT:
-        _cal_fail(source, "format", f"expected {CALIBRATION_FORMAT!r}, got {doc.get('format')!r}")
+        fields.fail(source, "format", f"expected {CALIBRATION_FORMAT!r}, got {doc.get('format')!r}")
     if doc.get("version") != CALIBRATION_VERSION:
-        _cal_fail(source, "version", f"expected {CALIBRATION_VERSION}, got {doc.get('version')!r}")
+        fields.fail(source, "version", f"expected {CALIBRATION_VERSION}, got {doc.get('version')!r}")
     spf = doc.get("seconds_per_frame")
     if not isinstance(spf, dict) or not spf:
-        _cal_fail(source, "seconds_per_frame", f"expected a mapping of pass kind to seconds, got {spf!r}")
+        fields.fail(source, "seconds_per_frame", f"expected a mapping of pass kind to seconds, got {spf!r}")
     for k, v in spf.items():
         if k not in RENDER_KINDS:
-            _cal_fail(source, f"seconds_per_frame.{k}", f"unknown pass kind; known: {', '.join(RENDER_KINDS)}")
-        if not _number(v) or v <= 0:
-            _cal_fail(source, f"seconds_per_frame.{k}", f"expected a positive number of seconds, got {v!r}")
+            fields.fail(source, f"seconds_per_frame.{k}", f"unknown pass kind; known: {', '.join(RENDER_KINDS)}")
+        if not fields.is_number(v) or v <= 0:
+            fields.fail(source, f"seconds_per_frame.{k}", f"expected a positive number of seconds, got {v!r}")
     cps = doc.get("cpu_seconds_per_frame", {})
     if not isinstance(cps, dict):
-        _cal_fail(source, "cpu_seconds_per_frame", f"expected a mapping of pass kind to CPU seconds, got {cps!r}")
+        fields.fail(source, "cpu_seconds_per_frame", f"expected a mapping of pass kind to CPU seconds, got {cps!r}")
     for k, v in cps.items():
         if k not in spf:
-            _cal_fail(source, f"cpu_seconds_per_frame.{k}", "a pass kind without seconds_per_frame")
-        if not _number(v) or v <= 0:
-            _cal_fail(source, f"cpu_seconds_per_frame.{k}", f"expected a positive number of seconds, got {v!r}")
+            fields.fail(source, f"cpu_seconds_per_frame.{k}", "a pass kind without seconds_per_frame")
+        if not fields.is_number(v) or v <= 0:
+            fields.fail(source, f"cpu_seconds_per_frame.{k}", f"expected a positive number of seconds, got {v!r}")
     bpf = doc.get("bytes_per_frame", {})
     if not isinstance(bpf, dict):
-        _cal_fail(source, "bytes_per_frame", f"expected a mapping of pass kind to bytes, got {bpf!r}")
+        fields.fail(source, "bytes_per_frame", f"expected a mapping of pass kind to bytes, got {bpf!r}")
     for k, v in bpf.items():
-        if k not in RENDER_KINDS or not _number(v) or v < 0:
-            _cal_fail(source, f"bytes_per_frame.{k}", f"expected a known pass kind and a non-negative number, got {v!r}")
-    cpus = doc.get("cpu_count")
-    if isinstance(cpus, bool) or not isinstance(cpus, int) or cpus <= 0:
-        _cal_fail(source, "cpu_count", f"expected a positive integer, got {cpus!r}")
+        if k not in RENDER_KINDS or not fields.is_number(v) or v < 0:
+            fields.fail(source, f"bytes_per_frame.{k}", f"expected a known pass kind and a non-negative number, got {v!r}")
+    fields.positive_int(source, doc.get("cpu_count"), "cpu_count")
     dev = doc.get("device")
     if not isinstance(dev, str) or not dev:
-        _cal_fail(source, "device", f"expected the device rendered on (CPU, OPTIX, CUDA, ...), got {dev!r}")
+        fields.fail(source, "device", f"expected the device rendered on (CPU, OPTIX, CUDA, ...), got {dev!r}")
     devs = doc.get("devices", {})
     if not isinstance(devs, dict) or not all(isinstance(v, str) and v for v in devs.values()):
-        _cal_fail(source, "devices", f"expected a mapping of pass kind to device, got {devs!r}")
+        fields.fail(source, "devices", f"expected a mapping of pass kind to device, got {devs!r}")
     for k in devs:
         if k not in spf:
-            _cal_fail(source, f"devices.{k}", "a pass kind without seconds_per_frame")
+            fields.fail(source, f"devices.{k}", "a pass kind without seconds_per_frame")
     spec = doc.get("spec")
     if not isinstance(spec, dict):
-        _cal_fail(source, "spec", f"expected a mapping (quality, width, height, ...), got {spec!r}")
+        fields.fail(source, "spec", f"expected a mapping (quality, width, height, ...), got {spec!r}")
     if not isinstance(spec.get("quality"), str):
-        _cal_fail(source, "spec.quality", f"expected a quality preset name, got {spec.get('quality')!r}")
+        fields.fail(source, "spec.quality", f"expected a quality preset name, got {spec.get('quality')!r}")
     for k in ("width", "height"):
-        v = spec.get(k)
-        if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
-            _cal_fail(source, f"spec.{k}", f"expected a positive integer, got {v!r}")
+        fields.positive_int(source, spec.get(k), f"spec.{k}")
     for k in ("date", "toolkit_version"):
         if not isinstance(doc.get(k), str) or not doc.get(k):
-            _cal_fail(source, k, f"expected a string, got {doc.get(k)!r}")
+            fields.fail(source, k, f"expected a string, got {doc.get(k)!r}")
     return doc
 
 
@@ -206,12 +195,12 @@ def check_fits(cal: dict, spec, work: list[Work], source: str) -> None:
     """The calibration was measured at the spec's quality and size and covers the plan's pass kinds."""
     s = cal["spec"]
     if s["quality"] != spec.quality:
-        _cal_fail(source, "spec.quality", f"measured at quality {s['quality']!r}, the spec renders at {spec.quality!r}")
+        fields.fail(source, "spec.quality", f"measured at quality {s['quality']!r}, the spec renders at {spec.quality!r}")
     if (s["width"], s["height"]) != (spec.width, spec.height):
-        _cal_fail(source, "spec.width", f"measured at {s['width']}x{s['height']}, the spec renders at {spec.width}x{spec.height}")
+        fields.fail(source, "spec.width", f"measured at {s['width']}x{s['height']}, the spec renders at {spec.width}x{spec.height}")
     for k in sorted({w.kind for w in work if w.kind in RENDER_KINDS}):
         if k not in cal["seconds_per_frame"]:
-            _cal_fail(source, f"seconds_per_frame.{k}", f"missing; the plan has {k} chunks")
+            fields.fail(source, f"seconds_per_frame.{k}", f"missing; the plan has {k} chunks")
 
 
 def is_gpu(device: str | None) -> bool:

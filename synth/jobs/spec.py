@@ -80,14 +80,10 @@ def parse_spec(doc, source: str) -> JobSpec:
     device = doc.get("device", DEFAULTS.device)
     if device not in DEVICES:
         fail(source, "device", f"expected one of {', '.join(DEVICES)}, got {device!r}")
-    seed = doc.get("seed", DEFAULTS.seed)
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        fail(source, "seed", f"expected a non-negative integer, got {seed!r}")
-    retries = doc.get("retries", RETRIES)
-    if isinstance(retries, bool) or not isinstance(retries, int) or retries < 0:
-        fail(source, "retries", f"expected a non-negative integer, got {retries!r}")
+    seed = fields.nonneg_int(source, doc.get("seed", DEFAULTS.seed), "seed")
+    retries = fields.nonneg_int(source, doc.get("retries", RETRIES), "retries")
     hfov = doc.get("hfov_deg", DEFAULTS.hfov_deg)
-    if isinstance(hfov, bool) or not isinstance(hfov, (int, float)) or not 1.0 <= hfov <= 170.0:
+    if not fields.is_number(hfov) or not 1.0 <= hfov <= 170.0:
         fail(source, "hfov_deg", f"expected degrees in [1, 170], got {hfov!r}")
     designs_doc = doc["designs"]
     if not isinstance(designs_doc, list) or not designs_doc:

@@ -24,11 +24,11 @@ one, ``scaled_plan``): change beyond the paper's range.
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
 from formats.errors import UserError
+from formats.fields import is_number
 
 from ..scene.fixtures import layout_fixtures
 from ..scene.model import Layout
@@ -45,7 +45,7 @@ def check_strengths(strengths, what: str = "strength") -> list[float]:
     """Strengths as sorted distinct floats in [0, 1] (one-line UserError naming ``what`` otherwise)."""
     out = []
     for s in strengths:
-        if isinstance(s, bool) or not isinstance(s, (int, float)) or not math.isfinite(s) or not 0.0 <= s <= 1.0:
+        if not is_number(s) or not 0.0 <= s <= 1.0:
             raise UserError(f"{what}: expected a number in [0, 1] (0 = unchanged, 1 = every movable object moved), got {s!r}")
         out.append(float(s))
     if len(set(out)) != len(out):

@@ -371,7 +371,7 @@ def _texture_transforms(path: Path, doc: dict, index: int) -> dict:
     """``{slot: {"offset", "rotation", "scale", "texCoord"}}``: the ``KHR_texture_transform`` of each
     texture slot of glTF material ``index`` that has one, glTF defaults filled in (``texCoord`` None
     when the extension does not override the slot's). SceneFormatError naming the field for bad values."""
-    from formats.fields import fail, mapping, number, numbers
+    from formats.fields import integer, mapping, number, numbers
 
     mat = _material(doc, index)
     if mat is None:
@@ -388,8 +388,8 @@ def _texture_transforms(path: Path, doc: dict, index: int) -> dict:
         rotation = number(path, t["rotation"], field + ".rotation") if "rotation" in t else 0.0
         scale = numbers(path, t["scale"], field + ".scale", 2) if "scale" in t else np.ones(2)
         tc = t.get("texCoord")
-        if tc is not None and (isinstance(tc, bool) or not isinstance(tc, int) or tc < 0):
-            fail(path, field + ".texCoord", f"expected an integer >= 0, got {tc!r}")
+        if tc is not None:
+            integer(path, tc, field + ".texCoord", lo=0)
         out[slot] = {"offset": [float(x) for x in offset], "rotation": float(rotation),
                      "scale": [float(x) for x in scale], "texCoord": tc}
     return out

@@ -105,7 +105,7 @@ import numpy as np
 import trimesh
 
 from formats.errors import UnknownNameError
-from formats.fields import fail, inside_root
+from formats.fields import fail, inside_root, number
 
 from ..scene.geometry import Y_UP_TO_Z_UP
 from ..scene.model import URDF_ASSET_PREFIX
@@ -388,9 +388,7 @@ def _check_state(model: UrdfModel, joint_state) -> dict[str, float]:
     for k, v in joint_state.items():
         if model.joints[k].type not in MOVABLE_JOINT_TYPES:
             fail(model.path, f"joint_state.{k}", f"joint {k!r} is {model.joints[k].type}: it has no position")
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
-            fail(model.path, f"joint_state.{k}", f"expected a finite number, got {v!r}")
-        out[k] = float(v)
+        out[k] = number(model.path, v, f"joint_state.{k}")
     return out
 
 

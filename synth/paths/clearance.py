@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from formats.errors import UserError
+from formats.fields import is_number
 
 from ..scene.model import Layout, Stage, object_box
 from .model import BAND, CameraPath
@@ -316,7 +317,7 @@ CLEARANCE_TOL = 1e-6  # m: paths are stored at 1 micrometre
 def declared_clearance(path: CameraPath) -> float | None:
     """The clearance the path was planned with (``meta['planner']['clearance_m']``), or None."""
     v = (path.meta.get("planner") or {}).get("clearance_m")
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+    if not is_number(v):
         return None
     return float(v)
 

@@ -5,7 +5,6 @@ summary stats); saving, loading (by name or file) and listing them.
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +13,7 @@ import yaml
 from formats import camera
 from formats.atomic import write_text_atomic
 from formats.errors import SceneFormatError, UnknownNameError, UserError
+from formats.fields import integer, is_number
 from formats.yamlfile import MAX_DEPTH, check_shape, read_text
 
 from ..resources import paths_dir  # $SYNTH_SCENES_DIR/paths, else scenes/paths
@@ -96,12 +96,12 @@ def load_path(name_or_file) -> CameraPath:
         if doc.get("format", FORMAT) != FORMAT:
             raise SceneFormatError(side, "format", f"expected '{FORMAT}', got {doc.get('format')!r}")
         fps = doc.get("fps", fps)
-        if isinstance(fps, bool) or not isinstance(fps, (int, float)) or not (math.isfinite(fps) and fps > 0):
+        if not is_number(fps) or not fps > 0:
             raise SceneFormatError(side, "fps", f"expected a number > 0, got {fps!r}")
         fps = float(fps)
         n_expect = doc.get("frames")
-        if n_expect is not None and (isinstance(n_expect, bool) or not isinstance(n_expect, int)):
-            raise SceneFormatError(side, "frames", f"expected an integer, got {n_expect!r}")
+        if n_expect is not None:
+            integer(side, n_expect, "frames")
         name = str(doc.get("name") or name)
         meta = {k: v for k, v in doc.items() if k not in ("format", "name", "fps", "frames", "poses")}
         meta.update(meta.pop("meta", None) or {})

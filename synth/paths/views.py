@@ -20,6 +20,7 @@ import numpy as np
 
 from formats import camera
 from formats.errors import UserError
+from formats.fields import is_integer
 
 from ..scene.model import Layout
 from .curves import track_poses
@@ -34,7 +35,7 @@ def plan_views(layouts: list[Layout], frames: int = DEFAULTS.views_frames, seed:
                clearance: float = DEFAULTS.clearance, spread: float = VIEWS_SPREAD,
                min_per_room: int = MIN_PER_ROOM, name: str = "views") -> CameraPath:
     """``frames`` random views in the free space that all ``layouts`` share (see the module doc)."""
-    if isinstance(frames, bool) or not isinstance(frames, int) or frames <= 0:
+    if not is_integer(frames) or frames <= 0:
         raise UserError(f"views: frames must be a positive integer, got {frames!r}")
     if not clearance > 0:
         raise UserError(f"views: clearance must be positive, got {clearance!r}")

@@ -51,6 +51,7 @@ import trimesh
 
 from formats.boxes import CEILING_ID_BASE, FLOOR_ID_BASE, STRUCT_SLAB, WALL_ID_BASE
 from formats.errors import SceneFormatError, UnknownNameError
+from formats.fields import is_number
 
 from ..assets import registry as assets
 from ..scene import geometry as geo
@@ -151,7 +152,7 @@ def stage_finishes(layout: Layout) -> dict:
             out[key] = val
         elif key in ("wall_color", "ceiling_color", "floor_color"):
             ok = isinstance(val, (list, tuple)) and len(val) == 3 and all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) and 0.0 <= v <= 1.0 for v in val)
+                is_number(v) and 0.0 <= v <= 1.0 for v in val)
             if not ok:
                 raise SceneFormatError(where, f"meta.finishes.{key}", f"expected three numbers in [0, 1], got {val!r}")
             out[key] = tuple(float(v) for v in val)

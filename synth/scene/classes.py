@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 
+from formats import fields
 from formats.errors import SceneFormatError, UnknownNameError
 from formats.yamlfile import read_yaml
 
@@ -82,21 +83,16 @@ def parse_class_table(data, source: str) -> ClassTable:
         unknown = set(props) - {"id", "support", "movable", "structure", "imported"}
         if unknown:
             raise SceneFormatError(source, field, f"unknown key(s) {sorted(unknown)}")
-        cid = props.get("id")
-        if not isinstance(cid, int) or isinstance(cid, bool) or cid <= 0:
-            raise SceneFormatError(source, f"{field}.id", f"expected a positive integer, got {cid!r}")
+        cid = fields.positive_int(source, props.get("id"), f"{field}.id")
         if cid in seen_ids:
             raise SceneFormatError(source, f"{field}.id", f"id {cid} already used by '{seen_ids[cid]}'")
         seen_ids[cid] = name
         support = props.get("support")
         if support not in SUPPORTS:
             raise SceneFormatError(source, f"{field}.support", f"expected one of {SUPPORTS}, got {support!r}")
-        movable = props.get("movable")
-        if not isinstance(movable, bool):
-            raise SceneFormatError(source, f"{field}.movable", f"expected true or false, got {movable!r}")
+        movable = fields.boolean(source, props.get("movable"), f"{field}.movable")
         for flag in ("structure", "imported"):
-            if not isinstance(props.get(flag, False), bool):
-                raise SceneFormatError(source, f"{field}.{flag}", f"expected true or false, got {props.get(flag)!r}")
+            fields.boolean(source, props.get(flag, False), f"{field}.{flag}")
         classes[name] = ClassInfo(name, cid, support, movable, bool(props.get("structure", False)), bool(props.get("imported", False)))
     aliases = (data.get("replicacad") or {}).get("aliases") or {}
     for key, target in aliases.items():

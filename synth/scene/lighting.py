@@ -103,8 +103,7 @@ def dimmed_preset(level: float, name: str | None = None) -> LightingPreset:
     lights (sun, sky and fixture power linearly, since a render is linear in its lights; the lamp
     count switches at the middle), and values above 1 dim night's lamps by ``2^-6`` per unit of
     level and leave a single lamp from 1.25 on, under night's sky: darker than the night preset."""
-    if isinstance(level, bool) or not isinstance(level, (int, float)) or not math.isfinite(level) \
-            or not 0.0 <= level <= DIMMER_MAX:
+    if not fields.is_number(level) or not 0.0 <= level <= DIMMER_MAX:
         raise UserError(f"dimmer: expected a level in [0, {DIMMER_MAX}] (0 day, 0.5 evening, 1 night, above 1 darker), "
                         f"got {level!r}")
     level = float(level)
@@ -176,12 +175,10 @@ def parse_preset(doc, source: str) -> LightingPreset:
         if not isinstance(d, dict) or set(d) - {"enabled", "color_temperature", "power", "count"}:
             bad = sorted(map(str, set(d) - {"enabled", "color_temperature", "power", "count"})) if isinstance(d, dict) else d
             raise SceneFormatError(source, f"fixtures.{kind}", f"expected keys enabled, color_temperature, power, count; got {bad}")
-        on = d.get("enabled", False)
-        if not isinstance(on, bool):
-            raise SceneFormatError(source, f"fixtures.{kind}.enabled", f"expected true or false, got {on!r}")
+        on = fields.boolean(source, d.get("enabled", False), f"fixtures.{kind}.enabled")
         count = d.get("count")
-        if count is not None and (isinstance(count, bool) or not isinstance(count, int) or count < 0):
-            raise SceneFormatError(source, f"fixtures.{kind}.count", f"expected a non-negative integer, got {count!r}")
+        if count is not None:
+            fields.nonneg_int(source, count, f"fixtures.{kind}.count")
         return FixtureSetting(on, number(source, d.get("color_temperature", 3000.0), f"fixtures.{kind}.color_temperature", lo=1000.0),
                               number(source, d.get("power", 60.0), f"fixtures.{kind}.power", lo=0.0), count)
 

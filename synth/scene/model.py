@@ -34,8 +34,8 @@ import yaml
 
 from formats.atomic import write_text_atomic
 from formats.boxes import BOXES_FORMAT, CEILING_ID_BASE, FLOOR_ID_BASE, FRAME_TEXT, MAX_OBJECT_ID, STRUCT_SLAB, WALL_ID_BASE
-from formats.errors import SceneFormatError, UnknownNameError
-from formats.fields import clean_name, shown
+from formats.errors import UnknownNameError
+from formats import fields
 from formats.yamlfile import read_yaml
 
 from . import geometry as geo
@@ -443,224 +443,163 @@ def layout_to_dict(layout: Layout) -> dict:
     return doc
 
 
-class _Reader:
-    """Typed field access with errors that name the file and the field."""
-
-    def __init__(self, source: str):
-        self.source = source
-
-    def fail(self, field: str, msg: str):
-        raise SceneFormatError(self.source, field, msg)
-
-    def mapping(self, d, field: str, allowed: set[str], required: set[str]) -> dict:
-        if not isinstance(d, dict):
-            self.fail(field, f"expected a mapping, got {type(d).__name__}")
-        unknown = set(d) - allowed
-        if unknown:
-            self.fail(field, f"unknown key(s) {sorted(map(str, unknown))}; allowed: {sorted(allowed)}")
-        missing = required - set(d)
-        if missing:
-            self.fail(field, f"missing key(s) {sorted(missing)}")
-        return d
-
-    def number(self, v, field: str, positive: bool = False, nonneg: bool = False) -> float:
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
-            self.fail(field, f"expected a finite number, got {shown(v)}")
-        v = float(v)
-        if positive and v <= 0:
-            self.fail(field, f"must be > 0, got {v}")
-        if nonneg and v < 0:
-            self.fail(field, f"must be >= 0, got {v}")
-        return v
-
-    def vec(self, v, field: str, n: int, positive: bool = False) -> tuple[float, ...]:
-        if not isinstance(v, (list, tuple)) or len(v) != n:
-            self.fail(field, f"expected a list of {n} numbers, got {shown(v)}")
-        return tuple(self.number(x, f"{field}[{i}]", positive=positive) for i, x in enumerate(v))
-
-    def string(self, v, field: str) -> str:
-        if not isinstance(v, str) or not v:
-            self.fail(field, f"expected a non-empty string, got {shown(v)}")
-        return v
-
-    def integer(self, v, field: str) -> int:
-        if isinstance(v, bool) or not isinstance(v, int):
-            self.fail(field, f"expected an integer, got {shown(v)}")
-        return v
-
-    def seq(self, v, field: str) -> list:
-        if v is None:
-            return []
-        if not isinstance(v, list):
-            self.fail(field, f"expected a list, got {type(v).__name__}")
-        return v
-
-
 def layout_from_dict(doc, source: str = "<memory>", classes: ClassTable | None = None, validate: bool = True) -> Layout:
     """Build a Layout from its file representation, validating every field."""
-    rd = _Reader(source)
-    rd.mapping(doc, "(top level)", {"format", "name", "seed", "reference", "meta", "stage", "objects", "fixtures"}, {"name", "stage"})
+    fields.mapping(source, doc, "(top level)", {"format", "name", "seed", "reference", "meta", "stage", "objects", "fixtures"}, {"name", "stage"}, what="a mapping")
     fmt = doc.get("format", FORMAT)
     if fmt != FORMAT:
-        rd.fail("format", f"expected '{FORMAT}', got {fmt!r}")
-    name = clean_name(rd.string(doc["name"], "name"), source, "name")
-    seed = None if doc.get("seed") is None else rd.integer(doc["seed"], "seed")
-    reference = None if doc.get("reference") is None else rd.string(doc["reference"], "reference")
-    meta = doc.get("meta") or {}
-    if not isinstance(meta, dict):
-        rd.fail("meta", "expected a mapping")
+        fields.fail(source, "format", f"expected '{FORMAT}', got {fmt!r}")
+    name = fields.name_text(source, doc["name"])
+    seed = None if doc.get("seed") is None else fields.integer(source, doc["seed"], "seed")
+    reference = None if doc.get("reference") is None else fields.string(source, doc["reference"], "reference")
+    meta = fields.mapping(source, doc.get("meta") or {}, "meta", what="a mapping")
 
-    s = rd.mapping(doc["stage"], "stage", {"ceiling_height", "floor_z", "asset", "position", "rotation", "rooms", "walls", "openings"}, {"ceiling_height"})
+    s = fields.mapping(source, doc["stage"], "stage", {"ceiling_height", "floor_z", "asset", "position", "rotation", "rooms", "walls", "openings"}, {"ceiling_height"}, what="a mapping")
     rooms = []
-    for i, r in enumerate(rd.seq(s.get("rooms"), "stage.rooms")):
+    for i, r in enumerate(fields.listing(source, s.get("rooms"), "stage.rooms", none_is_empty=True)):
         f = f"stage.rooms[{i}]"
-        rd.mapping(r, f, {"name", "type", "rect", "polygon"}, {"name", "type", "rect"})
-        rect = rd.vec(r["rect"], f + ".rect", 4)
+        fields.mapping(source, r, f, {"name", "type", "rect", "polygon"}, {"name", "type", "rect"}, what="a mapping")
+        rect = fields.vector(source, r["rect"], f + ".rect", 4)
         if rect[2] <= rect[0] or rect[3] <= rect[1]:
-            rd.fail(f + ".rect", f"expected xmin < xmax and ymin < ymax, got {list(rect)}")
+            fields.fail(source, f + ".rect", f"expected xmin < xmax and ymin < ymax, got {list(rect)}")
         polygon = None
         if r.get("polygon") is not None:
-            pts = rd.seq(r["polygon"], f + ".polygon")
+            pts = fields.listing(source, r["polygon"], f + ".polygon", none_is_empty=True)
             if len(pts) < 3:
-                rd.fail(f + ".polygon", f"expected at least 3 vertices, got {len(pts)}")
-            polygon = tuple(tuple(rd.vec(p, f"{f}.polygon[{k}]", 2)) for k, p in enumerate(pts))
+                fields.fail(source, f + ".polygon", f"expected at least 3 vertices, got {len(pts)}")
+            polygon = tuple(tuple(fields.vector(source, p, f"{f}.polygon[{k}]", 2)) for k, p in enumerate(pts))
             q = np.asarray(polygon)
             if q[:, 0].min() < rect[0] - 1e-3 or q[:, 0].max() > rect[2] + 1e-3 or q[:, 1].min() < rect[1] - 1e-3 or q[:, 1].max() > rect[3] + 1e-3:
-                rd.fail(f + ".polygon", "extends outside the room's rect")
-        rooms.append(Room(rd.string(r["name"], f + ".name"), rd.string(r["type"], f + ".type"), rect, polygon))
+                fields.fail(source, f + ".polygon", "extends outside the room's rect")
+        rooms.append(Room(fields.string(source, r["name"], f + ".name"), fields.string(source, r["type"], f + ".type"), rect, polygon))
     walls = []
-    for i, w in enumerate(rd.seq(s.get("walls"), "stage.walls")):
+    for i, w in enumerate(fields.listing(source, s.get("walls"), "stage.walls", none_is_empty=True)):
         f = f"stage.walls[{i}]"
-        rd.mapping(w, f, {"id", "start", "end", "thickness", "height"}, {"id", "start", "end", "thickness", "height"})
-        wall = Wall(rd.string(w["id"], f + ".id"), rd.vec(w["start"], f + ".start", 2), rd.vec(w["end"], f + ".end", 2),
-                    rd.number(w["thickness"], f + ".thickness", positive=True), rd.number(w["height"], f + ".height", positive=True))
+        fields.mapping(source, w, f, {"id", "start", "end", "thickness", "height"}, {"id", "start", "end", "thickness", "height"}, what="a mapping")
+        wall = Wall(fields.string(source, w["id"], f + ".id"), fields.vector(source, w["start"], f + ".start", 2), fields.vector(source, w["end"], f + ".end", 2),
+                    fields.number(source, w["thickness"], f + ".thickness", positive=True), fields.number(source, w["height"], f + ".height", positive=True))
         if wall.length <= 0:
-            rd.fail(f, "wall has zero length")
+            fields.fail(source, f, "wall has zero length")
         walls.append(wall)
     wall_ids = {w.id for w in walls}
     room_names = {r.name for r in rooms}
     openings = []
-    for i, o in enumerate(rd.seq(s.get("openings"), "stage.openings")):
+    for i, o in enumerate(fields.listing(source, s.get("openings"), "stage.openings", none_is_empty=True)):
         f = f"stage.openings[{i}]"
-        rd.mapping(o, f, {"id", "kind", "wall", "offset", "width", "bottom", "height", "rooms"}, {"id", "kind", "wall", "offset", "width", "height"})
-        kind = rd.string(o["kind"], f + ".kind")
+        fields.mapping(source, o, f, {"id", "kind", "wall", "offset", "width", "bottom", "height", "rooms"}, {"id", "kind", "wall", "offset", "width", "height"}, what="a mapping")
+        kind = fields.string(source, o["kind"], f + ".kind")
         if kind not in ("door", "window"):
-            rd.fail(f + ".kind", f"expected 'door' or 'window', got {kind!r}")
-        wid = rd.string(o["wall"], f + ".wall")
+            fields.fail(source, f + ".kind", f"expected 'door' or 'window', got {kind!r}")
+        wid = fields.string(source, o["wall"], f + ".wall")
         if wid not in wall_ids:
-            rd.fail(f + ".wall", f"no wall '{wid}' in stage.walls")
-        orooms = tuple(rd.string(x, f + ".rooms") for x in rd.seq(o.get("rooms"), f + ".rooms"))
+            fields.fail(source, f + ".wall", f"no wall '{wid}' in stage.walls")
+        orooms = tuple(fields.string(source, x, f + ".rooms") for x in fields.listing(source, o.get("rooms"), f + ".rooms", none_is_empty=True))
         for rn in orooms:
             if rn not in room_names:
-                rd.fail(f + ".rooms", f"no room '{rn}' in stage.rooms")
-        openings.append(Opening(rd.string(o["id"], f + ".id"), kind, wid, rd.number(o["offset"], f + ".offset"),
-                                rd.number(o["width"], f + ".width", positive=True), rd.number(o.get("bottom", 0.0), f + ".bottom", nonneg=True),
-                                rd.number(o["height"], f + ".height", positive=True), orooms))
+                fields.fail(source, f + ".rooms", f"no room '{rn}' in stage.rooms")
+        openings.append(Opening(fields.string(source, o["id"], f + ".id"), kind, wid, fields.number(source, o["offset"], f + ".offset"),
+                                fields.number(source, o["width"], f + ".width", positive=True), fields.number(source, o.get("bottom", 0.0), f + ".bottom", lo=0),
+                                fields.number(source, o["height"], f + ".height", positive=True), orooms))
     stage = Stage(
-        ceiling_height=rd.number(s["ceiling_height"], "stage.ceiling_height", positive=True),
+        ceiling_height=fields.number(source, s["ceiling_height"], "stage.ceiling_height", positive=True),
         rooms=rooms, walls=walls, openings=openings,
-        floor_z=rd.number(s.get("floor_z", 0.0), "stage.floor_z"),
-        asset=None if s.get("asset") is None else rd.string(s["asset"], "stage.asset"),
-        position=rd.vec(s.get("position", [0, 0, 0]), "stage.position", 3),
-        rotation=_quat(rd, s.get("rotation", [1, 0, 0, 0]), "stage.rotation"),
+        floor_z=fields.number(source, s.get("floor_z", 0.0), "stage.floor_z"),
+        asset=None if s.get("asset") is None else fields.string(source, s["asset"], "stage.asset"),
+        position=fields.vector(source, s.get("position", [0, 0, 0]), "stage.position", 3),
+        rotation=_quat(source, s.get("rotation", [1, 0, 0, 0]), "stage.rotation"),
     )
 
     classes = classes or class_table()
     objects = []
     seen: set[int] = set()
-    for i, o in enumerate(rd.seq(doc.get("objects"), "objects")):
+    for i, o in enumerate(fields.listing(source, doc.get("objects"), "objects", none_is_empty=True)):
         f = f"objects[{i}]"
-        rd.mapping(o, f, {"id", "class", "asset", "position", "rotation", "yaw_deg", "size", "box_offset", "support", "movable", "scale", "params"},
-                   {"id", "class", "asset", "position", "size"})
-        oid = rd.integer(o["id"], f + ".id")
+        fields.mapping(source, o, f, {"id", "class", "asset", "position", "rotation", "yaw_deg", "size", "box_offset", "support", "movable", "scale", "params"},
+                  {"id", "class", "asset", "position", "size"}, what="a mapping")
+        oid = fields.integer(source, o["id"], f + ".id")
         if not 1 <= oid <= MAX_OBJECT_ID:
-            rd.fail(f + ".id", f"object ids must be 1..{MAX_OBJECT_ID}, got {oid}")
+            fields.fail(source, f + ".id", f"object ids must be 1..{MAX_OBJECT_ID}, got {oid}")
         if oid in seen:
-            rd.fail(f + ".id", f"duplicate object id {oid}")
+            fields.fail(source, f + ".id", f"duplicate object id {oid}")
         seen.add(oid)
-        cls = rd.string(o["class"], f + ".class")
+        cls = fields.string(source, o["class"], f + ".class")
         if cls not in classes or classes.get(cls).structure:
-            rd.fail(f + ".class", f"unknown object class '{cls}' (see {classes.source})")
+            fields.fail(source, f + ".class", f"unknown object class '{cls}' (see {classes.source})")
         if "rotation" in o and "yaw_deg" in o:
-            rd.fail(f, "give either rotation (w, x, y, z) or yaw_deg, not both")
+            fields.fail(source, f, "give either rotation (w, x, y, z) or yaw_deg, not both")
         if "yaw_deg" in o:
-            rot = geo.yaw_to_quat(math.radians(rd.number(o["yaw_deg"], f + ".yaw_deg")))
+            rot = geo.yaw_to_quat(math.radians(fields.number(source, o["yaw_deg"], f + ".yaw_deg")))
         else:
-            rot = _quat(rd, o.get("rotation", [1, 0, 0, 0]), f + ".rotation")
-        size = rd.vec(o["size"], f + ".size", 3, positive=True)
-        support = rd.string(o.get("support", classes.get(cls).support if classes.get(cls).support != "surface" else "floor"), f + ".support")
-        _check_support(rd, support, f + ".support", wall_ids)
-        params = o.get("params") or {}
-        if not isinstance(params, dict):
-            rd.fail(f + ".params", "expected a mapping")
-        movable = o.get("movable", classes.get(cls).movable)
-        if not isinstance(movable, bool):
-            rd.fail(f + ".movable", f"expected true or false, got {movable!r}")
-        asset = rd.string(o["asset"], f + ".asset")
+            rot = _quat(source, o.get("rotation", [1, 0, 0, 0]), f + ".rotation")
+        size = fields.vector(source, o["size"], f + ".size", 3, positive=True)
+        support = fields.string(source, o.get("support", classes.get(cls).support if classes.get(cls).support != "surface" else "floor"), f + ".support")
+        _check_support(source, support, f + ".support", wall_ids)
+        params = fields.mapping(source, o.get("params") or {}, f + ".params", what="a mapping")
+        movable = fields.boolean(source, o.get("movable", classes.get(cls).movable), f + ".movable")
+        asset = fields.string(source, o["asset"], f + ".asset")
         if asset.startswith("proc:"):
             gen = asset[5:]
             if gen not in classes or classes.get(gen).structure:
-                rd.fail(f + ".asset", f"unknown procedural asset '{gen}' (generators exist for the object classes of {classes.source})")
+                fields.fail(source, f + ".asset", f"unknown procedural asset '{gen}' (generators exist for the object classes of {classes.source})")
         elif not any(asset.startswith(pre) and len(asset) > len(pre) for pre in MESH_ASSET_PREFIXES):
-            rd.fail(f + ".asset", f"expected 'proc:<class>', 'replicacad:<glb path>' or 'replicacad-urdf:<urdf path>', got {asset!r}")
+            fields.fail(source, f + ".asset", f"expected 'proc:<class>', 'replicacad:<glb path>' or 'replicacad-urdf:<urdf path>', got {asset!r}")
         objects.append(ObjectInstance(
-            id=oid, cls=cls, asset=asset, position=rd.vec(o["position"], f + ".position", 3), rotation=rot, size=size,
-            box_offset=rd.vec(o.get("box_offset", [0.0, 0.0, size[2] / 2.0]), f + ".box_offset", 3),
-            support=support, movable=movable, scale=rd.vec(o.get("scale", [1, 1, 1]), f + ".scale", 3, positive=True), params=params,
+            id=oid, cls=cls, asset=asset, position=fields.vector(source, o["position"], f + ".position", 3), rotation=rot, size=size,
+            box_offset=fields.vector(source, o.get("box_offset", [0.0, 0.0, size[2] / 2.0]), f + ".box_offset", 3),
+            support=support, movable=movable, scale=fields.vector(source, o.get("scale", [1, 1, 1]), f + ".scale", 3, positive=True), params=params,
         ))
     for i, o in enumerate(objects):
         par = o.support_parent()
         if par and par[0] not in seen:
-            rd.fail(f"objects[{i}].support", f"object {o.id} stands on object {par[0]}, which is not in the layout")
+            fields.fail(source, f"objects[{i}].support", f"object {o.id} stands on object {par[0]}, which is not in the layout")
         if par and par[0] == o.id:
-            rd.fail(f"objects[{i}].support", f"object {o.id} cannot stand on itself")
+            fields.fail(source, f"objects[{i}].support", f"object {o.id} cannot stand on itself")
 
     fixtures = []
     fids: set[str] = set()
-    for i, x in enumerate(rd.seq(doc.get("fixtures"), "fixtures")):
+    for i, x in enumerate(fields.listing(source, doc.get("fixtures"), "fixtures", none_is_empty=True)):
         f = f"fixtures[{i}]"
-        rd.mapping(x, f, {"id", "kind", "position", "room", "object", "opening", "color_temperature", "power"}, {"id", "kind", "position"})
-        fid = rd.string(x["id"], f + ".id")
+        fields.mapping(source, x, f, {"id", "kind", "position", "room", "object", "opening", "color_temperature", "power"}, {"id", "kind", "position"}, what="a mapping")
+        fid = fields.string(source, x["id"], f + ".id")
         if fid in fids:
-            rd.fail(f + ".id", f"duplicate fixture id '{fid}'")
+            fields.fail(source, f + ".id", f"duplicate fixture id '{fid}'")
         fids.add(fid)
-        kind = rd.string(x["kind"], f + ".kind")
+        kind = fields.string(source, x["kind"], f + ".kind")
         if kind not in ("lamp", "ceiling", "window"):
-            rd.fail(f + ".kind", f"expected lamp, ceiling or window, got {kind!r}")
-        obj = None if x.get("object") is None else rd.integer(x["object"], f + ".object")
+            fields.fail(source, f + ".kind", f"expected lamp, ceiling or window, got {kind!r}")
+        obj = None if x.get("object") is None else fields.integer(source, x["object"], f + ".object")
         if obj is not None and obj not in seen:
-            rd.fail(f + ".object", f"no object with id {obj}")
-        opening = None if x.get("opening") is None else rd.string(x["opening"], f + ".opening")
+            fields.fail(source, f + ".object", f"no object with id {obj}")
+        opening = None if x.get("opening") is None else fields.string(source, x["opening"], f + ".opening")
         if opening is not None and opening not in {o.id for o in openings}:
-            rd.fail(f + ".opening", f"no opening '{opening}' in stage.openings")
+            fields.fail(source, f + ".opening", f"no opening '{opening}' in stage.openings")
         fixtures.append(LightFixture(
-            id=fid, kind=kind, position=rd.vec(x["position"], f + ".position", 3),
-            room=None if x.get("room") is None else rd.string(x["room"], f + ".room"), object=obj, opening=opening,
-            color_temperature=rd.number(x.get("color_temperature", 3000.0), f + ".color_temperature", positive=True),
-            power=rd.number(x.get("power", 60.0), f + ".power", nonneg=True),
+            id=fid, kind=kind, position=fields.vector(source, x["position"], f + ".position", 3),
+            room=None if x.get("room") is None else fields.string(source, x["room"], f + ".room"), object=obj, opening=opening,
+            color_temperature=fields.number(source, x.get("color_temperature", 3000.0), f + ".color_temperature", positive=True),
+            power=fields.number(source, x.get("power", 60.0), f + ".power", lo=0),
         ))
     return Layout(name=name, stage=stage, objects=objects, fixtures=fixtures, seed=seed, reference=reference, meta=dict(meta))
 
 
-def _quat(rd: _Reader, v, field: str) -> geo.Quat:
-    q = rd.vec(v, field, 4)
-    n = math.sqrt(sum(x * x for x in q))
-    if abs(n - 1.0) > 1e-3:
-        rd.fail(field, f"expected a unit quaternion (w, x, y, z), got norm {n:.4f}")
+def _quat(source: str, v, field: str) -> geo.Quat:
+    """A rotation (w, x, y, z) of norm 1 within 1e-3 (``formats.fields.unit_quat``), kept as written."""
+    q = fields.vector(source, v, field, 4)
+    fields.unit_quat(source, list(q), field)
     return q
 
 
-def _check_support(rd: _Reader, support: str, field: str, wall_ids: set[str]) -> None:
+def _check_support(source: str, support: str, field: str, wall_ids: set[str]) -> None:
     if support in ("floor", "ceiling", "free"):
         return
     parts = support.split(":")
     if parts[0] == "wall" and len(parts) == 2:
         if parts[1] not in wall_ids:
-            rd.fail(field, f"no wall '{parts[1]}' in stage.walls")
+            fields.fail(source, field, f"no wall '{parts[1]}' in stage.walls")
         return
     if parts[0] == "object" and len(parts) == 3 and parts[1].isdigit() and parts[2].isdigit():
         return
-    rd.fail(field, f"expected floor, ceiling, free, wall:<id> or object:<id>:<surface>, got {support!r}")
+    fields.fail(source, field, f"expected floor, ceiling, free, wall:<id> or object:<id>:<surface>, got {support!r}")
 
 
 class _Dumper(yaml.SafeDumper):

@@ -125,7 +125,7 @@ def parse_trainset(doc, source: str) -> TrainsetSpec:
     if rc is not None and doc.get("seeds"):
         raise SceneFormatError(source, "seeds", "a ReplicaCAD trainset names scenes (replicacad.scenes), not generator seeds")
     seeds = doc.get("seeds") or []
-    if not isinstance(seeds, list) or any(isinstance(s, bool) or not isinstance(s, int) or s < 0 for s in seeds):
+    if not isinstance(seeds, list) or any(not fields.is_integer(s) or s < 0 for s in seeds):
         raise SceneFormatError(source, "seeds", f"expected a list of non-negative integers, got {seeds!r}")
     if len(set(seeds)) != len(seeds):
         raise SceneFormatError(source, "seeds", "a seed is listed twice")

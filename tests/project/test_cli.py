@@ -98,7 +98,7 @@ def test_console_script_reports_errors_with_status_2(tmp_path):
     bad.write_text("format: synth-layout/1\nname: x\nstage: {ceiling_height: -2}\n")
     r = subprocess.run([sys.executable, "-m", "synth.cli", "scene", "check", str(bad)], capture_output=True, text=True)
     assert r.returncode == 2
-    assert r.stderr.strip() == f"synth: error: {bad}: stage.ceiling_height: must be > 0, got -2.0"
+    assert r.stderr.strip() == f"synth: error: {bad}: stage.ceiling_height: must be > 0, got -2"
 
 
 @pytest.mark.slow

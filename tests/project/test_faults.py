@@ -295,6 +295,36 @@ def test_a_relative_out_inside_the_working_folder_and_an_absolute_one_are_fine(t
         fields.out_folder("s.yaml", "out/../../x")
 
 
+def test_the_typed_field_checks_are_one_line_naming_file_and_field():
+    """formats.fields is the one home of typed checks: a bool is never a number, a list names the
+    bad element by index, a mapping names its unknown and missing keys."""
+    from formats import fields
+    from formats.errors import SceneFormatError
+
+    def says(fn, *args, **kw):
+        with pytest.raises(SceneFormatError) as e:
+            fn("f.yaml", *args, **kw)
+        assert "\n" not in str(e.value)
+        return str(e.value)
+
+    assert not fields.is_number(True) and not fields.is_number(float("nan")) and fields.is_number(2)
+    assert not fields.is_integer(True) and not fields.is_integer(2.0) and fields.is_integer(-3)
+    assert says(fields.number, True, "x") == "f.yaml: x: expected a finite number, got True"
+    assert says(fields.number, 5, "x", hi=4) == "f.yaml: x: must be <= 4, got 5"
+    assert says(fields.integer, 5, "n", hi=4) == "f.yaml: n: expected an integer <= 4, got 5"
+    assert says(fields.nonneg_int, -1, "seed") == "f.yaml: seed: expected a non-negative integer, got -1"
+    assert fields.whole_number("f.yaml", 640.0, "width") == 640
+    assert says(fields.whole_number, 640.5, "width") == "f.yaml: width: expected an integer, got 640.5"
+    assert says(fields.required, {}, "fx") == "f.yaml: fx: missing"
+    assert fields.vector("f.yaml", [1, 2.5, 0], "p", 3) == (1.0, 2.5, 0.0)
+    assert says(fields.vector, [1, "a", 0], "p", 3) == "f.yaml: p[1]: expected a finite number, got 'a'"
+    assert says(fields.vector, [1, 2], "p", 3) == "f.yaml: p: expected a list of 3 numbers, got [1, 2]"
+    assert fields.listing("f.yaml", None, "rooms", none_is_empty=True) == []
+    assert says(fields.mapping, {"a": 1, "z": 2}, "m", allowed={"a", "b"}) == "f.yaml: m: unknown key(s) ['z']; allowed: ['a', 'b']"
+    assert says(fields.mapping, {"a": 1}, "m", allowed={"a", "b"}, required={"b"}) == "f.yaml: m: missing key(s) ['b']"
+    assert says(fields.mapping, [], "m", what="a mapping") == "f.yaml: m: expected a mapping, got list"
+
+
 @pytest.mark.slow
 def test_an_experiment_spec_out_that_climbs_out_is_refused(tmp_path, capsys):
     from reloc.cli import main as reloc_main

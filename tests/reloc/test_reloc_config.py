@@ -39,6 +39,9 @@ def _load(tmp_path, text: str) -> Config:
     ("nosuch:\n  x: 1\n", "nosuch"),
     ("nosuch: 3\n", "nosuch"),
     ("odometry:\n  iterations: 5\n", "odometry.iterations"),
+    ("registration:\n  center_match_m: .nan\n", "registration.center_match_m: expected a finite number"),
+    ("clips:\n  max_frames: 2.5\n", "clips.max_frames: expected an integer"),
+    ("clips:\n  adaptive: 1\n", "clips.adaptive: expected true or false"),
 ])
 def test_unknown_or_malformed_key_is_one_line_naming_file_and_key(tmp_path, text, key):
     with pytest.raises(UserError) as e:

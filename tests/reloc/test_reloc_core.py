@@ -24,7 +24,7 @@ from reloc.frontend.registration import (anchor_candidate, anchors_for_clip, anc
                                 graph_candidate)
 from reloc.frontend.surface import SurfaceScorer, kappa
 
-from formats.errors import UserError
+from formats.errors import SceneFormatError, UserError
 
 RNG = np.random.default_rng(1)
 
@@ -736,10 +736,12 @@ def test_config_overrides_and_errors():
     c = Config.from_dict({"registration": {"center_match_m": 0.4}, "clips": {"adaptive": False}})
     assert c.registration.center_match_m == 0.4 and not c.clips.adaptive
     assert Config().registration.center_match_m == 0.5  # paper default untouched
-    with pytest.raises(ValueError, match="registration.nope"):
+    with pytest.raises(SceneFormatError, match="registration.nope: unknown setting"):
         Config.from_dict({"registration": {"nope": 1}})
-    with pytest.raises(ValueError, match="expected a number"):
+    with pytest.raises(SceneFormatError, match="registration.center_match_m: expected a finite number"):
         Config.from_dict({"registration": {"center_match_m": "far"}})
-    with pytest.raises(ValueError, match="expected true or false"):
+    with pytest.raises(SceneFormatError, match="clips.adaptive: expected true or false"):
         Config.from_dict({"clips": {"adaptive": 1}})
+    with pytest.raises(SceneFormatError, match="registration.center_match_m: expected a finite number"):
+        Config.from_dict({"registration": {"center_match_m": float("nan")}})
     assert Config.from_dict(Config().to_dict()) == Config()

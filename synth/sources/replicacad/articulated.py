@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import logging
-import math
 import os
 from pathlib import Path
 
@@ -18,7 +17,7 @@ import numpy as np
 
 from formats.boxes import MAX_OBJECT_ID
 from formats.errors import UnknownNameError
-from formats.fields import fail
+from formats.fields import boolean, fail, is_number
 
 from . import habitat_format as hf
 from ...mesh.urdf import JOINT_STATE_DECIMALS, link_poses, local_bounds, parse_urdf, urdf_path
@@ -155,7 +154,7 @@ def _joint_pose(scene_path: Path, v, field: str) -> list[float]:
         fail(scene_path, field, f"expected a list of numbers or an object of numbers, got {type(v).__name__}")
     out = []
     for x in items:
-        if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(float(x)):
+        if not is_number(x):
             fail(scene_path, field, f"expected finite numbers, got {v!r}")
         out.append(float(x))
     return out
@@ -201,9 +200,7 @@ def load_articulated_instances(root, scene_path, doc: dict, first_id: int, class
             mt = hf.string(scene_path, inst["motion_type"], f + ".motion_type").upper()
             if mt not in hf.MOTION_TYPES:
                 fail(scene_path, f + ".motion_type", f"expected one of {', '.join(hf.MOTION_TYPES)}, got {inst['motion_type']!r}")
-        fixed = inst.get("fixed_base", False)
-        if not isinstance(fixed, bool):
-            fail(scene_path, f + ".fixed_base", f"expected true or false, got {fixed!r}")
+        fixed = boolean(scene_path, inst.get("fixed_base", False), f + ".fixed_base")
         hf.translation_origin(scene_path, inst.get("translation_origin"), f + ".translation_origin")  # checked, unused
         pose = _joint_pose(scene_path, inst["initial_joint_pose"], f + ".initial_joint_pose") if "initial_joint_pose" in inst else []
         order = None

@@ -68,7 +68,7 @@ from pathlib import Path
 import numpy as np
 from formats.boxes import MAX_OBJECT_ID
 from formats.errors import UnknownNameError
-from formats.fields import shown
+from formats.fields import integer, nonneg_int, shown
 
 from ...scene.classes import ClassTable, LexiconTable, class_table, lexicon_table
 from .receptacles import read_receptacles, to_object_frame
@@ -138,10 +138,7 @@ def _object_template(root: Path, config: Path) -> _Template:
     check_frame(config, cfg)
     sid = None
     if "semantic_id" in cfg:
-        v = cfg["semantic_id"]
-        if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-            fail(config, "semantic_id", f"expected a non-negative integer, got {v!r}")
-        sid = v
+        sid = nonneg_int(config, cfg["semantic_id"], "semantic_id")
     collision = "box" if cfg.get("use_bounding_box_for_collision") is True else None
     if collision is None and isinstance(cfg.get("collision_asset"), str) and cfg["collision_asset"]:
         cpath = inside_root(config, "collision_asset", config.parent / cfg["collision_asset"], root)
@@ -298,8 +295,7 @@ def read_semantics(root: Path, scene_path: Path, doc: dict, classes: ClassTable)
     for k, c in enumerate(raw):
         c = mapping(lex, c, f"classes[{k}]")
         cid, nm = c.get("id"), c.get("name")
-        if isinstance(cid, bool) or not isinstance(cid, int):
-            fail(lex, f"classes[{k}].id", f"expected an integer, got {shown(cid)}")
+        integer(lex, cid, f"classes[{k}].id")
         nm = string(lex, nm, f"classes[{k}].name")
         if cid in names:  # which name would habitat use? not ours to guess: a basket must not import as a bed
             first = next(j for j, c2 in enumerate(raw) if isinstance(c2, dict) and c2.get("id") == cid)

@@ -38,6 +38,7 @@ from pathlib import Path
 
 from formats.atomic import write_json_atomic, write_text_atomic
 from formats.errors import SceneFormatError, UserError
+from formats.fields import boolean
 
 ENV_ROOT = "REPLICACAD_ROOT"
 KEYS = {"root", "allow_unknown", "obstacles"}
@@ -58,9 +59,7 @@ def parse_section(doc, source: str) -> dict:
     root = doc.get("root")
     if root is not None and (not isinstance(root, str) or not root):
         raise SceneFormatError(source, "replicacad.root", f"expected a folder or null, got {root!r}")
-    allow = doc.get("allow_unknown", False)
-    if not isinstance(allow, bool):
-        raise SceneFormatError(source, "replicacad.allow_unknown", f"expected true or false, got {allow!r}")
+    allow = boolean(source, doc.get("allow_unknown", False), "replicacad.allow_unknown")
     obstacles = doc.get("obstacles", "all")
     if obstacles not in OBSTACLES:
         raise SceneFormatError(source, "replicacad.obstacles", f"expected one of {', '.join(OBSTACLES)}, got {obstacles!r}")
