@@ -178,6 +178,8 @@ def test_the_map_section_reaches_every_loaded_box_map(tmp_path, monkeypatch):
 
     monkeypatch.setattr(BoxMap, "load", staticmethod(load))
     import formats.tour
+    import reloc.experiments.runner  # noqa: F401  imported by the run below: first imported here, not while
+    import reloc.map.document  # noqa: F401  Tour is the stand-in (a module-level import would keep it)
     from reloc.cli import build_parser
 
     monkeypatch.setattr(formats.tour, "Tour", lambda *a, **k: None)  # cmd_run imports it when it runs
