@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from formats.cli import ArgumentParser, run_command
+from vrformats.cli import ArgumentParser, run_command
 
 from . import __version__
 

@@ -18,9 +18,9 @@ from pathlib import Path
 from typing import Any
 
 
-from formats import fields
-from formats.errors import UserError
-from formats.yamlfile import read_yaml
+from vrformats import fields
+from vrformats.errors import UserError
+from vrformats.yamlfile import read_yaml
 
 
 
@@ -251,7 +251,7 @@ class Config:
     def from_dict(d: dict | None, source: str = "<config>", under: str = "") -> "Config":
         """Overrides on top of the defaults; unknown sections or keys and values of the wrong type are
         a SceneFormatError naming ``source`` and the key (``under``: where the overrides sit in the
-        file, e.g. ``config`` in an experiment spec, prefixed to the key), checked by formats.fields."""
+        file, e.g. ``config`` in an experiment spec, prefixed to the key), checked by vrformats.fields."""
         cfg = Config()
         at = f"{under}." if under else ""
         sections = {f.name for f in dataclasses.fields(Config)}

@@ -16,8 +16,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from formats.errors import SceneFormatError, UnknownNameError
-from formats.shipped import is_bare_name, package_dir, resolve_spec, shipped_file, shipped_folder, shipped_names
+from vrformats.errors import SceneFormatError, UnknownNameError
+from vrformats.shipped import is_bare_name, package_dir, resolve_spec, shipped_file, shipped_folder, shipped_names
 
 PACKAGE_DIR = package_dir("reloc")
 MODELS_DIR = PACKAGE_DIR / "models"

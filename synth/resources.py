@@ -18,7 +18,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from formats.shipped import package_dir, resolve_spec, shipped_folder, shipped_names
+from vrformats.shipped import package_dir, resolve_spec, shipped_folder, shipped_names
 
 PACKAGE_DIR = package_dir("synth")
 REPO_ROOT = PACKAGE_DIR.resolve().parent  # a checkout, or site-packages when installed

@@ -2,7 +2,7 @@
 
 ``make_tour``: the one factory of tour folders for tests that make tours without a renderer (a plain
 function, ``from conftest import make_tour``): poses, frames and metadata written by the format's own
-writer, ``formats.tour.write_tour``, so a test's tour is read exactly as a rendered one.
+writer, ``vrformats.tour.write_tour``, so a test's tour is read exactly as a rendered one.
 
 ``smoke_reference``: the shipped smoke render job (tests/jobspecs.SMOKE: 36 frames, Blender, tiny
 images) rendered once per session with the local backend and two workers. The tests that check
@@ -24,7 +24,7 @@ def make_tour(root, poses, frames=None, *, intrinsics, fps=30.0, frame_ids=None,
     """A tour folder at ``root`` (made with its parents): ``poses`` camera-to-world, ``frames`` frame id ->
     channels (``rgb``, ``depth``, ``instance``, ``semantic``; None: poses only), ``meta`` over the
     writer's placeholders (``layout``, ``lighting``, ``path``, ``renderer``, anything else). Returns ``root``."""
-    from formats.tour import write_tour
+    from vrformats.tour import write_tour
 
     root = Path(root)
     root.mkdir(parents=True, exist_ok=True)

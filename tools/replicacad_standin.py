@@ -57,8 +57,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from formats.atomic import write_bytes_atomic, write_text_atomic  # noqa: E402
-from formats.errors import UserError  # noqa: E402
+from vrformats.atomic import write_bytes_atomic, write_text_atomic  # noqa: E402
+from vrformats.errors import UserError  # noqa: E402
 from synth.sources.replicacad.habitat_format import hab_matrix, mapping, read_json  # noqa: E402
 from synth.sources.replicacad.navmesh import (  # noqa: E402
     NavMesh, StandinSpec, navmesh_for_scene, read_navmesh, standin_stage, write_standin_glb,

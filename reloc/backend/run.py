@@ -26,10 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.atomic import save_npz_atomic, write_json_atomic
-from formats.camera import write_tum
-from formats.errors import UserError, check_output_folder
-from formats.cli import add_quiet, add_sensor, positive_int
+from vrformats.atomic import save_npz_atomic, write_json_atomic
+from vrformats.camera import write_tum
+from vrformats.errors import UserError, check_output_folder
+from vrformats.cli import add_quiet, add_sensor, positive_int
 
 from .online import Backend, ClipState
 from ..frontend.clips import fuse
@@ -308,7 +308,7 @@ def write_clip_poses(path: Path, clips) -> None:
 
 def load_clip_poses(run_dir) -> dict[int, dict[int, np.ndarray]]:
     """clip id -> {frame: V_i} from a ``reloc run`` output (the clip partition and odometry)."""
-    from formats.errors import UserError
+    from vrformats.errors import UserError
 
     path = Path(run_dir) / CLIP_POSES
     if not path.is_file():
@@ -321,7 +321,7 @@ def load_clip_poses(run_dir) -> dict[int, dict[int, np.ndarray]]:
 
 
 def cmd_run(args) -> int:
-    from formats.tour import Tour
+    from vrformats.tour import Tour
 
     from ..config import load_config
     from ..detection.factory import build_detector, detector_spec_from_args

@@ -33,9 +33,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from formats.atomic import save_npz_atomic
-from formats.errors import UserError
-from formats.frames import FrameFileError
+from vrformats.atomic import save_npz_atomic
+from vrformats.errors import UserError
+from vrformats.frames import FrameFileError
 
 
 
@@ -121,7 +121,7 @@ def rgb_frames(tour, frames: list[int], counts: dict, depth: bool):
 
 def to_gray8(rgb_linear: np.ndarray) -> np.ndarray:
     """Linear radiance -> auto-exposed sRGB -> 8-bit grey (what a camera with auto-exposure delivers)."""
-    from formats.tour import tonemap
+    from vrformats.tour import tonemap
 
     srgb, _ = tonemap(rgb_linear, exposure=None)
     img = np.clip(srgb * 255.0 + 0.5, 0, 255).astype(np.uint8)
@@ -234,8 +234,8 @@ class AppearanceMap:
     @classmethod
     def build(cls, tour, stride: int | None = None, cfg: AppearanceConfig | None = None,
               progress: bool = False) -> "AppearanceMap":
-        """Map from a mapping tour (``formats.tour.Tour`` or its directory) with ground-truth poses."""
-        from formats.tour import Tour
+        """Map from a mapping tour (``vrformats.tour.Tour`` or its directory) with ground-truth poses."""
+        from vrformats.tour import Tour
 
         cfg = cfg or AppearanceConfig()
         _check_cfg(cfg)
@@ -492,11 +492,11 @@ def run_appearance(tour, amap: AppearanceMap, out_dir, clip_poses: dict[int, dic
     the frame estimates of the others (``clip_rigid``: the fit's tolerances, a
     ``reloc.config.ClipRigidConfig``; the experiment passes its config's). Returns the run.json summary.
     """
-    from formats.camera import write_tum
-    from formats.tour import Tour
+    from vrformats.camera import write_tum
+    from vrformats.tour import Tour
 
     from ..frontend.clip_rigid import clip_rigid_trajectory
-    from formats.atomic import write_json_atomic
+    from vrformats.atomic import write_json_atomic
 
     cfg = cfg or amap.cfg
     _check_cfg(cfg)

@@ -39,10 +39,10 @@ import numpy as np
 import open3d as o3d
 from scipy.spatial import cKDTree
 
-from formats.atomic import save_npz_atomic, write_json_atomic
-from formats.camera import write_tum
-from formats.errors import UserError
-from formats.fields import is_number
+from vrformats.atomic import save_npz_atomic, write_json_atomic
+from vrformats.camera import write_tum
+from vrformats.errors import UserError
+from vrformats.fields import is_number
 
 
 
@@ -668,8 +668,8 @@ def run_fpfh_icp(tour, pmap: PointMap, clip_poses: dict, out_dir, cfg: FpfhConfi
 def main(argv=None) -> int:
     import argparse
 
-    from formats.tour import Tour
-    from formats.cli import run_command
+    from vrformats.tour import Tour
+    from vrformats.cli import run_command
 
     from ..backend.run import load_clip_poses
 

@@ -68,7 +68,7 @@ def check_rgb_schedule(tour, every: int | None, detector, what: str) -> None:
     geometry-only tour has no RGB at all)."""
     if not needs_rgb(detector):
         return
-    from formats.errors import UserError
+    from vrformats.errors import UserError
 
     where = f"{tour.root}/meta.json"
     if not tour.has_rgb():

@@ -12,7 +12,7 @@ ratios, never one run.
 """
 
 from __future__ import annotations
-from formats.cli import positive_int
+from vrformats.cli import positive_int
 
 import argparse
 import statistics
@@ -20,7 +20,7 @@ import time
 
 
 def bench(tour_dir, models, frames: int = 40, repeats: int = 3) -> list[dict]:
-    from formats.tour import Tour
+    from vrformats.tour import Tour
 
     from .base import FrameData
     from .learned import LearnedDetector

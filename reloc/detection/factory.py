@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 
-from formats.errors import UserError
+from vrformats.errors import UserError
 
 from ..config import DetectionConfig
 from .base import Detector

@@ -1,7 +1,7 @@
 """The learned detector (``detector: learned``): instances from pixels, by the toolkit's own model.
 
 The model (``reloc.detector``: trained on renders of apartments the experiments never use,
-exported to ONNX) sees only the RGB frame, exposed as a camera would (``formats.tour.tonemap``:
+exported to ONNX) sees only the RGB frame, exposed as a camera would (``vrformats.tour.tonemap``:
 per-frame auto exposure, 8-bit sRGB), and gives per-pixel class scores and instance-boundary
 scores. Instances are then cut here, without any ground truth:
 
@@ -27,10 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.cli import MAX_WORKERS as MAX_THREADS
-from formats.errors import UserError, one_line
-from formats.fields import is_integer, shown
-from formats.tour import tonemap
+from vrformats.cli import MAX_WORKERS as MAX_THREADS
+from vrformats.errors import UserError, one_line
+from vrformats.fields import is_integer, shown
+from vrformats.tour import tonemap
 
 from .. import resources
 from .base import Detection, FrameData

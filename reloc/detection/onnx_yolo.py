@@ -22,10 +22,10 @@ import cv2
 import numpy as np
 import yaml
 
-from formats.errors import UserError, one_line
-from formats.fields import is_integer
-from formats.yamlfile import read_yaml
-from formats.color import srgb8
+from vrformats.errors import UserError, one_line
+from vrformats.fields import is_integer
+from vrformats.yamlfile import read_yaml
+from vrformats.color import srgb8
 
 from .base import Detection, FrameData
 

@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 from scipy.ndimage import find_objects
 
-from formats.boxes import STRUCTURE_KINDS
+from vrformats.boxes import STRUCTURE_KINDS
 
 from ..config import DetectionConfig
 from .base import Detection, FrameData

@@ -1,7 +1,7 @@
 """Camera-realistic augmentation at training time (PyTorch, batched, on the training device).
 
 Each training frame is stored as the 8-bit sRGB the camera pipeline made of its linear render
-(``formats.tour.tonemap``: auto exposure, sRGB, 8 bits) together with that exposure's scale, so
+(``vrformats.tour.tonemap``: auto exposure, sRGB, 8 bits) together with that exposure's scale, so
 the linear scene radiance is recovered as ``srgb_decode(x) / scale`` (up to the 8-bit steps and the
 ~3 % of highlights the tonemap clipped). On it, per image and with random strengths
 (``reloc.detector.settings.AugmentConfig``), in the order a camera applies them:
@@ -11,20 +11,20 @@ the linear scene radiance is recovered as ``srgb_decode(x) / scale`` (up to the 
    and a white-balance error (red and blue gains ``2^U(-w, w)``);
 2. motion blur from a random camera motion during the exposure: the frame averaged over
    ``blur_samples`` affine warps (a shift of up to ``blur_px`` pixels along a random direction and a
-   roll of up to ``blur_roll_deg``), rotation-only flow as ``formats.sensors.motion_blur`` draws it
+   roll of up to ``blur_roll_deg``), rotation-only flow as ``vrformats.sensors.motion_blur`` draws it
    for distant points;
-3. the colour camera of ``formats.sensors.ColorModel``, with its parameters drawn around a preset's
+3. the colour camera of ``vrformats.sensors.ColorModel``, with its parameters drawn around a preset's
    (``sensor``: structured_light's, shared by tof): auto exposure on the 97th luminance
    percentile, analog gain at the longest exposure, shot and read noise in electrons, full-well
    clip, with ``electrons_per_ms`` and ``read_noise_e`` scaled at random (``sensor_prob`` of the
    frames; the others keep the renderer's noise only);
-4. the display transform of inference (``formats.tour.tonemap``: the 97th luminance percentile to
+4. the display transform of inference (``vrformats.tour.tonemap``: the 97th luminance percentile to
    0.9, sRGB, clip) and 8-bit quantisation;
 5. JPEG-like compression (``jpeg_prob`` of the frames): 8x8 DCT blocks quantised with the JPEG
    luminance table at a random quality in ``jpeg_quality``.
 
-``tests/reloc/detector/test_detector_augment.py`` checks steps 3 and 4 against ``formats.sensors`` and
-``formats.tour.tonemap`` on the same frames.
+``tests/reloc/detector/test_detector_augment.py`` checks steps 3 and 4 against ``vrformats.sensors`` and
+``vrformats.tour.tonemap`` on the same frames.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ import math
 import torch
 import torch.nn.functional as F
 
-from formats import color
+from vrformats import color
 
 LUMA = (0.2126, 0.7152, 0.0722)
 # the JPEG standard's luminance quantisation table (ITU-T T.81, Annex K.1)
@@ -46,12 +46,12 @@ JPEG_LUMA = (
 
 
 def srgb_decode(x: torch.Tensor) -> torch.Tensor:
-    """``formats.color.srgb_decode`` on tensors (their dtype kept)."""
+    """``vrformats.color.srgb_decode`` on tensors (their dtype kept)."""
     return torch.where(x <= color.DECODE_KNEE, x / color.SLOPE, ((x + color.OFFSET) / (1.0 + color.OFFSET)) ** color.GAMMA)
 
 
 def srgb_encode(x: torch.Tensor) -> torch.Tensor:
-    """``formats.color.srgb_encode`` on tensors (clipped to [0, 1] first; the power's input kept
+    """``vrformats.color.srgb_encode`` on tensors (clipped to [0, 1] first; the power's input kept
     above 1e-8, where the linear segment is taken anyway, so that its gradient stays finite)."""
     x = x.clamp(0.0, 1.0)
     return torch.where(x <= color.ENCODE_KNEE, x * color.SLOPE,
@@ -71,7 +71,7 @@ def percentile(lum: torch.Tensor, q: float) -> torch.Tensor:
 
 
 def tonemap(lin: torch.Tensor) -> torch.Tensor:
-    """``formats.tour.tonemap`` on a batch: each image's 97th luminance percentile to 0.9, sRGB."""
+    """``vrformats.tour.tonemap`` on a batch: each image's 97th luminance percentile to 0.9, sRGB."""
     p = percentile(luminance(lin), 97.0)
     scale = torch.where(p > 1e-8, 0.9 / p.clamp_min(1e-12), torch.ones_like(p)).view(-1, 1, 1, 1)
     return srgb_encode(lin * scale)
@@ -79,7 +79,7 @@ def tonemap(lin: torch.Tensor) -> torch.Tensor:
 
 def exposure(lin: torch.Tensor, electrons_per_ms: torch.Tensor, full_well_e: float, percentile_q: float,
              target: float, min_ms: float, max_ms: float, max_gain: float) -> tuple[torch.Tensor, torch.Tensor]:
-    """``formats.sensors.exposure`` on a batch: (exposure ms, analog gain), each (B,)."""
+    """``vrformats.sensors.exposure`` on a batch: (exposure ms, analog gain), each (B,)."""
     p = percentile(luminance(lin), percentile_q)
     want = target * full_well_e / (electrons_per_ms * p.clamp_min(1e-30))
     t = want.clamp(min_ms, max_ms)
@@ -93,7 +93,7 @@ def exposure(lin: torch.Tensor, electrons_per_ms: torch.Tensor, full_well_e: flo
 def sensor_noise(lin: torch.Tensor, electrons_per_ms: torch.Tensor, read_noise_e: torch.Tensor, full_well_e: float,
                  percentile_q: float, target: float, min_ms: float, max_ms: float, max_gain: float,
                  generator: torch.Generator | None = None) -> torch.Tensor:
-    """``formats.sensors`` colour camera (without motion blur) on a batch; per-image
+    """``vrformats.sensors`` colour camera (without motion blur) on a batch; per-image
     ``electrons_per_ms`` and ``read_noise_e`` (B,). Returns linear scene-referred values."""
     t, gain = exposure(lin, electrons_per_ms, full_well_e, percentile_q, target, min_ms, max_ms, max_gain)
     k = (electrons_per_ms * t).view(-1, 1, 1, 1)

@@ -9,11 +9,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from formats.design import list_tours
-from formats.errors import UserError, check_output_file, check_output_folder
+from vrformats.design import list_tours
+from vrformats.errors import UserError, check_output_file, check_output_folder
 
 from .settings import INPUT_HEIGHT, INPUT_WIDTH, TrainConfig
-from formats.cli import add_json, add_quiet, positive_int
+from vrformats.cli import add_json, add_quiet, positive_int
 
 
 def _tours(args_tours) -> list[Path]:
@@ -131,7 +131,7 @@ def register_cli(subparsers) -> None:
     a.add_argument("tours", nargs="+", help="tour folders, or design folders holding tours")
     a.add_argument("--model", required=True, help="ONNX model (reloc detector export)")
     a.add_argument("--every", type=positive_int, default=1)
-    a.add_argument("--sensor", help="read the frames through a sensor preset or file (formats/sensor_presets: "
+    a.add_argument("--sensor", help="read the frames through a sensor preset or file (vrformats/sensor_presets: "
                                     "structured_light, tof; default: the renders as they are)")
     add_json(a, "the report")
     add_quiet(a)

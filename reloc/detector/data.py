@@ -1,7 +1,7 @@
 """Training sets for the learned detector: rendered tours packed into one small file.
 
-``pack`` reads the RGB frames of tours (``formats.tour``), encodes them as the camera would (per-frame
-auto exposure, ``formats.tour.tonemap``, 8-bit sRGB; the exposure's scale is kept per frame, so that
+``pack`` reads the RGB frames of tours (``vrformats.tour``), encodes them as the camera would (per-frame
+auto exposure, ``vrformats.tour.tonemap``, 8-bit sRGB; the exposure's scale is kept per frame, so that
 training can recover linear light for the camera augmentation) and stores each frame as a JPEG (RGB) and two
 lossless PNGs (class index, 16-bit instance id), with the frame's tour, layout and lighting. One ``.npz`` of byte strings keeps 3,840 frames at 160x120 near
 45 MB, small enough to travel to a training machine; ``load`` decodes it with Pillow, so training
@@ -60,7 +60,7 @@ def _decode(b: bytes) -> np.ndarray:
 
 def tour_classes(tour_dirs) -> list[str]:
     """["background", then every class of the tours' objects.json, in semantic-id order]."""
-    from formats.tour import Tour
+    from vrformats.tour import Tour
 
     ids: dict[str, int] = {}
     for d in tour_dirs:
@@ -71,9 +71,9 @@ def tour_classes(tour_dirs) -> list[str]:
 
 def pack(tour_dirs, out, classes: list[str], every: int = 1, progress: bool = True) -> dict:
     """Pack every ``every``-th RGB frame of the tours into ``out`` (.npz); returns a summary."""
-    from formats.atomic import save_npz_atomic
-    from formats.errors import UserError
-    from formats.tour import Tour, tonemap
+    from vrformats.atomic import save_npz_atomic
+    from vrformats.errors import UserError
+    from vrformats.tour import Tour, tonemap
 
     index = {c: k for k, c in enumerate(classes)}
     blobs: list[bytes] = []

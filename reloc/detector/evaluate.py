@@ -23,7 +23,7 @@ from collections import Counter, defaultdict
 
 import numpy as np
 
-from formats.tour import Tour
+from vrformats.tour import Tour
 
 from ..detection.learned import LearnedDetector
 
@@ -88,8 +88,8 @@ def _match(dets, gt_masks: dict[int, tuple[str, np.ndarray]]) -> tuple[int, int]
 def evaluate(model, tour_dirs, every: int = 1, min_pixels: int = 20, progress: bool = True,
              sensor: str | None = None) -> dict:
     """The report (see the module docstring); ``sensor``: a sensor preset or file
-    (``formats.sensors``) the frames are read through, as the experiments' ``sensors:`` do."""
-    from formats.sensors import load_sensor
+    (``vrformats.sensors``) the frames are read through, as the experiments' ``sensors:`` do."""
+    from vrformats.sensors import load_sensor
 
     sens = load_sensor(sensor) if sensor else None
     det = LearnedDetector(model)

@@ -14,7 +14,7 @@ INPUT_WIDTH, INPUT_HEIGHT = 160, 120
 @dataclass
 class AugmentConfig:
     """Random strengths of the camera augmentation (``reloc.detector.augment.camera_augment``). The
-    colour camera's centre values come from the sensor preset ``sensor`` (``formats.sensors``) when
+    colour camera's centre values come from the sensor preset ``sensor`` (``vrformats.sensors``) when
     training starts (``with_sensor``)."""
 
     brightness_log2: tuple[float, float] = (2.0, 1.0)  # scene radiance x 2^U(-a, b)
@@ -47,7 +47,7 @@ class AugmentConfig:
         """A copy with the colour camera of the preset ``sensor``."""
         from dataclasses import replace
 
-        from formats.sensors import load_sensor
+        from vrformats.sensors import load_sensor
 
         c = load_sensor(self.sensor).color
         return replace(self, electrons_per_ms=c.electrons_per_ms, read_noise_e=c.read_noise_e, full_well_e=c.full_well_e,

@@ -10,7 +10,7 @@ camera, not to the rendered light. Adam with a cosine schedule; seeded.
 Validation frames are whole tours held out by layout (``val_layouts``); the checkpoint after each
 epoch is written atomically, and ``--resume`` continues from it. Runs on the CPU or, with
 ``--device cuda``, on a GPU; it imports nothing of the toolkit but this package and
-``formats.atomic``, so it runs wherever PyTorch and Pillow are.
+``vrformats.atomic``, so it runs wherever PyTorch and Pillow are.
 """
 
 from __future__ import annotations
@@ -27,8 +27,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from formats.atomic import replacing, write_json_atomic
-from formats.errors import UserError, one_line
+from vrformats.atomic import replacing, write_json_atomic
+from vrformats.errors import UserError, one_line
 
 from .augment import camera_augment, srgb_decode, srgb_encode
 from .data import boundaries, load

@@ -5,7 +5,7 @@
 - ``stability``: an experiment's figures under last-bit perturbations (:mod:`reloc.experiments.stability`);
 - ``detector-speed``: learned-detector models side by side (:mod:`reloc.detection.bench_speed`);
 - ``map-rules``: what each map-building rule costs (:mod:`reloc.map.bench_rules`);
-- ``sensors``: a tour's read speed through each sensor model (:mod:`formats.bench_sensors`).
+- ``sensors``: a tour's read speed through each sensor model (:mod:`vrformats.bench_sensors`).
 
 ``reloc bench frontend`` streams a tour through the front-end (adaptive clips, registration and
 refinement at every clip closure) and reports milliseconds per frame for each stage: reading the
@@ -15,7 +15,7 @@ second are given with and without io, as the median over ``--repeat`` runs (the 
 
 from __future__ import annotations
 
-from formats.cli import add_json, positive_int
+from vrformats.cli import add_json, positive_int
 
 import json
 import statistics
@@ -82,7 +82,7 @@ def format_frontend(rep: dict) -> str:
 
 
 def cmd_frontend(args) -> int:
-    from formats.tour import Tour
+    from vrformats.tour import Tour
 
     from ..config import load_config
 
@@ -113,7 +113,7 @@ def cmd_map_rules(args) -> int:
 
 
 def cmd_sensors(args) -> int:
-    from formats import bench_sensors
+    from vrformats import bench_sensors
 
     return bench_sensors.run(args)
 
@@ -141,7 +141,7 @@ def register_cli(subparsers) -> None:
 
     bench_odometry.add_arguments(a)
     a.set_defaults(fn=cmd_odometry)
-    from formats import bench_sensors
+    from vrformats import bench_sensors
 
     from ..detection import bench_speed
     from ..map import bench_rules

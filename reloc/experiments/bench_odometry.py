@@ -30,9 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.atomic import write_json_atomic
-from formats.cli import add_json, add_out, positive_int
-from formats.errors import check_output_file
+from vrformats.atomic import write_json_atomic
+from vrformats.cli import add_json, add_out, positive_int
+from vrformats.errors import check_output_file
 
 from ..config import OdometryConfig
 from ..frontend.odometry import OdometryChain, rotation_deg
@@ -46,19 +46,19 @@ def load_depths(tour_dir, frames: int | None = None, start: int = 0):
     Only frames whose files exist are read (a tour may still be rendering); ``frames`` caps
     the count after ``start`` (a position in poses.txt order).
     """
-    from formats import frames as fr
-    from formats.camera import read_tum
+    from vrformats import frames as fr
+    from vrformats.camera import read_tum
 
     root = Path(tour_dir)
-    from formats.tour import Tour
-    from formats.errors import UserError
+    from vrformats.tour import Tour
+    from vrformats.errors import UserError
 
     try:
         tour = Tour(root)
         idx_all, poses_all, K = tour.frame_indices, tour.poses, tour.K
         W, H, fps = tour.intrinsics.width, tour.intrinsics.height, tour.fps
     except UserError:  # e.g. meta.json not written yet while rendering
-        from formats.tour import CAMERA_FILE, read_camera
+        from vrformats.tour import CAMERA_FILE, read_camera
 
         intr, fps, _ = read_camera(root / CAMERA_FILE)
         K, W, H = intr.K, intr.width, intr.height
@@ -86,7 +86,7 @@ def load_depths(tour_dir, frames: int | None = None, start: int = 0):
 
 
 def _has_rgb(path) -> bool:
-    from formats import frames as fr
+    from vrformats import frames as fr
 
     try:
         return all(c in fr.read_channels(path) for c in fr.RGB_CHANNELS)

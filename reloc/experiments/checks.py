@@ -60,9 +60,9 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from formats.errors import SceneFormatError, UserError
-from formats.fields import clean_name, shown
-from formats.cli import add_json
+from vrformats.errors import SceneFormatError, UserError
+from vrformats.fields import clean_name, shown
+from vrformats.cli import add_json
 
 from .tables import FACTOR_KEYS, METRICS, interval_figures, read_results
 
@@ -83,7 +83,7 @@ CHECK_SPEC_KEYS = {"checks", "description"}
 
 
 def parse_checks(path) -> list[Check]:
-    from formats.yamlfile import read_yaml
+    from vrformats.yamlfile import read_yaml
 
     from ..resources import check_spec
 

@@ -5,7 +5,7 @@ For each trajectory (causal, closure, and any budget_B), over ALL ground-truth f
 error over the returned poses, and pose coverage.
 
 ``--poses CONVENTION``: OUT is instead one pose file of another relocalizer, written in that
-convention (``formats.poses``: tum, ace, colmap, mapfree; always stated, never guessed); named
+convention (``vrformats.poses``: tum, ace, colmap, mapfree; always stated, never guessed); named
 conventions map file names to tour frames through ``--names`` (the export folder, whose
 ``export.json`` "frames" is used, or a JSON file ``{"frames": {name: index}}``). The report is the
 same, with one output labelled by the file's name.
@@ -16,10 +16,10 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from formats.atomic import write_json_atomic
-from formats.camera import read_tum
-from formats.errors import SceneFormatError, UserError
-from formats.cli import add_json
+from vrformats.atomic import write_json_atomic
+from vrformats.camera import read_tum
+from vrformats.errors import SceneFormatError, UserError
+from vrformats.cli import add_json
 
 from .evaluation import summarize
 
@@ -52,13 +52,13 @@ def evaluate_run(out_dir, tour) -> dict:
 
 
 def evaluate_poses(pose_file, convention: str, tour, names=None) -> dict:
-    """Recall and errors of one pose file in ``convention`` (``formats.poses``) against ``tour``.
+    """Recall and errors of one pose file in ``convention`` (``vrformats.poses``) against ``tour``.
 
     ``names`` (named conventions): an export folder, a manifest JSON file, or its ``"frames"`` dict.
     Tour frames without a pose are misses; with a named convention, over the frames the export holds
     (an image export leaves out geometry-only frames, as ``reloc experiment`` scores external methods).
     The report has ``evaluate_run``'s shape, its one output labelled by the file's name."""
-    from formats.poses import NAMED, check_convention, load_names, read_poses
+    from vrformats.poses import NAMED, check_convention, load_names, read_poses
 
     conv = check_convention(convention)
     path = Path(pose_file)
@@ -100,9 +100,9 @@ def format_eval(rep: dict) -> str:
 
 
 def cmd_eval(args) -> int:
-    from formats.errors import check_output_file
-    from formats.poses import NAMED, check_convention
-    from formats.tour import Tour
+    from vrformats.errors import check_output_file
+    from vrformats.poses import NAMED, check_convention
+    from vrformats.tour import Tour
 
     if args.poses is None:
         if args.names is not None:

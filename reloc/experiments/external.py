@@ -24,7 +24,7 @@ An experiment spec's ``methods`` list takes, beside the built-in names, mappings
         names: null                                    # named conventions: an export folder whose frames the names follow
 
 Placeholders (``PLACEHOLDERS``): ``{mapping}`` and ``{query}``, the exports of the mapping tour and of
-this query tour (``formats.export``; exported once, cached under ``OUT/exports/<format>/``);
+this query tour (``vrformats.export``; exported once, cached under ``OUT/exports/<format>/``);
 ``{scene}``, one folder holding both (the mapping export's and the query export's top-level entries,
 linked: ACE's ``train/`` and ``test/``); ``{out}``, this run's folder (``OUT/runs/<name>/<tour>/``,
 empty before the command runs); ``{map_out}``, the folder ``map_command`` writes (``OUT/maps/<name>/``);
@@ -33,7 +33,7 @@ command is split like a shell would (``shlex``) but run without a shell: use a s
 
 A command that exits with another status than 0, times out, or writes no pose file is a failed run
 (its stderr's last lines are the reason); the other runs go on. Poses are read in the stated
-convention (``formats.poses``), mapped to tour frames by the export's names, and written as the
+convention (``vrformats.poses``), mapped to tour frames by the export's names, and written as the
 run's ``<mode>.txt`` (TUM), so evaluation is the built-in methods'. Image exports leave out frames
 without RGB; such a method is evaluated on the frames its export holds. Runs are resumable and
 invalidated like the built-in ones: the done-key holds the command, the conventions, the exports'
@@ -54,9 +54,9 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from formats.errors import SceneFormatError, UserError
-from formats.fields import is_number
-from formats.atomic import write_text_atomic
+from vrformats.errors import SceneFormatError, UserError
+from vrformats.fields import is_number
+from vrformats.atomic import write_text_atomic
 
 PLACEHOLDERS = ("mapping", "query", "scene", "out", "map_out", "tour", "name")
 MAP_PLACEHOLDERS = ("mapping", "map_out", "name")
@@ -73,12 +73,12 @@ STDERR_TAIL = 5  # lines of a failed command's stderr in its failure message
 class ExternalMethod:
     name: str
     kind: str  # command | folder
-    poses: str  # the pose-file convention (formats.poses.CONVENTIONS)
+    poses: str  # the pose-file convention (vrformats.poses.CONVENTIONS)
     mode: str = "causal"
     label: str = ""
     command: str | None = None
     map_command: str | None = None
-    export: str | None = None  # formats.export format
+    export: str | None = None  # vrformats.export format
     poses_file: str = "{out}/poses.txt"
     exposure: str | float = "auto"
     timeout_s: float | None = None
@@ -111,7 +111,7 @@ def check_template(template, src, field: str, allowed: tuple) -> str:
 
 def parse_external(doc, src, field: str, builtin: tuple) -> ExternalMethod:
     """One ``methods`` entry that is a mapping; every error names the spec file and the field."""
-    from formats.poses import CONVENTIONS
+    from vrformats.poses import CONVENTIONS
 
     if not isinstance(doc, dict):
         raise SceneFormatError(src, field, f"expected a built-in method name or a mapping with name and command or "
@@ -144,7 +144,7 @@ def parse_external(doc, src, field: str, builtin: tuple) -> ExternalMethod:
         raise SceneFormatError(src, f"{field}.version", f"expected a string or number, got {version!r}")
     common = {"name": name, "kind": kind, "poses": poses, "mode": mode, "label": label, "version": str(version)}
     if kind == "command":
-        from formats.export import FORMATS
+        from vrformats.export import FORMATS
 
         export = doc.get("export")
         if export not in FORMATS:
@@ -199,7 +199,7 @@ def prepare_exports(out: Path, methods: list[ExternalMethod], mappings: dict, qu
     ``sensor`` (``sensors``: sensor name -> preset name or file, None for ideal; ``sensor_seed``);
     link a ``scene`` folder per query reading with the mapping export ``mapping_of(query info)``
     names (default: the only mapping). Returns {(format, exposure, reading name): manifest key}."""
-    from formats.export import export_tour
+    from vrformats.export import export_tour
 
     sensors = sensors or {}
     if mapping_of is None:
@@ -311,7 +311,7 @@ def run_external_map_task(task: dict) -> dict:
     d.mkdir(parents=True, exist_ok=True)
     values = {"mapping": task["mapping"], "map_out": d, "name": m.name}
     s = _run_command(_fill(m.map_command, values), d, d.parent / f"{d.name}.log", m.timeout_s, f"{m.name} map_command")
-    from formats.atomic import write_json_atomic
+    from vrformats.atomic import write_json_atomic
 
     write_json_atomic(done, {"key": task["key"], "seconds": round(s, 2)})
     return {"method": m.name, "seconds": s}
@@ -320,10 +320,10 @@ def run_external_map_task(task: dict) -> dict:
 def run_external_task(task: dict) -> dict:
     """One external method on one query tour: run the command (or take the precomputed file), read its
     poses, write ``<mode>.txt`` (TUM, camera-to-world) and mark the run done."""
-    from formats.atomic import write_json_atomic
-    from formats.camera import write_tum
-    from formats.poses import load_names, read_poses
-    from formats.tour import Tour
+    from vrformats.atomic import write_json_atomic
+    from vrformats.camera import write_tum
+    from vrformats.poses import load_names, read_poses
+    from vrformats.tour import Tour
 
     t0 = time.perf_counter()
     m = ExternalMethod(**task["method"])

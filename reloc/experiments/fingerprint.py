@@ -22,7 +22,7 @@ from pathlib import Path
 
 # The project's top-level packages (pyproject.toml's tool.setuptools.packages.find). A new one must
 # be added here for the fingerprint to follow imports into it (tests check this list).
-PROJECT_PACKAGES = ("formats", "reloc", "synth")
+PROJECT_PACKAGES = ("vrformats", "reloc", "synth")
 # Distributions whose version changes numbers: the numeric and image libraries reloc computes with.
 LIBRARIES = ("numpy", "scipy", "open3d", "opencv-python-headless", "opencv-python", "OpenEXR", "onnxruntime")
 SOURCE_ROOT = Path(__file__).resolve().parents[2]  # the folder holding the project's packages
@@ -58,7 +58,7 @@ def _imported_names(path: Path, module: str) -> set[str]:
 
 def code_files(root: Path | None = None) -> list[Path]:
     """The sources whose code can compute a result: every module of the ``reloc`` package, and every
-    module of the project's other packages (``PROJECT_PACKAGES``: formats, synth) that reloc imports, directly
+    module of the project's other packages (``PROJECT_PACKAGES``: vrformats, synth) that reloc imports, directly
     or through other such modules, with the ``__init__.py`` of each package on the way; found by
     reading the import statements. Sorted by path relative to ``root`` (default ``SOURCE_ROOT``)."""
     root = Path(root or SOURCE_ROOT)

@@ -47,7 +47,7 @@ import dataclasses
 
 import numpy as np
 
-from formats import fields
+from vrformats import fields
 
 # the columns of a segment's counts
 FRAMES, OK_COARSE, OK_FINE, POSED = range(4)

@@ -13,7 +13,7 @@ states.
 
 from __future__ import annotations
 
-from formats.cli import add_json, add_quiet, positive_int
+from vrformats.cli import add_json, add_quiet, positive_int
 
 import dataclasses
 import sys
@@ -133,7 +133,7 @@ def format_units(rep: dict) -> str:
 
 
 def _lengths(text: str) -> tuple[int, ...]:
-    from formats.errors import UserError
+    from vrformats.errors import UserError
 
     try:
         vals = tuple(int(x) for x in text.split(","))
@@ -147,11 +147,11 @@ def _lengths(text: str) -> tuple[int, ...]:
 def cmd_units(args) -> int:
     import json
 
-    from formats.tour import Tour
+    from vrformats.tour import Tour
 
     from ..config import Config, load_config
     from ..detection.factory import build_detector, detector_spec_from_args
-    from formats.atomic import write_json_atomic
+    from vrformats.atomic import write_json_atomic
 
     tour = Tour(args.tour)
     cfg = load_config(args.config) if args.config else Config()

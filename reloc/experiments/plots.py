@@ -34,9 +34,9 @@ from matplotlib.colors import LinearSegmentedColormap, Normalize
 from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
-from formats.atomic import save_figure
-from formats.camera import read_tum
-from formats.errors import SceneFormatError, UserError
+from vrformats.atomic import save_figure
+from vrformats.camera import read_tum
+from vrformats.errors import SceneFormatError, UserError
 
 from .evaluation import THRESHOLDS, pose_errors
 from .tables import read_results
@@ -414,7 +414,7 @@ def plot_experiment(results_dir) -> list[Path]:
 
     A missing trajectory file is a column without poses; a tour whose ground truth cannot be read
     is skipped with a message on stderr; a missing map leaves the boxes out."""
-    from formats.tour import Tour
+    from vrformats.tour import Tour
 
     from ..map.boxmap import BoxMap
 

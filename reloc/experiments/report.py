@@ -21,7 +21,7 @@ import math
 import re
 from pathlib import Path
 
-from formats.atomic import write_text_atomic
+from vrformats.atomic import write_text_atomic
 
 from .tables import EXTRA_TABLES, PAPER_TABLES, read_results, table_title
 

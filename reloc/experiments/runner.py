@@ -24,15 +24,15 @@ import sys
 import time
 from pathlib import Path
 
-from formats.fields import terminal_safe
-from formats.atomic import write_json_atomic
-from formats.design import DESIGN_FILE, list_tours, read_design, tour_name
-from formats.errors import SceneFormatError, UserError, check_output_folder
-from formats.yamlfile import read_json
-from formats.lifetime import folder_lock, stop_processes, worker_init
-from formats.sensors import load_sensor
-from formats.tour import META_FILE, POSES_FILE, Tour
-from formats.cli import add_quiet, add_workers
+from vrformats.fields import terminal_safe
+from vrformats.atomic import write_json_atomic
+from vrformats.design import DESIGN_FILE, list_tours, read_design, tour_name
+from vrformats.errors import SceneFormatError, UserError, check_output_folder
+from vrformats.yamlfile import read_json
+from vrformats.lifetime import folder_lock, stop_processes, worker_init
+from vrformats.sensors import load_sensor
+from vrformats.tour import META_FILE, POSES_FILE, Tour
+from vrformats.cli import add_quiet, add_workers
 
 from . import methods as registry
 from . import tables
@@ -49,7 +49,7 @@ from .tasks import DONE, is_done, run_map_task, run_tour_task
 
 def design_tours(spec: ExperimentSpec) -> tuple[dict, dict]:
     """(query tours {name: info}, mapping tour info) of the design in ``spec.tours_root``, read from
-    its files (``formats.design``): the planned tours from design.json, each tour from its meta.json
+    its files (``vrformats.design``): the planned tours from design.json, each tour from its meta.json
     (without design.json, the tours found there). Checks that they are rendered.
 
     Every query tour is there once per sensor of the spec, named ``reading_name(tour, sensor)``,
@@ -137,7 +137,7 @@ def _pool(workers: int):
     if workers <= 1:
         return None
     # spawn: Open3D and OpenCV keep thread pools that a fork would copy mid-state; the workers die with
-    # the driver and leave Ctrl-C to it (formats.lifetime)
+    # the driver and leave Ctrl-C to it (vrformats.lifetime)
     return cf.ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=worker_init,
                                   initargs=(os.getpid(),))
 
@@ -184,7 +184,7 @@ class _Runner:
                 finished, _ = cf.wait(running, return_when=cf.FIRST_COMPLETED)
                 for f in finished:
                     self._finish(running.pop(f), f.result, done)
-        except BaseException:  # Ctrl-C, SIGTERM, SIGHUP (formats.lifetime) or a bug: stop the workers now
+        except BaseException:  # Ctrl-C, SIGTERM, SIGHUP (vrformats.lifetime) or a bug: stop the workers now
             self.abort()
             raise
 

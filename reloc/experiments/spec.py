@@ -22,7 +22,7 @@ the optional tables::
     config: {}                         # VideoReloc threshold overrides (reloc/config.py sections)
     appearance: {}                     # AppearanceConfig overrides
     fpfh_icp: {}                       # FpfhConfig overrides
-    sensors: [ideal]                   # the RGB-D cameras the tours are read through (formats.sensors):
+    sensors: [ideal]                   # the RGB-D cameras the tours are read through (vrformats.sensors):
                                        # presets (ideal, structured_light, tof) or sensor YAML files
                                        # (relative to this file); a design factor like lighting and layout
     map_sensor: same                   # the mapping tour through the query's sensor (same) or one sensor
@@ -57,7 +57,7 @@ A detector that sees images (``learned``, ``onnx``) looks only at frames with RG
 there (``rgb_every`` dividing both), which the spec check says before anything runs; the map is
 built from the mapping tour's RGB frames.
 
-Sensors (``formats.sensors``): every query tour is read through every sensor of ``sensors``, seeded
+Sensors (``vrformats.sensors``): every query tour is read through every sensor of ``sensors``, seeded
 per (tour, frame, sensor, ``seed``), so every method sees the same noisy frames (external command
 methods through exports read with the same sensor). A query tour read through a sensor other than
 ``ideal`` is named ``TOUR@SENSOR`` (its runs are ``runs/METHOD/TOUR@SENSOR``). The map is built from
@@ -75,10 +75,10 @@ import dataclasses
 import json
 from pathlib import Path
 
-from formats import fields
-from formats.errors import SceneFormatError, UserError
-from formats.sensors import load_sensor
-from formats.yamlfile import read_yaml
+from vrformats import fields
+from vrformats.errors import SceneFormatError, UserError
+from vrformats.sensors import load_sensor
+from vrformats.yamlfile import read_yaml
 
 from . import methods as registry
 from .intervals import IntervalSettings
@@ -177,7 +177,7 @@ def _fail(src, field, msg):
 def _sensor_entry(value, src, field) -> dict:
     """One sensor of a spec's ``sensors``: a preset name or a YAML file relative to the spec. Loaded
     here, so that an unknown preset or a bad parameter stops the experiment before anything runs."""
-    from formats.sensors import PRESET_DIR
+    from vrformats.sensors import PRESET_DIR
 
     if not isinstance(value, str) or not value:
         _fail(src, field, f"expected a sensor preset name or a sensor YAML file, got {value!r}")

@@ -18,9 +18,9 @@ import json
 import sys
 from pathlib import Path
 
-from formats.atomic import write_json_atomic, write_text_atomic
-from formats.cli import add_json, add_quiet, add_workers, fraction
-from formats.errors import UserError
+from vrformats.atomic import write_json_atomic, write_text_atomic
+from vrformats.cli import add_json, add_quiet, add_workers, fraction
+from vrformats.errors import UserError
 
 # the default perturbations: name -> Perturbation settings
 DEFAULT_PERTURBATIONS = {

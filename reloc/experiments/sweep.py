@@ -29,9 +29,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from formats.errors import SceneFormatError
-from formats.fields import is_number
-from formats.atomic import save_figure
+from vrformats.errors import SceneFormatError
+from vrformats.fields import is_number
+from vrformats.atomic import save_figure
 
 from .intervals import OK_COARSE, figure_values
 

@@ -35,10 +35,10 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.atomic import write_json_atomic, write_text_atomic
-from formats.camera import read_tum
-from formats.errors import SceneFormatError
-from formats.yamlfile import read_json
+from vrformats.atomic import write_json_atomic, write_text_atomic
+from vrformats.camera import read_tum
+from vrformats.errors import SceneFormatError
+from vrformats.yamlfile import read_json
 
 from . import methods as registry
 from .evaluation import END_REASONS, THRESHOLDS, end_reason_kind, odometry_drift, pose_errors, summarize
@@ -100,7 +100,7 @@ def table_title(key: str) -> str:
 
 
 def _gt(tour_dir: str):
-    from formats.tour import Tour
+    from vrformats.tour import Tour
 
     t = Tour(tour_dir)
     return t, {int(i): T for i, T in zip(t.frame_indices, t.poses)}

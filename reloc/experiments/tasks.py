@@ -16,10 +16,10 @@ import importlib
 import time
 from pathlib import Path
 
-from formats.atomic import write_json_atomic
-from formats.errors import SceneFormatError
-from formats.yamlfile import read_json
-from formats.tour import Tour
+from vrformats.atomic import write_json_atomic
+from vrformats.errors import SceneFormatError
+from vrformats.yamlfile import read_json
+from vrformats.tour import Tour
 
 from . import methods
 from .methods.common import config_of, detector_for, load_map

@@ -19,7 +19,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from formats.boxes import STRUCTURE_KINDS
+from vrformats.boxes import STRUCTURE_KINDS
 
 from ..config import ClipConfig, ObservationConfig
 from ..geometry import farthest_point_sample

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from formats.boxes import STRUCTURE_KINDS
+from vrformats.boxes import STRUCTURE_KINDS
 
 from ..config import DetectionConfig, ObservationConfig
 from ..detection.base import Detection

@@ -23,7 +23,7 @@ from itertools import combinations
 
 import numpy as np
 
-from formats.camera import wrap_angle
+from vrformats.camera import wrap_angle
 
 from .clip_rigid import consensus_fit, within_sum
 from .clips import Node

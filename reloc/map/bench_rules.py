@@ -59,7 +59,7 @@ def _missing_classes(errors: dict) -> Counter:
 
 
 def bench(tour_dir, model, stride: int | None = None, progress: bool = False) -> list[dict]:
-    from formats.tour import Tour
+    from vrformats.tour import Tour
 
     from ..config import DetectionConfig
     from ..detection.learned import LearnedDetector

@@ -24,10 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.boxes import BOXES_FORMAT, STRUCTURE_KINDS
-from formats import fields
-from formats.errors import SceneFormatError
-from formats.yamlfile import read_json
+from vrformats.boxes import BOXES_FORMAT, STRUCTURE_KINDS
+from vrformats import fields
+from vrformats.errors import SceneFormatError
+from vrformats.yamlfile import read_json
 
 from ..config import MapConfig
 from ..geometry import non_degenerate_triangles

@@ -38,7 +38,7 @@ with the knobs of :class:`~reloc.map.settings.MapBuildSettings`):
   the 1st/99th percentiles in the box frame extrapolated to the ends (ignoring flying pixels at
   mask edges without shrinking the box), each voxel counting with the spread of its points, z
   likewise. Surfaces thinner than the ground truth's structure (walls 0.1 m, floor and ceiling
-  slabs ``formats.boxes.STRUCT_SLAB``) are thickened *away from the cameras that saw them*, since
+  slabs ``vrformats.boxes.STRUCT_SLAB``) are thickened *away from the cameras that saw them*, since
   only their visible face is observed.
 
 Boxes are canonical: size x >= size y (x along the longest horizontal axis), yaw in [-90, 90)
@@ -60,8 +60,8 @@ from dataclasses import asdict
 
 import numpy as np
 
-from formats.boxes import BOXES_FORMAT, FRAME_TEXT, ID_BASE
-from formats.errors import UserError
+from vrformats.boxes import BOXES_FORMAT, FRAME_TEXT, ID_BASE
+from vrformats.errors import UserError
 
 from ..detection.base import FrameData, check_rgb_schedule, needs_labels, needs_rgb
 from ..detection.oracle import OracleDetector
@@ -74,7 +74,7 @@ from .structure import structure_camera, split_rooms, split_walls
 
 
 def _struct_slab() -> float:
-    from formats.boxes import STRUCT_SLAB
+    from vrformats.boxes import STRUCT_SLAB
 
     return float(STRUCT_SLAB)
 
@@ -83,7 +83,7 @@ def build_map(tour_dir, detector=None, stride: int | None = None, voxel: float |
               settings: MapBuildSettings | None = None, max_frames: int | None = None) -> tuple[dict, dict]:
     """Build a box map from a mapping tour: ``(videoreloc-boxes/1 document, report)``.
 
-    ``tour_dir``: the tour's folder, or a ``formats.tour.Tour`` (one read through a sensor model:
+    ``tour_dir``: the tour's folder, or a ``vrformats.tour.Tour`` (one read through a sensor model:
     the map then sees what that camera measures). ``detector``: anything with ``detect(FrameData) -> list[Detection]`` (default: the oracle of
     the tour's classes). ``stride``/``voxel`` (default 5 frames / 0.05 m, see
     :class:`MapBuildSettings`) override ``settings``. ``max_frames``: stop after that many visited
@@ -94,7 +94,7 @@ def build_map(tour_dir, detector=None, stride: int | None = None, voxel: float |
     """
     from tqdm import tqdm
 
-    from formats.tour import Tour
+    from vrformats.tour import Tour
 
     t_start = time.perf_counter()
     s = _settings(settings, stride, voxel)
@@ -255,7 +255,7 @@ def _pieces(acc: _Accumulator, s: MapBuildSettings, dropped: Counter) -> list[tu
 
 def _min_sizes(s: MapBuildSettings) -> dict[str, tuple]:
     """The minimum box size per kind: walls as the thinnest ground-truth wall, floor and ceiling
-    slabs as the ground truth's (``formats.boxes.STRUCT_SLAB``)."""
+    slabs as the ground truth's (``vrformats.boxes.STRUCT_SLAB``)."""
     slab = _struct_slab()
     return {
         "object": (s.min_object_size_m,) * 3,

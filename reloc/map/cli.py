@@ -8,9 +8,9 @@ import json
 import sys
 from collections import Counter
 
-from formats.atomic import write_text_atomic
-from formats.errors import UserError, check_output_file
-from formats.cli import add_quiet
+from vrformats.atomic import write_text_atomic
+from vrformats.errors import UserError, check_output_file
+from vrformats.cli import add_quiet
 
 from .build import build_map
 from .document import dumps_map, map_from_tour
@@ -47,7 +47,7 @@ def cmd_build(args) -> int:
     check_output_file(args.out)
     if args.report:
         check_output_file(args.report)
-    from formats.tour import Tour
+    from vrformats.tour import Tour
 
     tour = Tour(args.tour)  # UserError when missing or malformed
     detector = None

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import json
 
-from formats.boxes import STRUCTURE_KINDS
-from formats.tour import Tour
+from vrformats.boxes import STRUCTURE_KINDS
+from vrformats.tour import Tour
 
 
 def kind_of(cls: str) -> str:
@@ -34,5 +34,5 @@ def dumps_map(doc: dict) -> str:
 
 def map_from_tour(tour_dir) -> dict:
     """The ground-truth boxes of a tour's layout as a map: its ``objects.json``, which the
-    renderer wrote in the same format (``formats.boxes``)."""
+    renderer wrote in the same format (``vrformats.boxes``)."""
     return Tour(tour_dir).objects()

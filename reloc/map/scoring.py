@@ -115,9 +115,9 @@ def box_errors(doc: dict, gt_doc: dict, match: str = "auto", max_match_m: float 
 
 
 def errors_against_ground_truth(tour, doc: dict) -> dict | None:
-    """:func:`box_errors` of a map built from ``tour`` (a ``formats.tour.Tour``) against the tour's
+    """:func:`box_errors` of a map built from ``tour`` (a ``vrformats.tour.Tour``) against the tour's
     ground-truth boxes (objects.json); None when the tour has none."""
-    from formats.errors import UserError
+    from vrformats.errors import UserError
 
     try:
         gt = tour.objects()

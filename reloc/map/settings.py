@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from formats.errors import UserError
+from vrformats.errors import UserError
 
 
 DEFAULT_STRIDE = 5  # every 5th frame: a 6000-frame 320x240 tour maps in well under a minute
@@ -39,7 +39,7 @@ class MapBuildSettings:
     vote_ratio: float = 0.5
     quantile: float = 0.01  # robust extents: quantile .. 1 - quantile
     # minimum box thickness: walls as the thinnest ground-truth wall, objects 2 cm; floors and
-    # ceilings as the ground truth's slab (formats.boxes.STRUCT_SLAB)
+    # ceilings as the ground truth's slab (vrformats.boxes.STRUCT_SLAB)
     min_wall_thickness_m: float = 0.1
     min_object_size_m: float = 0.02
     # association of untracked object detections to untracked segments

@@ -1,6 +1,6 @@
 """Procedural object assets: meshes generated from a class, a size and a few parameters.
 
-Modules, bottom up (each imports only those above it, and ``formats.errors``):
+Modules, bottom up (each imports only those above it, and ``vrformats.errors``):
 
 * ``materials``   the material vocabulary (``MATERIALS``) and the colour palettes;
 * ``surfaces``    ``Surface``, a supporting rectangle in an object's local frame;

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from formats.errors import UnknownNameError
+from vrformats.errors import UnknownNameError
 
 from . import bathroom, beds, decor, electronics, kitchen, lighting, plants, seating, storage, tables
 from .primitives import Builder, Part, concat

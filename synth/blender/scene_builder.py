@@ -1,9 +1,9 @@
 """Translate a layout's render parts, a resolved lighting and a camera into a Blender scene.
 
 Everything here is translation of plain data (``synth.render.meshes``, ``synth.scene.lighting``,
-``formats.camera``); the conventions are decided there. The one conversion made here is the
+``vrformats.camera``); the conventions are decided there. The one conversion made here is the
 camera's: an OpenCV camera-to-world pose becomes Blender's camera matrix (looking down -Z, +Y up)
-through ``formats.camera.blender_from_opencv``, and the intrinsics become lens and shift.
+through ``vrformats.camera.blender_from_opencv``, and the intrinsics become lens and shift.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import bpy
 import numpy as np
 from mathutils import Matrix, Vector
 
-from formats.camera import Intrinsics, blender_from_opencv
+from vrformats.camera import Intrinsics, blender_from_opencv
 
 from ..scene.lighting import ResolvedLighting
 

@@ -25,9 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
-from formats import frames as fr
-from formats.color import srgb8
-from formats.atomic import replacing
+from vrformats import frames as fr
+from vrformats.color import srgb8
+from vrformats.atomic import replacing
 
 from ..render.chunks import emit, worker_main
 
@@ -53,7 +53,7 @@ def read_blender_exr(path: str) -> dict[str, np.ndarray]:
 def run(job: dict) -> int:
     import bpy
 
-    from formats.camera import Intrinsics, read_tum
+    from vrformats.camera import Intrinsics, read_tum
     from ..scene.lighting import load_lighting, resolve_lighting
     from ..render.meshes import instance_classes, layout_parts
     from ..render.settings import quality

@@ -6,8 +6,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from formats import frames as fr
-from formats.errors import UserError
+from vrformats import frames as fr
+from vrformats.errors import UserError
 
 from ..render.chunks import run_chunk_process
 from .plan import Plan
@@ -22,7 +22,7 @@ def measure_calibration(plan: Plan, frames: int = 1) -> dict:
     of a frame file, and this machine (CPU count and model, load average, date, toolkit version)."""
     import tempfile
 
-    from formats.camera import write_tum
+    from vrformats.camera import write_tum
 
     from .estimate import CALIBRATION_FORMAT, CALIBRATION_VERSION, is_gpu, measure_environment
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from formats.fields import terminal_safe
+from vrformats.fields import terminal_safe
 
 from ..render.chunks import run_chunk_process, stopping_workers
 from .plan import Chunk, Plan

@@ -7,9 +7,9 @@ import os
 import sys
 from pathlib import Path
 
-from formats.atomic import write_json_atomic
-from formats.errors import UserError, check_output_file
-from formats.cli import add_quiet, add_workers
+from vrformats.atomic import write_json_atomic
+from vrformats.errors import UserError, check_output_file
+from vrformats.cli import add_quiet, add_workers
 
 from .calibration import estimate, measure_calibration
 from .estimate import fmt_duration

@@ -46,9 +46,9 @@ import heapq
 from dataclasses import dataclass
 from pathlib import Path
 
-from formats import fields
-from formats.errors import SceneFormatError, UserError
-from formats.yamlfile import read_json
+from vrformats import fields
+from vrformats.errors import SceneFormatError, UserError
+from vrformats.yamlfile import read_json
 
 SETUP_S = {"geometry": 3.0, "rgb": 4.0, "fast": 1.0}  # start-up per chunk (a fresh process, the scene built)
 RENDER_KINDS = ("geometry", "rgb", "fast")  # kinds rendered on the nodes; copy runs on the driver

@@ -19,10 +19,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from formats import frames as fr
-from formats.design import tour_name
-from formats.errors import SceneFormatError, UserError, check_output_folder
-from formats.fields import fail
+from vrformats import frames as fr
+from vrformats.design import tour_name
+from vrformats.errors import SceneFormatError, UserError, check_output_folder
+from vrformats.fields import fail
 
 from ..render.chunks import chunk_job
 from ..tour.render import TourSpec, prepare

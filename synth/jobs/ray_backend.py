@@ -39,10 +39,10 @@ import threading
 import time
 from pathlib import Path
 
-from formats import frames as fr
-from formats.atomic import replacing, write_bytes_atomic, write_text_atomic
-from formats.errors import UserError, one_line
-from formats.lifetime import reclaim_signals, start_reaper
+from vrformats import frames as fr
+from vrformats.atomic import replacing, write_bytes_atomic, write_text_atomic
+from vrformats.errors import UserError, one_line
+from vrformats.lifetime import reclaim_signals, start_reaper
 
 from ..render.chunks import run_chunk_process
 from .chunk_queue import ChunkQueue, chunk_files
@@ -55,7 +55,7 @@ RUNTIME_ENV_MODES = ("auto", "full", "code", "none")
 # (scenes) travels
 _EXCLUDES = [".git", ".venv", "**/__pycache__", "*.egg-info", ".pytest_cache", "build", "dist", "out", "renders",
              "/data", ".gl", ".whl", "tests"]
-_FRAME = re.compile(r"^\d{6,}\.exr$")  # synth frame names (formats.frames.frame_name)
+_FRAME = re.compile(r"^\d{6,}\.exr$")  # synth frame names (vrformats.frames.frame_name)
 _PREVIEW = re.compile(r"^\d{6,}\.png$")
 LOG_TAIL = 64 * 1024
 
@@ -236,7 +236,7 @@ def failure_cause(e: BaseException) -> str:
 
 
 def _module_names(renderer: str) -> list[str]:
-    names = ["synth", "formats"]
+    names = ["synth", "vrformats"]
     for req in requirements(renderer):
         name = _requirement_name(req)
         names.append(_MODULES.get(name.lower(), name))

@@ -10,10 +10,10 @@ import sys
 import time
 from pathlib import Path
 
-from formats.atomic import write_json_atomic
-from formats.design import write_design
-from formats.errors import UserError, check_output_folder
-from formats.lifetime import folder_lock
+from vrformats.atomic import write_json_atomic
+from vrformats.design import write_design
+from vrformats.errors import UserError, check_output_folder
+from vrformats.lifetime import folder_lock
 
 from ..tour.render import make_output_folder, tour_meta, write_static_files
 from ..render.settings import quality

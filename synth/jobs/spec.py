@@ -9,10 +9,10 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-from formats import fields
-from formats.errors import UserError
-from formats.fields import fail, names, positive_int
-from formats.yamlfile import read_yaml
+from vrformats import fields
+from vrformats.errors import UserError
+from vrformats.fields import fail, names, positive_int
+from vrformats.yamlfile import read_yaml
 
 from ..render.settings import DEFAULTS, DEVICES, quality
 

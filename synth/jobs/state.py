@@ -11,8 +11,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from formats.atomic import write_text_atomic
-from formats.errors import UserError, one_line
+from vrformats.atomic import write_text_atomic
+from vrformats.errors import UserError, one_line
 
 from .plan import Chunk
 
@@ -88,7 +88,7 @@ def parse_state(text: str, where: str) -> dict:
     except json.JSONDecodeError as e:
         problem = f"not valid JSON: {e.msg} at line {e.lineno}"
     except RecursionError:
-        problem = "nested too deeply"  # (formats.yamlfile bounds the files users hand it; this one the toolkit wrote)
+        problem = "nested too deeply"  # (vrformats.yamlfile bounds the files users hand it; this one the toolkit wrote)
     else:
         if isinstance(doc, dict):
             return doc

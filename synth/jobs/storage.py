@@ -13,7 +13,7 @@ writes the job's own files there too.
   when it is written. Frames never touch the driver's disk: they go from the task's bytes to the
   storage. ``Storage`` maps a path in the staging folder to the same relative path in the storage.
 - **Atomic writes**: on a file system with a rename (``file://``: fsspec's local file system) a file
-  is written under the hidden temporary name ``.NAME.PID.tmp`` (``formats.atomic.temp_name``) and
+  is written under the hidden temporary name ``.NAME.PID.tmp`` (``vrformats.atomic.temp_name``) and
   renamed into place. Elsewhere a file is written with one put (``pipe_file``): ``memory://``
   stores the bytes when the write is complete, and object stores make an object visible only once
   it has been uploaded whole; that is atomic enough, and a rename there would be a copy.
@@ -27,9 +27,9 @@ import posixpath
 import re
 from pathlib import Path
 
-from formats.atomic import write_bytes_atomic
-from formats.errors import UserError, check_output_folder
-from formats import frames as fr
+from vrformats.atomic import write_bytes_atomic
+from vrformats.errors import UserError, check_output_folder
+from vrformats import frames as fr
 
 _SCHEME = re.compile(r"^([A-Za-z][A-Za-z0-9+.-]*)://")
 
@@ -105,7 +105,7 @@ class Storage:
     # -- checks
 
     def check_writable(self) -> None:
-        """A local storage folder can be made (``formats.errors.check_output_folder``; writes nothing)."""
+        """A local storage folder can be made (``vrformats.errors.check_output_folder``; writes nothing)."""
         if self.renames:
             try:
                 check_output_folder(self.root)
@@ -152,7 +152,7 @@ class Storage:
                 if parent not in self._dirs:
                     self.fs.makedirs(parent, exist_ok=True)
                     self._dirs.add(parent)
-                write_bytes_atomic(r, data)  # this machine's files: never through a planted link (formats.atomic)
+                write_bytes_atomic(r, data)  # this machine's files: never through a planted link (vrformats.atomic)
             else:
                 self.fs.pipe_file(r, data)
         except OSError as e:

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.atomic import write_json_atomic
-from formats.cli import add_json, add_quiet
-from formats.errors import UserError, check_output_file
+from vrformats.atomic import write_json_atomic
+from vrformats.cli import add_json, add_quiet
+from vrformats.errors import UserError, check_output_file
 
 
 def _print_json(obj) -> None:
@@ -271,7 +271,7 @@ def cmd_rearrange(args) -> int:
 
 def cmd_grade(args) -> int:
     """Nested variants of BASE at graded strengths (synth.layout.graded), one file per level."""
-    from formats.atomic import write_bytes_atomic
+    from vrformats.atomic import write_bytes_atomic
 
     from .graded import BEYOND, check_strengths, graded_variants, level_name, moved_ids
     from .rearrange import target_ranges

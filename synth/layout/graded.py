@@ -27,8 +27,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from formats.errors import UserError
-from formats.fields import is_number
+from vrformats.errors import UserError
+from vrformats.fields import is_number
 
 from ..scene.fixtures import layout_fixtures
 from ..scene.model import Layout

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from formats.camera import wrap_angle
+from vrformats.camera import wrap_angle
 
 from ..assets import registry as assets
 from ..mesh.surfaces import mesh_surfaces

@@ -50,8 +50,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from formats.camera import wrap_angle
-from formats.errors import UserError
+from vrformats.camera import wrap_angle
+from vrformats.errors import UserError
 
 from ..paths.model import DEFAULTS
 from ..scene import geometry as geo

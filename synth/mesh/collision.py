@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.fields import inside_root
+from vrformats.fields import inside_root
 
 from ..scene import geometry as geo
 from ..scene.geometry import Y_UP_TO_Z_UP
@@ -230,7 +230,7 @@ def _stage_scene(root: str, asset: str, position: tuple, rotation: tuple):
     checks then go without it, saying so once)."""
     import open3d as o3d
 
-    from formats.errors import SceneFormatError, UnknownNameError
+    from vrformats.errors import SceneFormatError, UnknownNameError
 
     from .mesh_assets import load_asset_mesh
 

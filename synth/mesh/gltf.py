@@ -77,10 +77,10 @@ import trimesh
 from trimesh.visual import TextureVisuals
 from trimesh.visual.material import PBRMaterial
 
-from formats.errors import SceneFormatError
-from formats.fields import inside_root, listing, shown
-from formats.yamlfile import check_shape
-from formats.lfs import LFS_HINT, LFS_POINTER_PREFIX, is_lfs_pointer  # noqa: F401 - re-exported for readers
+from vrformats.errors import SceneFormatError
+from vrformats.fields import inside_root, listing, shown
+from vrformats.yamlfile import check_shape
+from vrformats.lfs import LFS_HINT, LFS_POINTER_PREFIX, is_lfs_pointer  # noqa: F401 - re-exported for readers
 
 from ..scene.geometry import Y_UP_TO_Z_UP
 
@@ -144,7 +144,7 @@ def _read_container(path: Path) -> tuple[dict, bytes | None, int]:
                 bad(f"malformed JSON chunk: {e}")
             except RecursionError:
                 bad("JSON chunk nested too deeply")
-            check_shape(path, doc)  # the bounds of every reader (formats.yamlfile)
+            check_shape(path, doc)  # the bounds of every reader (vrformats.yamlfile)
         elif ctype == _CHUNK_BIN and binary is None:
             binary, bin_at = chunk, off + 8
         off += 8 + clen + (-clen % 4)
@@ -156,7 +156,7 @@ def _read_container(path: Path) -> tuple[dict, bytes | None, int]:
 def _external(path: Path, uri: str, field: str = "images[].uri") -> Path | None:
     """The file an external URI names (relative to the GLB's folder); None for a data: URI.
     SceneFormatError naming the GLB and ``field`` for a URI with a scheme or outside the GLB's
-    dataset folder (``owning_root``; ``formats.fields.inside_root``)."""
+    dataset folder (``owning_root``; ``vrformats.fields.inside_root``)."""
     if uri.startswith("data:"):
         return None
     if "://" in uri:
@@ -371,7 +371,7 @@ def _texture_transforms(path: Path, doc: dict, index: int) -> dict:
     """``{slot: {"offset", "rotation", "scale", "texCoord"}}``: the ``KHR_texture_transform`` of each
     texture slot of glTF material ``index`` that has one, glTF defaults filled in (``texCoord`` None
     when the extension does not override the slot's). SceneFormatError naming the field for bad values."""
-    from formats.fields import integer, mapping, number, numbers
+    from vrformats.fields import integer, mapping, number, numbers
 
     mat = _material(doc, index)
     if mat is None:

@@ -12,9 +12,9 @@ from pathlib import Path
 
 import trimesh
 
-from formats.errors import UnknownNameError
+from vrformats.errors import UnknownNameError
 
-from formats.fields import fail, inside_root
+from vrformats.fields import fail, inside_root
 
 from ..scene.model import GLB_ASSET_PREFIX as ASSET_PREFIX
 from ..scene.model import URDF_ASSET_PREFIX as URDF_PREFIX

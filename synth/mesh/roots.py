@@ -1,5 +1,5 @@
 """The folder a mesh asset's files belong to: the root that the paths a file names (a URDF's meshes,
-a GLB's textures) must stay inside (``formats.fields.inside_root``), and the dataset folder that
+a GLB's textures) must stay inside (``vrformats.fields.inside_root``), and the dataset folder that
 asset names (``replicacad:<glb>``, ``replicacad-urdf:<urdf>``) are relative to.
 
 A dataset folder is marked by a scene dataset config (``*.scene_dataset_config.json``, habitat-sim's,
@@ -12,7 +12,7 @@ from __future__ import annotations
 import functools
 from pathlib import Path
 
-from formats.fields import fail
+from vrformats.fields import fail
 
 DATASET_CONFIG_GLOB = "*.scene_dataset_config.json"
 
@@ -20,7 +20,7 @@ DATASET_CONFIG_GLOB = "*.scene_dataset_config.json"
 def owning_root(path) -> Path:
     """The dataset folder a file belongs to: its nearest ancestor holding a
     ``*.scene_dataset_config.json``, else the file's own folder. Paths a file names (a URDF's
-    meshes, a GLB's textures) must stay inside it (``formats.fields.inside_root``)."""
+    meshes, a GLB's textures) must stay inside it (``vrformats.fields.inside_root``)."""
     p = Path(path).resolve().parent
     return _owning(p)
 

@@ -70,8 +70,8 @@ import numpy as np
 import trimesh
 from scipy import ndimage
 
-from formats.boxes import CEILING_ID_BASE, FLOOR_ID_BASE, WALL_ID_BASE
-from formats.fields import fail
+from vrformats.boxes import CEILING_ID_BASE, FLOOR_ID_BASE, WALL_ID_BASE
+from vrformats.fields import fail
 
 from ..scene.model import Opening, Room, Stage, Wall, quantize
 

@@ -104,8 +104,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from formats.errors import UnknownNameError
-from formats.fields import fail, inside_root, number
+from vrformats.errors import UnknownNameError
+from vrformats.fields import fail, inside_root, number
 
 from ..scene.geometry import Y_UP_TO_Z_UP
 from ..scene.model import URDF_ASSET_PREFIX

@@ -1,6 +1,6 @@
 """Camera paths planned once and rendered in every layout x lighting (no Blender here).
 
-Two kinds of path, both as camera-to-world poses (OpenCV axes, ``formats.camera``) at a fixed frame
+Two kinds of path, both as camera-to-world poses (OpenCV axes, ``vrformats.camera``) at a fixed frame
 rate, stored as TUM text (``camera.write_tum``) plus a sidecar YAML with the planner's inputs:
 
 ``plan_query_path(layouts)``

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.errors import UserError
-from formats.fields import is_number
+from vrformats.errors import UserError
+from vrformats.fields import is_number
 
 from ..scene.model import Layout, Stage, object_box
 from .model import BAND, CameraPath

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.errors import UnknownNameError, UserError
-from formats.cli import add_json, positive_int
+from vrformats.errors import UnknownNameError, UserError
+from vrformats.cli import add_json, positive_int
 
 from .clearance import CLEARANCE_TOL, range_text, describe_object, clearance_report, declared_clearance, replan_command
 from .files import load_path, save_path

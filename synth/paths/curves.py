@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from formats import camera
+from vrformats import camera
 
 from .model import CURVE_MARGIN, DS, MARGIN, MAX_YAW_RATE
 from .space import Space

@@ -10,11 +10,11 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from formats import camera
-from formats.atomic import write_text_atomic
-from formats.errors import SceneFormatError, UnknownNameError, UserError
-from formats.fields import integer, is_number
-from formats.yamlfile import MAX_DEPTH, check_shape, read_text
+from vrformats import camera
+from vrformats.atomic import write_text_atomic
+from vrformats.errors import SceneFormatError, UnknownNameError, UserError
+from vrformats.fields import integer, is_number
+from vrformats.yamlfile import MAX_DEPTH, check_shape, read_text
 
 from ..resources import paths_dir  # $SYNTH_SCENES_DIR/paths, else scenes/paths
 from .model import FORMAT, CameraPath

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from formats.errors import UserError
+from vrformats.errors import UserError
 
 from ..scene.model import Layout
 from .curves import arc_length, continuous_angles, final_yaw, track_poses, rate_limit, resample_track, smooth_noise, smooth_valid, travel_yaw, turn_loops

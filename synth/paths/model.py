@@ -1,6 +1,6 @@
 """The camera path itself (``CameraPath``: poses, frame rate, metadata) and the planners' constants.
 
-Poses are camera-to-world, OpenCV axes (``formats.camera``). The constants are shared by the
+Poses are camera-to-world, OpenCV axes (``vrformats.camera``). The constants are shared by the
 clearance checks (``BAND``), the planning grid and both planners; ``synth.paths`` explains them.
 """
 
@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from formats import camera
+from vrformats import camera
 
 
 __all__ = ["CameraPath", "FORMAT", "BAND", "PlannerDefaults", "DEFAULTS"]
@@ -47,7 +47,7 @@ class PlannerDefaults:
     ``synth path plan``'s option defaults and the shipped paths (``synth.paths.shipped.SHIPPED``)
     read them from :data:`DEFAULTS`."""
 
-    fps: float = camera.DEFAULT_FPS  # frames per second (the cameras' default, formats.camera)
+    fps: float = camera.DEFAULT_FPS  # frames per second (the cameras' default, vrformats.camera)
     speed: float = 1.0  # m/s along the path
     clearance: float = 0.3  # m the camera centre keeps from obstacles and walls
     obstacles: str = "all"  # "all": every object but ceiling-mounted ones; "band": those in the height band

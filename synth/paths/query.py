@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from formats.errors import UserError
+from vrformats.errors import UserError
 
 from ..scene.model import Layout
 from .curves import arc_length, final_yaw, polyline_resample, track_poses, resample_track, smooth_noise, smooth_valid, travel_yaw, turn_loops

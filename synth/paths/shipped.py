@@ -7,7 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from formats.errors import UserError
+from vrformats.errors import UserError
 
 from ..scene.model import Layout
 from .files import paths_dir, save_path

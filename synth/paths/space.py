@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from formats.errors import UserError
+from vrformats.errors import UserError
 
 from ..scene.model import Layout
 from .clearance import Boxes, object_boxes, seg_dist, inside_free, path_clearance, room_index, wall_segments

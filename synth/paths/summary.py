@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.errors import UserError
+from vrformats.errors import UserError
 
 from ..scene.model import Layout
 from .clearance import path_clearance

@@ -18,9 +18,9 @@ import math
 
 import numpy as np
 
-from formats import camera
-from formats.errors import UserError
-from formats.fields import is_integer
+from vrformats import camera
+from vrformats.errors import UserError
+from vrformats.fields import is_integer
 
 from ..scene.model import Layout
 from .curves import track_poses

@@ -19,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.atomic import write_nofollow
-from formats.camera import Intrinsics, write_tum
-from formats.cli import add_json, positive_int
+from vrformats.atomic import write_nofollow
+from vrformats.camera import Intrinsics, write_tum
+from vrformats.cli import add_json, positive_int
 
 from .settings import QUALITY
 

@@ -13,8 +13,8 @@ import sys
 import time
 from pathlib import Path
 
-from formats import frames as fr
-from formats.atomic import replacing
+from vrformats import frames as fr
+from vrformats.atomic import replacing
 
 from .chunks import emit, worker_main
 
@@ -38,7 +38,7 @@ def run(job: dict) -> int:
         return 0
     if job["pass"] != "fast":
         raise ValueError(f"unknown pass {job['pass']!r}")
-    from formats.camera import Intrinsics, read_tum
+    from vrformats.camera import Intrinsics, read_tum
     from .fast_render import FastRenderer
     from ..scene.model import load_layout
 

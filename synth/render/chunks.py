@@ -18,9 +18,9 @@ import threading
 from contextlib import contextmanager
 from pathlib import Path
 
-from formats import frames as fr
-from formats.atomic import nofollow_opener, write_nofollow
-from formats.lifetime import die_with_parent, stop_processes, worker_env
+from vrformats import frames as fr
+from vrformats.atomic import nofollow_opener, write_nofollow
+from vrformats.lifetime import die_with_parent, stop_processes, worker_env
 
 
 
@@ -91,7 +91,7 @@ _STOPPING = threading.Event()
 @contextmanager
 def stopping_workers(pool=None):
     """``with ThreadPoolExecutor(...) as pool, stopping_workers(pool):`` around a driver's chunk loop:
-    if it ends by an exception (Ctrl-C, SIGTERM, SIGHUP: ``formats.lifetime``), the chunks not yet
+    if it ends by an exception (Ctrl-C, SIGTERM, SIGHUP: ``vrformats.lifetime``), the chunks not yet
     started are cancelled, no new worker starts, and every running chunk worker is stopped (SIGTERM,
     SIGKILL after 3 s) before the exception goes on. Frames are written atomically, so a chunk cut
     short leaves only whole frames, and ``--resume`` renders the rest."""

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 import open3d as o3d
 
-from formats.camera import Intrinsics
+from vrformats.camera import Intrinsics
 
 from .meshes import layout_parts
 from ..scene.model import Layout

@@ -49,9 +49,9 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from formats.boxes import CEILING_ID_BASE, FLOOR_ID_BASE, STRUCT_SLAB, WALL_ID_BASE
-from formats.errors import SceneFormatError, UnknownNameError
-from formats.fields import is_number
+from vrformats.boxes import CEILING_ID_BASE, FLOOR_ID_BASE, STRUCT_SLAB, WALL_ID_BASE
+from vrformats.errors import SceneFormatError, UnknownNameError
+from vrformats.fields import is_number
 
 from ..assets import registry as assets
 from ..scene import geometry as geo

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from formats.camera import DEFAULT_HEIGHT, DEFAULT_HFOV_DEG, DEFAULT_WIDTH
-from formats.errors import UnknownNameError
+from vrformats.camera import DEFAULT_HEIGHT, DEFAULT_HFOV_DEG, DEFAULT_WIDTH
+from vrformats.errors import UnknownNameError
 
 
 @dataclass(frozen=True)

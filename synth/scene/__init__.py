@@ -1,7 +1,7 @@
 """The scene model: layouts, stages, objects, light fixtures, lighting presets and class table.
 
 The bottom layer of ``synth``: everything else reads and writes these types, and nothing here
-imports another ``synth`` subpackage (only ``synth.resources`` and ``formats``).
+imports another ``synth`` subpackage (only ``synth.resources`` and ``vrformats``).
 
 ``model``      Layout / Stage / ObjectInstance / LightFixture, YAML I/O, layout lookup
 ``geometry``   oriented boxes, quaternions, polygon helpers (Z-up world, metres)

@@ -8,9 +8,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 
-from formats import fields
-from formats.errors import SceneFormatError, UnknownNameError
-from formats.yamlfile import read_yaml
+from vrformats import fields
+from vrformats.errors import SceneFormatError, UnknownNameError
+from vrformats.yamlfile import read_yaml
 
 from ..resources import classes_file, replicacad_lexicon_file
 

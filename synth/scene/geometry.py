@@ -12,10 +12,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from formats.camera import matrix_to_quat, quat_to_matrix  # noqa: F401
+from vrformats.camera import matrix_to_quat, quat_to_matrix  # noqa: F401
 
 
-# the quaternion convention, (w, x, y, z), is the cameras' and TUM files': defined in formats.camera
+# the quaternion convention, (w, x, y, z), is the cameras' and TUM files': defined in vrformats.camera
 
 Quat = tuple[float, float, float, float]
 

@@ -18,11 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
-from formats import fields
-from formats.color import srgb_decode
-from formats.errors import SceneFormatError, UnknownNameError, UserError
-from formats.fields import number
-from formats.yamlfile import read_yaml
+from vrformats import fields
+from vrformats.color import srgb_decode
+from vrformats.errors import SceneFormatError, UnknownNameError, UserError
+from vrformats.fields import number
+from vrformats.yamlfile import read_yaml
 
 from ..resources import lighting_dir  # $SYNTH_SCENES_DIR/lighting, else scenes/lighting
 from .model import Layout

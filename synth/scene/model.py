@@ -32,11 +32,11 @@ from typing import Any
 import numpy as np
 import yaml
 
-from formats.atomic import write_text_atomic
-from formats.boxes import BOXES_FORMAT, CEILING_ID_BASE, FLOOR_ID_BASE, FRAME_TEXT, MAX_OBJECT_ID, STRUCT_SLAB, WALL_ID_BASE
-from formats.errors import UnknownNameError
-from formats import fields
-from formats.yamlfile import read_yaml
+from vrformats.atomic import write_text_atomic
+from vrformats.boxes import BOXES_FORMAT, CEILING_ID_BASE, FLOOR_ID_BASE, FRAME_TEXT, MAX_OBJECT_ID, STRUCT_SLAB, WALL_ID_BASE
+from vrformats.errors import UnknownNameError
+from vrformats import fields
+from vrformats.yamlfile import read_yaml
 
 from . import geometry as geo
 from .classes import ClassTable, class_table
@@ -583,7 +583,7 @@ def layout_from_dict(doc, source: str = "<memory>", classes: ClassTable | None =
 
 
 def _quat(source: str, v, field: str) -> geo.Quat:
-    """A rotation (w, x, y, z) of norm 1 within 1e-3 (``formats.fields.unit_quat``), kept as written."""
+    """A rotation (w, x, y, z) of norm 1 within 1e-3 (``vrformats.fields.unit_quat``), kept as written."""
     q = fields.vector(source, v, field, 4)
     fields.unit_quat(source, list(q), field)
     return q

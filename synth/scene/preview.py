@@ -38,8 +38,8 @@ from matplotlib.patches import Arc, FancyArrowPatch, Patch, Polygon, Rectangle
 from matplotlib.ticker import MultipleLocator
 from matplotlib.transforms import Bbox
 
-from formats.atomic import save_figure
-from formats.errors import UserError
+from vrformats.atomic import save_figure
+from vrformats.errors import UserError
 
 from . import geometry as geo
 from .model import Layout, Stage, Wall, object_box

@@ -20,7 +20,7 @@ with a ``source.py`` giving such an object, added to ``SOURCES`` (docs/architect
 
 from __future__ import annotations
 
-from formats.errors import UnknownNameError
+from vrformats.errors import UnknownNameError
 
 from .replicacad.source import SOURCE as REPLICACAD
 

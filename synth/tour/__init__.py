@@ -7,8 +7,8 @@
 ``cli``     the ``synth tour`` commands (and their old names ``synth dataset check|show|export``)
 
 The tour's format is the format layer's, because reloc reads tours too and imports nothing of synth:
-the reader and the folder's conventions are ``formats.tour``, the other methods' formats that
-``synth tour export`` writes are ``formats.export``. The renderer's pieces that ``render`` drives
+the reader and the folder's conventions are ``vrformats.tour``, the other methods' formats that
+``synth tour export`` writes are ``vrformats.export``. The renderer's pieces that ``render`` drives
 (chunks of frames in worker processes, the fast renderer, quality settings) are ``synth.render``;
 the Blender side is ``synth.blender``. A render job (``synth.jobs``) renders many tours with
 ``render``'s preparation and meta.json.

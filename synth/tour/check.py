@@ -1,14 +1,14 @@
-"""``synth tour check``: a rendered tour on disk, checked (the reader is ``formats.tour.Tour``).
+"""``synth tour check``: a rendered tour on disk, checked (the reader is ``vrformats.tour.Tour``).
 
-A tour directory, as the renderers write it (the format is ``formats.tour``)::
+A tour directory, as the renderers write it (the format is ``vrformats.tour``)::
 
     TOUR/
-      camera.json    {"width", "height", "K", "fx", "fy", "cx", "cy", "fps", + formats.camera.CAMERA_DOC keys}
+      camera.json    {"width", "height", "K", "fx", "fy", "cx", "cy", "fps", + vrformats.camera.CAMERA_DOC keys}
       poses.txt      TUM, camera-to-world, OpenCV axes; frame index = round(t * fps); one line per frame
-      objects.json   ground-truth boxes of the tour's layout (``formats.boxes``: videoreloc-boxes/1)
+      objects.json   ground-truth boxes of the tour's layout (``vrformats.boxes``: videoreloc-boxes/1)
       meta.json      {"toolkit", "layout", "lighting" (null: geometry-only tour), "path", "renderer", "seed",
                       "settings", "frames": [first, last], "wall_time_s", ...}
-      frames/NNNNNN.exr   one per frame (formats.frames: R, G, B half; Z; instance; semantic)
+      frames/NNNNNN.exr   one per frame (vrformats.frames: R, G, B half; Z; instance; semantic)
       previews/NNNNNN.png optional 8-bit sRGB previews
 
 ``check_tour``
@@ -18,7 +18,7 @@ objects.json, pose sanity and a multi-view depth consistency test between neighb
 length instead of planar z; it does not catch a wrong focal length, which small camera motions
 hardly reveal), and a brightness test: a lit tour whose RGB frames are nearly black fails (the
 median over its RGB frames of each frame's 99th-percentile luminance, in linear RGB at exposure 1
-as ``formats.tour.tonemap(rgb, 1.0)`` shows it, below ``DARK_P99_LUMINANCE``; a scene lit only
+as ``vrformats.tour.tonemap(rgb, 1.0)`` shows it, below ``DARK_P99_LUMINANCE``; a scene lit only
 through windows it does not have, or a night preset without lamps, renders like that). The
 contact sheet of one frame (``synth tour show``) is ``synth.tour.show``.
 
@@ -33,12 +33,12 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.fields import terminal_safe
-from formats import frames as fr
-from formats.boxes import STRUCTURE_CLASSES, STRUCTURE_ID_MAX, STRUCTURE_ID_MIN
-from formats.camera import Intrinsics
-from formats.errors import UserError
-from formats.tour import (CAMERA_FILE, FRAMES_DIR, META_FILE, OBJECTS_FILE, POSES_FILE, PREVIEWS_DIR, Tour,
+from vrformats.fields import terminal_safe
+from vrformats import frames as fr
+from vrformats.boxes import STRUCTURE_CLASSES, STRUCTURE_ID_MAX, STRUCTURE_ID_MIN
+from vrformats.camera import Intrinsics
+from vrformats.errors import UserError
+from vrformats.tour import (CAMERA_FILE, FRAMES_DIR, META_FILE, OBJECTS_FILE, POSES_FILE, PREVIEWS_DIR, Tour,
                           images_from_channels, ranges_text, read_split_channels, scan_dir)
 
 # depth consistency between neighbouring frames
@@ -55,13 +55,13 @@ PAIR_MAX_MOVE_M, PAIR_MAX_TURN_DEG = 1.0, 30.0  # ... but the views still overla
 CLASS_MISMATCH_FRACTION = 0.005  # instance/semantic pairs disagreeing with objects.json on > 0.5 % of a frame
 ROTATION_TOL = 1e-4
 # a lit tour is nearly black when the median over its RGB frames of each frame's 99th-percentile
-# luminance (Rec. 709 weights, as formats.tour.tonemap; linear RGB at exposure 1) is below this:
+# luminance (Rec. 709 weights, as vrformats.tour.tonemap; linear RGB at exposure 1) is below this:
 # 0.01 is sRGB 25/255 at exposure 1, i.e. the brightest 1 % of the frame is darker than a dim grey and
 # auto exposure would have to scale the frame by about 90 to show it. The toolkit's renders lie far
 # above (built-in apartment by day about 1.3; ReplicaCAD apt_0 with the stand-in stage: see docs/replicacad.md)
 DARK_P99_LUMINANCE = 0.01
 DARK_PERCENTILE = 99.0
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)  # formats.tour.tonemap's weights
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)  # vrformats.tour.tonemap's weights
 PROBLEM_LINES_PER_KIND = 20  # text report: at most this many lines per kind of problem
 
 
@@ -481,7 +481,7 @@ def _problem_counts(rep: dict, meta_count_bad: bool) -> dict:
 
 
 def frame_brightness(rgb) -> float:
-    """The 99th-percentile luminance of linear RGB (exposure 1, ``formats.tour.tonemap``'s weights)."""
+    """The 99th-percentile luminance of linear RGB (exposure 1, ``vrformats.tour.tonemap``'s weights)."""
     rgb = np.nan_to_num(np.asarray(rgb, dtype=np.float32), nan=0.0, posinf=0.0, neginf=0.0)
     lum = rgb.reshape(-1, 3) @ LUMINANCE
     return float(np.percentile(lum, DARK_PERCENTILE)) if lum.size else 0.0

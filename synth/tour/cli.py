@@ -12,8 +12,8 @@ import functools
 import json
 import sys
 
-from formats.cli import add_json, add_quiet, add_sensor, add_workers
-from formats.errors import UserError
+from vrformats.cli import add_json, add_quiet, add_sensor, add_workers
+from vrformats.errors import UserError
 
 from ..render.settings import DEFAULTS, DEVICES, QUALITY
 
@@ -44,7 +44,7 @@ def cmd_check(args) -> int:
 
 
 def cmd_show(args) -> int:
-    from formats.tour import Tour
+    from vrformats.tour import Tour
 
     from .show import contact_sheet
 
@@ -56,7 +56,7 @@ def cmd_show(args) -> int:
 
 
 def cmd_export(args) -> int:
-    from formats import export
+    from vrformats import export
 
     m = export.export_tour(args.dir, args.format, args.out, role=args.role, exposure=args.exposure,
                            progress=not args.quiet and sys.stderr.isatty(), sensor=args.sensor,

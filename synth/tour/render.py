@@ -31,13 +31,13 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.fields import terminal_safe
-from formats import frames as fr
-from formats.atomic import replacing, write_json_atomic
-from formats.camera import Intrinsics, camera_document, write_tum
-from formats.tour import CAMERA_FILE
-from formats.errors import UserError, check_output_folder
-from formats.lifetime import folder_lock
+from vrformats.fields import terminal_safe
+from vrformats import frames as fr
+from vrformats.atomic import replacing, write_json_atomic
+from vrformats.camera import Intrinsics, camera_document, write_tum
+from vrformats.tour import CAMERA_FILE
+from vrformats.errors import UserError, check_output_folder
+from vrformats.lifetime import folder_lock
 
 from .. import __version__
 from ..render.chunks import chunk_job, missing_frames, run_chunk_process, split, stopping_workers
@@ -264,7 +264,7 @@ def _render_pass(p: Prepared, kind: str, out_dir: Path, work: Path, desc: str, p
 
 def render_tour(spec: TourSpec, progress: bool = True) -> dict:
     """Render (or finish rendering) one tour; returns its meta.json content. One run per tour folder
-    (``formats.lifetime.folder_lock``)."""
+    (``vrformats.lifetime.folder_lock``)."""
     t0 = time.time()
     p = prepare(spec)
     with folder_lock(p.out, "synth tour render"):

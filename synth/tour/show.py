@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.errors import UserError
-from formats.tour import Tour, tonemap
+from vrformats.errors import UserError
+from vrformats.tour import Tour, tonemap
 
 
 def id_colors(ids, salt: int = 0) -> np.ndarray:
@@ -158,7 +158,7 @@ def contact_sheet(tour: Tour, index: int, out, exposure: float | None = None, dp
     fig.suptitle(f"{tour.name}  |  frame {index}  |  camera at ({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f}) m"
                  + (f"\n{sub}" if sub else ""), fontsize=12, y=1 - 0.1 / fig.get_figheight(), va="top")
 
-    from formats.atomic import save_figure
+    from vrformats.atomic import save_figure
 
     return save_figure(fig, out, dpi)
 

@@ -51,12 +51,12 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from formats.atomic import write_text_atomic
-from formats import fields
-from formats.errors import SceneFormatError, UserError
-from formats.fields import integer
-from formats.yamlfile import read_yaml
-from formats.cli import add_quiet, add_workers
+from vrformats.atomic import write_text_atomic
+from vrformats import fields
+from vrformats.errors import SceneFormatError, UserError
+from vrformats.fields import integer
+from vrformats.yamlfile import read_yaml
+from vrformats.cli import add_quiet, add_workers
 
 from ..layout.apartment import DEFAULT_SEED, generate_apartment
 from ..scene.lighting import LightingJitter, jitter_preset, load_lighting, preset_document

@@ -104,9 +104,9 @@ def test_console_script_reports_errors_with_status_2(tmp_path):
 @pytest.mark.slow
 def test_model_and_reloc_do_not_import_bpy():
     code = (
-        "import sys, pkgutil, importlib, formats, synth, reloc\n"
+        "import sys, pkgutil, importlib, vrformats, synth, reloc\n"
         "n = 0\n"
-        "for pkg in (formats, synth, reloc):\n"
+        "for pkg in (vrformats, synth, reloc):\n"
         "    for m in pkgutil.walk_packages(pkg.__path__, pkg.__name__ + '.'):\n"
         "        if not m.name.startswith('synth.blender'):\n"
         "            importlib.import_module(m.name)\n"
@@ -144,7 +144,7 @@ def test_a_closed_stdout_pipe_ends_a_command_quietly():
     import subprocess
     import sys
 
-    from formats.cli import run_command
+    from vrformats.cli import run_command
 
     r, w = os.pipe()
     os.close(r)  # the reading end closed before the command writes

@@ -15,7 +15,7 @@ Conventions (docs/testing.md, "The doc check"):
   Any other program must be listed in ``FOREIGN`` with the reason it is not checked.
 * Repository paths in commands exist (globs match something), except what a command writes.
 * Inline code in prose that starts with ``synth `` or ``reloc `` is checked as a command; a
-  repository path or a ``synth.``/``reloc.``/``formats.`` module named in inline code exists.
+  repository path or a ``synth.``/``reloc.``/``vrformats.`` module named in inline code exists.
 * Relative links point to existing files, and their ``#anchors`` to headings there.
 
 Nothing renders or runs: the whole check takes a few seconds.
@@ -56,7 +56,7 @@ FOREIGN = {
 # options whose value is a file or folder a command writes: not required to exist
 OUTPUT_OPTIONS = {"--out", "--out-dir", "--save-calibration", "--save", "--report"}
 # top-level folders and files of the repository: a path starting with one of these must exist
-REPO_TOPS = ("render_jobs/", "scenes/", "models/", "docs/", "tools/", "tests/", "formats/", "synth/", "reloc/",
+REPO_TOPS = ("render_jobs/", "scenes/", "models/", "docs/", "tools/", "tests/", "vrformats/", "synth/", "reloc/",
              ".ci/", "Makefile", "pyproject.toml")
 PYTHONS = {"python", "python3", "python3.11", ".venv/bin/python", "$(VENV)/bin/python"}
 
@@ -510,7 +510,7 @@ def test_links():
     assert not problems, "\n".join(problems)
 
 
-DOTTED = re.compile(r"(?<![\w.])((?:synth|reloc|formats)(?:\.[A-Za-z_]\w*)+)")
+DOTTED = re.compile(r"(?<![\w.])((?:synth|reloc|vrformats)(?:\.[A-Za-z_]\w*)+)")
 
 
 def module_problem(dotted: str) -> str | None:

@@ -3,7 +3,7 @@ message and what is left behind, so that they stay fixed (issue: hardening 2).
 
 How the checks are made, so that others can extend them:
 
-* **Signals** (``formats.lifetime``): the command runs as a child process (``python -m reloc.cli``
+* **Signals** (``vrformats.lifetime``): the command runs as a child process (``python -m reloc.cli``
   or ``python -m synth.cli``) on a small geometry-only design; once it has its workers (pool
   workers, or chunk worker processes), the test sends one signal to the **driver only** (not its
   process group: that is what ``kill PID`` and a closed terminal do) and records every descendant
@@ -32,7 +32,7 @@ import numpy as np
 import pytest
 import yaml
 
-from formats.lifetime import FolderLock, descendants
+from vrformats.lifetime import FolderLock, descendants
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -148,7 +148,7 @@ def test_a_signal_to_the_experiment_driver_stops_its_workers(fault_design, tmp_p
 def test_a_signal_to_the_render_driver_stops_its_chunk_workers(fault_design, tmp_path, sig, backend):
     """The local backend's chunk processes, and the Ray backend's whole local instance (GCS, raylet, its
     workers and their chunk processes: all descendants of the driver), end with the driver; Ray's own
-    SIGTERM handler does not replace the orderly stop (formats.lifetime.reclaim_signals)."""
+    SIGTERM handler does not replace the orderly stop (vrformats.lifetime.reclaim_signals)."""
     if backend == "ray":
         pytest.importorskip("ray")
     spec = yaml.safe_load((fault_design / "render.yaml").read_text())
@@ -167,7 +167,7 @@ def test_a_signal_to_the_render_driver_stops_its_chunk_workers(fault_design, tmp
 def test_a_worker_dies_with_its_parent(tmp_path):
     """kill -9 of a parent: its child that called die_with_parent ends within 2 s."""
     code = ("import subprocess, sys, time\n"
-            "c = subprocess.Popen([sys.executable, '-c', 'from formats.lifetime import die_with_parent; "
+            "c = subprocess.Popen([sys.executable, '-c', 'from vrformats.lifetime import die_with_parent; "
             "die_with_parent(); import time; time.sleep(60)'])\n"
             "print(c.pid, flush=True)\n"
             "time.sleep(60)\n")
@@ -286,7 +286,7 @@ def test_render_specs_that_could_hurt_are_refused(tmp_path, monkeypatch, capsys,
 
 
 def test_a_relative_out_inside_the_working_folder_and_an_absolute_one_are_fine(tmp_path, monkeypatch):
-    from formats import fields
+    from vrformats import fields
 
     monkeypatch.chdir(tmp_path)
     assert fields.out_folder("s.yaml", "out/demo/../x") == "out/demo/../x"
@@ -296,10 +296,10 @@ def test_a_relative_out_inside_the_working_folder_and_an_absolute_one_are_fine(t
 
 
 def test_the_typed_field_checks_are_one_line_naming_file_and_field():
-    """formats.fields is the one home of typed checks: a bool is never a number, a list names the
+    """vrformats.fields is the one home of typed checks: a bool is never a number, a list names the
     bad element by index, a mapping names its unknown and missing keys."""
-    from formats import fields
-    from formats.errors import SceneFormatError
+    from vrformats import fields
+    from vrformats.errors import SceneFormatError
 
     def says(fn, *args, **kw):
         with pytest.raises(SceneFormatError) as e:
@@ -351,7 +351,7 @@ def test_an_experiment_into_a_render_folder_is_refused(fault_design, capsys):
 def test_results_beside_the_tours_are_allowed_and_inside_a_tour_refused(tmp_path):
     """make demo writes its experiment to out/demo/experiment, beside the tours of out/demo: allowed.
     The design's folder itself, a tour folder and anything below a tour are refused."""
-    from formats.errors import UserError
+    from vrformats.errors import UserError
     from reloc.experiments.runner import check_not_a_render_folder
 
     demo = tmp_path / "demo"
@@ -438,7 +438,7 @@ def test_a_full_disk_during_an_experiment_is_one_line(fault_design, tmp_path):
 
 
 def _zero_depth(tour: Path, frames) -> None:
-    from formats import frames as fr
+    from vrformats import frames as fr
 
     for i in frames:
         p = tour / "frames" / fr.frame_name(i)
@@ -481,7 +481,7 @@ def test_a_truncated_frame_is_one_line_after_the_progress_bar(fault_design, tmp_
     starting on its own line (the progress bar is closed first), and writes no outputs."""
     import shutil
 
-    from formats import frames as fr
+    from vrformats import frames as fr
     from reloc.cli import main as reloc_main
 
     tour = tmp_path / "tour"
@@ -501,7 +501,7 @@ def test_a_truncated_frame_is_one_line_after_the_progress_bar(fault_design, tmp_
 @pytest.mark.parametrize("changes, field", [({"window_portals": "no"}, "window_portals"), ({"name": ["a"]}, "name"),
                                             ({"description": 5}, "description")])
 def test_lighting_presets_are_type_checked(changes, field):
-    from formats.errors import SceneFormatError
+    from vrformats.errors import SceneFormatError
     from synth.scene.lighting import parse_preset, preset_document, load_lighting
 
     doc = {**preset_document(load_lighting("day")), **changes}
@@ -514,7 +514,7 @@ def test_lighting_presets_are_type_checked(changes, field):
                                            ({"out": "../../x"}, "out: '../../x' leaves the working folder"),
                                            ({"quality": 3}, "quality: expected text")])
 def test_trainset_specs_are_type_checked(changes, says):
-    from formats.errors import SceneFormatError
+    from vrformats.errors import SceneFormatError
     from synth.trainset.trainset import parse_trainset
 
     doc = {"name": "t", "out": "o", "seeds": [103], **changes}

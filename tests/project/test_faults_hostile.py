@@ -12,9 +12,9 @@ from pathlib import Path
 import pytest
 import yaml
 
-from formats.atomic import replacing, temp_name, write_json_atomic, write_nofollow
-from formats.errors import UserError
-from formats.lifetime import FolderLock
+from vrformats.atomic import replacing, temp_name, write_json_atomic, write_nofollow
+from vrformats.errors import UserError
+from vrformats.lifetime import FolderLock
 
 
 # ---------------------------------------------------------------------------------------------
@@ -183,7 +183,7 @@ def test_a_urdf_mesh_outside_the_root_is_refused(root, tmp_path, capsys):
     assert str(urdf) in err and "lies outside the dataset folder" in err
 
 
-from formats.errors import SceneFormatError  # noqa: E402
+from vrformats.errors import SceneFormatError  # noqa: E402
 
 
 def test_a_layout_asset_name_cannot_climb_out_of_the_root(root, tmp_path):
@@ -283,8 +283,8 @@ def test_hostile_json_is_one_line(root, tmp_path, capsys, damage, which):
 
 
 def test_readers_bound_size_depth_and_aliases(tmp_path, monkeypatch):
-    import formats.yamlfile as yf
-    from formats.yamlfile import read_json, read_yaml
+    import vrformats.yamlfile as yf
+    from vrformats.yamlfile import read_json, read_yaml
 
     ok = tmp_path / "ok.yaml"
     ok.write_text("a: [1, 2, {b: 3}]\n")
@@ -344,7 +344,7 @@ def test_stability_benchmark_out_inside_a_render_folder_is_refused(tmp_path, cap
 
 @pytest.mark.parametrize("case", ["self", "pair", "unknown"])
 def test_sensor_bases_that_loop_or_do_not_exist_are_one_line(tmp_path, case):
-    from formats.sensors import load_sensor
+    from vrformats.sensors import load_sensor
 
     a, b = tmp_path / "a.yaml", tmp_path / "b.yaml"
     if case == "self":
@@ -366,7 +366,7 @@ def test_sensor_bases_that_loop_or_do_not_exist_are_one_line(tmp_path, case):
 
 
 def test_a_sensor_base_file_is_found_next_to_the_sensor_file(tmp_path, monkeypatch):
-    from formats.sensors import load_sensor
+    from vrformats.sensors import load_sensor
 
     d = tmp_path / "sensors"
     d.mkdir()
@@ -476,7 +476,7 @@ def test_graded_levels_that_would_merge_are_refused(tmp_path, capsys, levels, sa
                                         (["x"], "expected a non-empty string")])
 @pytest.mark.parametrize("where", ["render spec", "experiment spec", "lighting preset", "dimmer file", "layout"])
 def test_names_are_bounded_and_printable(tmp_path, capsys, name, says, where):
-    from formats.fields import MAX_NAME  # noqa: F401
+    from vrformats.fields import MAX_NAME  # noqa: F401
     from reloc.experiments.spec import load_experiment
     from synth.jobs.spec import load_spec
     from synth.scene.lighting import load_lighting
@@ -503,7 +503,7 @@ def test_names_are_bounded_and_printable(tmp_path, capsys, name, says, where):
         load(str(f))
     msg = str(e.value)
     assert says in msg and "name" in msg, msg
-    from formats.fields import terminal_safe
+    from vrformats.fields import terminal_safe
 
     safe = terminal_safe(msg)
     assert "\x1b" not in safe and "\x07" not in safe and "\u202e" not in safe and "\n" not in safe

@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
-PACKAGES = ("formats", "synth", "reloc")
+PACKAGES = ("vrformats", "synth", "reloc")
 
 
 def _modules() -> dict[str, Path]:
@@ -88,7 +88,7 @@ def test_the_scan_sees_imports():
     assert "synth.scene.model" in mods and "reloc.cli" in mods
     # relative, absolute and function-level imports are all edges
     assert "synth.scene.geometry" in _imports("synth.scene.model", mods["synth.scene.model"], mods)
-    assert "formats.cli" in _imports("reloc.cli", mods["reloc.cli"], mods)
+    assert "vrformats.cli" in _imports("reloc.cli", mods["reloc.cli"], mods)
 
 
 def test_a_function_level_cycle_is_found(tmp_path, monkeypatch):
@@ -153,13 +153,13 @@ def test_stages_import_one_way():
 
 
 def test_the_format_layer_is_the_only_bridge():
-    """formats imports neither half; reloc imports nothing of synth (it reads tours, maps and
-    designs through formats)."""
+    """vrformats imports neither half; reloc imports nothing of synth (it reads tours, maps and
+    designs through vrformats)."""
     mods = _modules()
     graph = {m: _imports(m, p, mods) for m, p in mods.items()}
-    assert [m for m in mods if m.startswith("formats.")], "the scan must see the formats package"
-    assert {(m, t) for m, ts in graph.items() if m.startswith("formats") for t in ts
-            if not t.startswith("formats")} == set()
+    assert [m for m in mods if m.startswith("vrformats.")], "the scan must see the vrformats package"
+    assert {(m, t) for m, ts in graph.items() if m.startswith("vrformats") for t in ts
+            if not t.startswith("vrformats")} == set()
     assert {(m, t) for m, ts in graph.items() if m.startswith("reloc") for t in ts if t.startswith("synth")} == set()
 
 
@@ -212,7 +212,7 @@ def test_synth_layers_import_downwards():
 
 
 def test_an_upward_synth_import_is_found(tmp_path, monkeypatch):
-    for pkg in ("synth", "synth/scene", "synth/layout", "formats", "reloc"):
+    for pkg in ("synth", "synth/scene", "synth/layout", "vrformats", "reloc"):
         (tmp_path / pkg).mkdir()
         (tmp_path / pkg / "__init__.py").write_text("")
     (tmp_path / "synth" / "layout" / "apartment.py").write_text("from ..scene import model\n")
@@ -243,7 +243,7 @@ def test_layout_render_and_blender_import_no_scene_source():
 
 
 def test_a_scene_source_import_is_found(tmp_path, monkeypatch):
-    for pkg in ("synth", "synth/render", "synth/sources", "synth/sources/replicacad", "synth/mesh", "formats", "reloc"):
+    for pkg in ("synth", "synth/render", "synth/sources", "synth/sources/replicacad", "synth/mesh", "vrformats", "reloc"):
         (tmp_path / pkg).mkdir()
         (tmp_path / pkg / "__init__.py").write_text("")
     (tmp_path / "synth" / "mesh" / "gltf.py").write_text("")

@@ -1,13 +1,13 @@
 """The toolkit built as a wheel and installed outside the checkout finds its shipped data.
 
 The wheel is built offline (``pip wheel --no-deps --no-build-isolation``) from a copy of the
-packaging files (pyproject.toml, README.md, formats/, synth/, reloc/: nothing the checkout's
+packaging files (pyproject.toml, README.md, vrformats/, synth/, reloc/: nothing the checkout's
 ``build/`` may hold goes in), and installed into a fresh venv in tmp_path. That venv sees the
 dependencies through a ``.pth`` line naming the main venv's site-packages: a path line adds the
 folder to ``sys.path`` without running the ``.pth`` files there, so the editable install of the
 checkout (``__editable__*.pth`` and its finder) is not picked up. Every command runs from
 tmp_path with ``SYNTH_SCENES_DIR`` unset, and the test asserts that ``synth``, ``reloc`` and
-``formats`` are imported from the venv. Run with ``-s`` to see the commands and their output.
+``vrformats`` are imported from the venv. Run with ``-s`` to see the commands and their output.
 """
 
 from __future__ import annotations
@@ -26,14 +26,14 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
-PACKAGES = ("formats", "synth", "reloc")
+PACKAGES = ("vrformats", "synth", "reloc")
 # the design card's top-level data folders, shipped inside synth (pyproject.toml's package-dir)
 DATA_FOLDERS = {"scenes": "synth/scenes", "render_jobs": "synth/render_jobs"}
 # the shipped files that must be in the wheel, as they lie in the checkout (besides every file under scenes/)
 SHIPPED = ("render_jobs/demo.yaml", "render_jobs/smoke.yaml", "render_jobs/detector_train.yaml", "render_jobs/README.md",
            "reloc/models/detector_v2_160x120.onnx", "reloc/models/detector_v2_160x120.md",
            "reloc/models/detector_160x120.onnx", "reloc/models/detector_160x120.md", "reloc/specs/demo_experiment.yaml",
-           "reloc/specs/demo_checks.yaml", "reloc/specs/README.md", "formats/sensor_presets/tof.yaml")
+           "reloc/specs/demo_checks.yaml", "reloc/specs/README.md", "vrformats/sensor_presets/tof.yaml")
 
 pytestmark = [pytest.mark.slow, pytest.mark.blender]
 
@@ -118,7 +118,7 @@ def test_the_wheel_ships_the_data_and_specs(installed):
 def test_installed_commands_find_the_shipped_data_outside_the_checkout(installed, tmp_path):
     venv, env, log, _ = installed
     py = venv / "bin" / "python"
-    where = _run(log, [py, "-c", "import formats, synth, reloc\nfor m in (formats, synth, reloc): print(m.__name__, m.__file__)"],
+    where = _run(log, [py, "-c", "import vrformats, synth, reloc\nfor m in (vrformats, synth, reloc): print(m.__name__, m.__file__)"],
                  cwd=tmp_path, env=env)
     for line in where.splitlines():
         f = Path(line.split(" ", 1)[1]).resolve()

@@ -16,9 +16,9 @@ import pytest
 
 from reloc.cli import main as reloc_main
 
-from formats.camera import write_tum
-from formats.frames import FrameFileError, read_channels
-from formats.tour import Tour
+from vrformats.camera import write_tum
+from vrformats.frames import FrameFileError, read_channels
+from vrformats.tour import Tour
 from synth.cli import main as synth_main
 from synth.scene.model import boxes_document, load_layout
 from synth.tour.render import TourSpec, render_tour
@@ -84,7 +84,7 @@ def test_relocalize_checks_out_before_reading_frames(world, tmp_path, blocker, m
     """The API too: no frame is read when the output folder cannot be made."""
     import reloc.backend.run
     from reloc.map.boxmap import BoxMap
-    from formats.errors import UserError
+    from vrformats.errors import UserError
 
     def no_read(*a, **k):
         raise AssertionError("a frame was read before --out was checked")
@@ -160,7 +160,7 @@ def test_synth_export_boxes_unwritable_out(tmp_path, blocker, capsys, where):
 
 
 def test_output_checks_create_nothing(tmp_path):
-    from formats.errors import check_output_file, check_output_folder
+    from vrformats.errors import check_output_file, check_output_folder
 
     check_output_folder(tmp_path / "a" / "b")
     check_output_file(tmp_path / "c" / "d.json")
@@ -277,7 +277,7 @@ def test_eval_tolerates_float_print_noise(world, tmp_path, capsys):
 
 def test_read_tum_strict_off_by_default(tmp_path):
     """Other readers (paths, render jobs) keep reading any time as its nearest frame."""
-    from formats.camera import read_tum
+    from vrformats.camera import read_tum
 
     p = tmp_path / "t.txt"
     p.write_text("1.65 0 0 0 0 0 0 1\n1.65 0 0 0 0 0 0 1\n")

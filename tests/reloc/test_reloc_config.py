@@ -21,7 +21,7 @@ from reloc.detection.oracle import Corruption
 from reloc.frontend.observations import Observation, observe
 from reloc.frontend.refinement import estimate_gravity, wall_yaws
 
-from formats.errors import UserError
+from vrformats.errors import UserError
 
 
 RELOC = Path(__file__).resolve().parents[2] / "reloc"
@@ -177,12 +177,12 @@ def test_the_map_section_reaches_every_loaded_box_map(tmp_path, monkeypatch):
         raise Stop
 
     monkeypatch.setattr(BoxMap, "load", staticmethod(load))
-    import formats.tour
+    import vrformats.tour
     import reloc.experiments.runner  # noqa: F401  imported by the run below: first imported here, not while
     import reloc.map.document  # noqa: F401  Tour is the stand-in (a module-level import would keep it)
     from reloc.cli import build_parser
 
-    monkeypatch.setattr(formats.tour, "Tour", lambda *a, **k: None)  # cmd_run imports it when it runs
+    monkeypatch.setattr(vrformats.tour, "Tour", lambda *a, **k: None)  # cmd_run imports it when it runs
     (tmp_path / "cfg.yaml").write_text("map:\n  triangle_edge_max_m: 2.0\n")
     args = build_parser().parse_args(["run", "--tour", "T", "--map", str(path), "--out", str(tmp_path / "out"),
                                       "--config", str(tmp_path / "cfg.yaml")])

@@ -24,7 +24,7 @@ from reloc.frontend.registration import (anchor_candidate, anchors_for_clip, anc
                                 graph_candidate)
 from reloc.frontend.surface import SurfaceScorer, kappa
 
-from formats.errors import SceneFormatError, UserError
+from vrformats.errors import SceneFormatError, UserError
 
 RNG = np.random.default_rng(1)
 

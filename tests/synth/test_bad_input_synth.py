@@ -23,9 +23,9 @@ import yaml
 
 from reloc.cli import main as reloc_main
 
-from formats.errors import SceneFormatError
-from formats.frames import FrameFileError, write_frame
-from formats.tour import Tour
+from vrformats.errors import SceneFormatError
+from vrformats.frames import FrameFileError, write_frame
+from vrformats.tour import Tour
 from synth.layout.validity import check_layout
 from synth.cli import main as synth_main
 from synth.tour.check import check_tour
@@ -75,7 +75,7 @@ def test_poses_cut_short_is_refused_by_every_reader(tour, tmp_path, capsys):
     assert synth_main(["tour", "show", str(tour), "--out", str(tmp_path / "s.png")]) == 2
     err = one_line_error(capsys)
     assert "poses.txt" in err and "10 poses for 24 frame files" in err
-    # reloc reads tours through formats.tour.Tour: no silently shortened map
+    # reloc reads tours through vrformats.tour.Tour: no silently shortened map
     assert reloc_main(["map", "build", str(tour), "--out", str(tmp_path / "m.json"), "--quiet"]) == 2
     err = one_line_error(capsys)
     assert "poses.txt" in err and "10 poses for 24 frame files" in err

@@ -4,8 +4,8 @@ the longer units of Table III (:mod:`reloc.experiments.localization_units`)."""
 
 from __future__ import annotations
 
-from formats.atomic import write_json_atomic
-from formats.camera import write_tum
+from vrformats.atomic import write_json_atomic
+from vrformats.camera import write_tum
 
 from .common import config_of, detector_for, load_map, unit_file
 from .registry import Method, Row, register

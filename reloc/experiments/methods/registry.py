@@ -61,7 +61,7 @@ class Method:
     * ``label``: its name in results.json (``{feature}``-style fields from ``label_fields``);
       ``rows``: its Table I rows (``Row``), in the order of its modes; ``primary``: the mode
       ``reloc check`` reads for ``NAME.KEY``;
-    * ``run(task, tour, out_dir) -> dict``: one query tour (a ``formats.tour.Tour`` read through the
+    * ``run(task, tour, out_dir) -> dict``: one query tour (a ``vrformats.tour.Tour`` read through the
       query's sensor): writes ``MODE.txt`` trajectories into ``out_dir`` and returns extras for the
       done marker; ``task``: the runner's task dict (``map``, ``config``, ``detector``, ``seed``, ...,
       plus what ``task_args`` adds);

@@ -5,8 +5,8 @@ clips are what the clip-rigid controls reuse, and its variants make Table IV (``
 
 from __future__ import annotations
 
-from formats.atomic import write_json_atomic, write_text_atomic
-from formats.errors import UserError
+from vrformats.atomic import write_json_atomic, write_text_atomic
+from vrformats.errors import UserError
 
 from .common import config_of, detector_for, load_map, map_report_path, open_detector
 from .registry import MapKind, Method, Row, register, register_map

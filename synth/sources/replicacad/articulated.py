@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.boxes import MAX_OBJECT_ID
-from formats.errors import UnknownNameError
-from formats.fields import boolean, fail, is_number
+from vrformats.boxes import MAX_OBJECT_ID
+from vrformats.errors import UnknownNameError
+from vrformats.fields import boolean, fail, is_number
 
 from . import habitat_format as hf
 from ...mesh.urdf import JOINT_STATE_DECIMALS, link_poses, local_bounds, parse_urdf, urdf_path

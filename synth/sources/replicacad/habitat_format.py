@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.fields import fail, inside_root, mapping, number, numbers, string  # noqa: F401  (re-exported)
-from formats.fields import unit_quat as quat  # noqa: F401
-from formats.yamlfile import read_json  # noqa: F401  (re-exported: every habitat config is read with it)
+from vrformats.fields import fail, inside_root, mapping, number, numbers, string  # noqa: F401  (re-exported)
+from vrformats.fields import unit_quat as quat  # noqa: F401
+from vrformats.yamlfile import read_json  # noqa: F401  (re-exported: every habitat config is read with it)
 
 from ...scene.geometry import Y_UP_TO_Z_UP  # noqa: F401  (the readers import it from here too)
 from ...mesh.roots import DATASET_CONFIG_GLOB, dataset_config_path, dataset_root, owning_root  # noqa: F401  (re-exported)
@@ -35,7 +35,7 @@ _DEFAULT_UP = (0.0, 1.0, 0.0)
 _DEFAULT_FRONT = (0.0, 0.0, -1.0)
 _C = Y_UP_TO_Z_UP
 
-# field checks (every error names the file and the field): formats.fields, re-exported for the readers
+# field checks (every error names the file and the field): vrformats.fields, re-exported for the readers
 
 
 def check_frame(file, cfg: dict) -> None:
@@ -105,7 +105,7 @@ def render_asset(root: Path, config: Path, cfg: dict) -> Path:
     """The GLB a config's ``render_asset`` names (relative to the config's folder). SceneFormatError
     naming the config and ``render_asset`` when it does not exist, and naming the GLB when it is a
     Git LFS pointer (a clone made without ``git lfs``: "run git lfs pull")."""
-    from formats.lfs import LFS_HINT, is_lfs_pointer
+    from vrformats.lfs import LFS_HINT, is_lfs_pointer
 
     rel = string(config, cfg.get("render_asset"), "render_asset")
     glb = inside_root(config, "render_asset", config.parent / rel, root)

@@ -72,8 +72,8 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.errors import SceneFormatError
-from formats.fields import number
+from vrformats.errors import SceneFormatError
+from vrformats.fields import number
 
 from ...scene.geometry import Y_UP_TO_Z_UP
 from ...scene.fixtures import LAMP_CLASSES

@@ -66,9 +66,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from formats.boxes import MAX_OBJECT_ID
-from formats.errors import UnknownNameError
-from formats.fields import integer, nonneg_int, shown
+from vrformats.boxes import MAX_OBJECT_ID
+from vrformats.errors import UnknownNameError
+from vrformats.fields import integer, nonneg_int, shown
 
 from ...scene.classes import ClassTable, LexiconTable, class_table, lexicon_table
 from .receptacles import read_receptacles, to_object_frame

@@ -36,9 +36,9 @@ import os
 from dataclasses import replace
 from pathlib import Path
 
-from formats.atomic import write_json_atomic, write_text_atomic
-from formats.errors import SceneFormatError, UserError
-from formats.fields import boolean
+from vrformats.atomic import write_json_atomic, write_text_atomic
+from vrformats.errors import SceneFormatError, UserError
+from vrformats.fields import boolean
 
 ENV_ROOT = "REPLICACAD_ROOT"
 KEYS = {"root", "allow_unknown", "obstacles"}

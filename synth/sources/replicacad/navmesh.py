@@ -58,7 +58,7 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.lfs import LFS_HINT, is_lfs_pointer
+from vrformats.lfs import LFS_HINT, is_lfs_pointer
 from scipy import ndimage
 
 from .habitat_format import Y_UP_TO_Z_UP, fail, inside_root, mapping, read_json
@@ -593,7 +593,6 @@ def standin_stage(nav: NavMesh, spec: StandinSpec | None = None) -> Standin:
     """A stage that matches the navmesh: what an agent of the navmesh's radius could walk on is
     floor, and walls stand where it could not (see the module docstring of
     ``tools/replicacad_standin.py`` for the choices). Our frame; ``write_standin_glb`` writes it."""
-    import trimesh
 
     spec = spec or StandinSpec()
     levels = nav.levels()

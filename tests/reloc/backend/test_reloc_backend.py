@@ -2,7 +2,7 @@
 
 Synthetic runs check the decisions against transforms chosen here; rendered tours check the
 outputs against the tours' ground truth, read back with an independent TUM parser (scipy's
-quaternion conversion, not formats.camera.read_tum).
+quaternion conversion, not vrformats.camera.read_tum).
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from reloc.backend.run import relocalize
 
 from tests.reloc.test_reloc_core import nodes_from_map, room_map, yaw_T
 
-from formats.tour import Tour
+from vrformats.tour import Tour
 from synth.scene.model import boxes_document, load_layout
 from synth.tour.render import TourSpec, render_tour
 

@@ -19,10 +19,10 @@ from reloc.baselines.appearance import AppearanceConfig, AppearanceMap, localize
 from reloc.frontend.clip_rigid import clip_rigid_trajectory, fit_clip_transform
 from reloc.geometry import exp_so3, inv_T, make_T, pose_distance
 
-from formats import camera as cam
-from formats.errors import UserError
+from vrformats import camera as cam
+from vrformats.errors import UserError
 from conftest import make_tour
-from formats.tour import Tour
+from vrformats.tour import Tour
 
 
 ROOM_LO = np.array([0.0, 0.0, 0.0])

@@ -15,10 +15,10 @@ import pytest
 
 from reloc.baselines.fpfh_icp import FpfhConfig, PointMap, clip_frames, constraint, register_clip, run_fpfh_icp
 
-from formats import camera as cam
-from formats.errors import UserError
+from vrformats import camera as cam
+from vrformats.errors import UserError
 from conftest import make_tour
-from formats.tour import Tour
+from vrformats.tour import Tour
 from synth.render.fast_render import FastRenderer
 from synth.paths.files import load_path
 from synth.scene.model import load_layout

@@ -28,7 +28,7 @@ from onnx import TensorProto, helper, numpy_helper
 from reloc.detection.base import FrameData
 from reloc.detection.onnx_yolo import OnnxDetector
 
-from formats.errors import UserError
+from vrformats.errors import UserError
 
 
 NAMES = {0: "chair", 1: "couch", 2: "tv"}

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from formats.tour import Tour
+from vrformats.tour import Tour
 from reloc.detection.base import FrameData
 from reloc.detection.learned import LearnedDetector
 from reloc.resources import MODELS_DIR, SHIPPED_MODEL

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 import yaml
 
-from formats.errors import UserError
-from formats.tour import Tour, tonemap
+from vrformats.errors import UserError
+from vrformats.tour import Tour, tonemap
 from reloc.cli import main as reloc_main
 from reloc.detection.base import FrameData
 from reloc.detection.learned import LearnedDetector, depth_edges

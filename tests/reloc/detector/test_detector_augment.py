@@ -1,5 +1,5 @@
 """The detector's camera augmentation (reloc.detector.augment) against the toolkit's own camera
-pipeline (formats.sensors, formats.tour.tonemap) and against Pillow's JPEG encoder, on the same
+pipeline (vrformats.sensors, vrformats.tour.tonemap) and against Pillow's JPEG encoder, on the same
 frames: the training-time pipeline is a batched copy of those, and these tests keep it one."""
 
 from __future__ import annotations
@@ -10,10 +10,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from formats import color
-from formats.camera import Intrinsics
-from formats.sensors import apply_sensor, exposure, load_sensor
-from formats.tour import tonemap
+from vrformats import color
+from vrformats.camera import Intrinsics
+from vrformats.sensors import apply_sensor, exposure, load_sensor
+from vrformats.tour import tonemap
 
 torch = pytest.importorskip("torch")
 
@@ -27,7 +27,7 @@ def _hdr(seed: int, level: float, h: int = 24, w: int = 32) -> np.ndarray:
 
 
 def test_srgb_curve_on_tensors_is_formats_color():
-    """The tensor ports of the sRGB curve give formats.color's values (float64 and float32, knees
+    """The tensor ports of the sRGB curve give vrformats.color's values (float64 and float32, knees
     and clipping included; up to the last bits of the two libraries' powers), and decode inverts
     encode."""
     x = np.concatenate([np.linspace(-0.5, 1.5, 2001), [0.0, color.ENCODE_KNEE, color.DECODE_KNEE, 1.0, 1e-9]])

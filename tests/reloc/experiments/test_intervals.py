@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from formats.errors import SceneFormatError
+from vrformats.errors import SceneFormatError
 from reloc.experiments.intervals import (Bootstrap, IntervalSettings, factor_figures, figure_values, n_segments,
                                          pooled_figures, segment_counts)
 

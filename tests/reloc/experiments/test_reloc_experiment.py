@@ -15,7 +15,7 @@ from reloc.experiments import tables
 from reloc.cli import main as reloc_main
 from reloc.experiments.spec import load_experiment
 
-from formats.design import write_design
+from vrformats.design import write_design
 from jobspecs import write_experiment_spec
 
 REPO = Path(__file__).resolve().parents[3]
@@ -266,7 +266,7 @@ def test_a_bare_name_is_a_shipped_spec_and_a_file_wins(tmp_path, monkeypatch, ca
     """reloc experiment NAME, reloc check NAME: a bare name is a spec of reloc/specs, a file of that
     name wins, and an unknown name is one line listing the shipped ones (exit 2). An experiment
     spec's render: is a file relative to it, or the name of a render spec synth ships."""
-    from formats.errors import SceneFormatError
+    from vrformats.errors import SceneFormatError
     from reloc.experiments.checks import parse_checks
 
     monkeypatch.chdir(tmp_path)
@@ -746,7 +746,7 @@ def test_units_and_ablation_tables_carry_intervals(tmp_path):
     its trajectory (``unit_L.txt``, the one-frame unit's ``causal.txt``) counted per path segment, each
     ablation row's from its runs, and an ablation row's difference to the full method is paired (a row
     that equals it has the interval [0, 0], one that fails where it succeeds a negative one)."""
-    from formats.camera import write_tum
+    from vrformats.camera import write_tum
     from reloc.experiments.intervals import IntervalSettings
 
     n = 400
@@ -900,7 +900,7 @@ def test_code_fingerprint_covers_reloc_and_the_format_modules_it_imports(tmp_pat
     rel = {f.relative_to(E.SOURCE_ROOT).as_posix() for f in files}
     # every module of reloc, and the format modules that reloc reads tours with, directly or not
     assert {p.relative_to(REPO).as_posix() for p in (REPO / "reloc").rglob("*.py")} <= rel
-    assert {"formats/__init__.py", "formats/tour.py", "formats/camera.py", "formats/frames.py", "formats/errors.py"} <= rel
+    assert {"vrformats/__init__.py", "vrformats/tour.py", "vrformats/camera.py", "vrformats/frames.py", "vrformats/errors.py"} <= rel
     assert not any(r.startswith("synth/") for r in rel)  # reloc computes nothing with synth's code
     outside = sorted(p for p in (REPO / "synth").rglob("*.py") if p.relative_to(REPO).as_posix() not in rel)
     assert outside
@@ -909,7 +909,7 @@ def test_code_fingerprint_covers_reloc_and_the_format_modules_it_imports(tmp_pat
     _copy_sources(copy, files + outside)
     fp = E.code_fingerprint()
     assert E.source_fingerprint(copy) == fp == E.code_fingerprint() and len(fp) == 16
-    for name in ("reloc/experiments/tables.py", "formats/frames.py"):
+    for name in ("reloc/experiments/tables.py", "vrformats/frames.py"):
         _flip_one_byte(copy / name)
         changed = E.source_fingerprint(copy)
         assert changed != fp, name
@@ -985,7 +985,7 @@ def test_a_code_change_recomputes_every_result(fast_design, capsys, monkeypatch,
     assert reloc_main(argv) == 0
     assert "0 runs and 0 maps computed now" in capsys.readouterr().out
     # one byte of one covered module changed: every map and run is computed again, and says with what
-    _flip_one_byte(copy / "formats" / "frames.py")
+    _flip_one_byte(copy / "vrformats" / "frames.py")
     E.code_fingerprint.cache_clear()
     changed = E.code_fingerprint()
     assert changed != marks["runs/videoreloc/apt_0__geometry__query/done.json"]["code"]

@@ -83,7 +83,7 @@ def _noisy(root: Path, **kw) -> dict:
 
 def _gt_recall_tum(folder: Path, tours: Path, shift_every: int) -> None:
     """Precomputed TUM trajectories: every frame of each query tour; frames multiple of ``shift_every`` moved 3 m."""
-    from formats.camera import read_tum, write_tum
+    from vrformats.camera import read_tum, write_tum
 
     folder.mkdir(parents=True, exist_ok=True)
     for t in sorted(tours.glob("*__query")):
@@ -164,8 +164,8 @@ def test_external_command_reads_exports_through_every_sensor(design, capsys):
     other method gets), its map_command runs once per map sensor, and its rows count per sensor."""
     import numpy as np
 
-    from formats.export import depth16, read_manifest
-    from formats.tour import Tour
+    from vrformats.export import depth16, read_manifest
+    from vrformats.tour import Tour
 
     root = design
     spec = _spec(root, [_noisy(root)], name="exp_sensors")

@@ -20,9 +20,9 @@ IN_TREE = ("videoreloc", "videoreloc_oracle", "fpfh_icp", "appearance", "one_fra
 # A whole method in one module: a map kind built from the mapping tour (its frame count) and a
 # "relocalizer" that returns the ground-truth pose of every other frame, one Table I row.
 PLUGIN = '''
-from formats.atomic import write_json_atomic
-from formats.camera import write_tum
-from formats.yamlfile import read_json
+from vrformats.atomic import write_json_atomic
+from vrformats.camera import write_tum
+from vrformats.yamlfile import read_json
 
 from reloc.experiments.methods import MapKind, Method, Row, register, register_map
 from reloc.experiments.methods.common import load_map

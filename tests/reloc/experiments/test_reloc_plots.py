@@ -18,7 +18,7 @@ import reloc.experiments.plots as plots
 from reloc.experiments.plots import box_corners, error_colors, per_frame, plot_experiment, rolling_median, tour_png_name
 from reloc.experiments.report import markdown_to_html, split_row, table_to_html, write_report
 
-from formats import camera as cam
+from vrformats import camera as cam
 from conftest import make_tour
 
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import yaml
 
-from formats.camera import pose_from_ypr
+from vrformats.camera import pose_from_ypr
 from reloc.cli import main as reloc_main
 from reloc.experiments import tables
 from reloc.experiments.evaluation import END_REASONS, end_reason_kind, odometry_drift
@@ -195,7 +195,7 @@ def test_experiment_through_two_sensors(sensor_design, capsys):
 def test_built_maps_see_the_sensor(sensor_design, tmp_path, capsys):
     """map: build with two sensors: each box map is built from the mapping tour read through its
     sensor, the same as building it by hand from that reading (and the two differ)."""
-    from formats.tour import Tour
+    from vrformats.tour import Tour
     from reloc.map.build import build_map
     from reloc.map.document import dumps_map
 

@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from formats.errors import SceneFormatError
+from vrformats.errors import SceneFormatError
 from reloc.experiments.checks import metric_table
 from reloc.experiments.sweep import breaking_metrics, parse_sweep, plot_sweep, sweep_table
 from reloc.experiments.sweep import compute_sweep as _compute

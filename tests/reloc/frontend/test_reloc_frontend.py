@@ -18,7 +18,7 @@ from reloc.geometry import pose_distance
 from reloc.map.boxmap import BoxMap
 from reloc.experiments.localization_units import format_units, run_units
 
-from formats.tour import Tour
+from vrformats.tour import Tour
 from synth.scene.model import boxes_document, load_layout
 from synth.tour.render import TourSpec, render_tour
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from reloc.config import OdometryConfig
-from formats.tour import Tour
+from vrformats.tour import Tour
 from synth.tour.render import TourSpec, render_tour
 from reloc.frontend.odometry import (
     ChainPose,

@@ -30,9 +30,9 @@ from reloc.map.scoring import box_errors
 from reloc.map.segmentation import point_moments, reduce_by_key, voxel_keys
 from reloc.map.settings import MapBuildSettings
 
-from formats.errors import UserError
-from formats.frames import write_frame
-from formats.tour import Tour
+from vrformats.errors import UserError
+from vrformats.frames import write_frame
+from vrformats.tour import Tour
 
 TOUR_FRAMES = 600
 REPO = Path(__file__).resolve().parents[3]

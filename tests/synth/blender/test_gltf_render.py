@@ -31,10 +31,10 @@ from scipy import ndimage
 from trimesh.visual import TextureVisuals
 from trimesh.visual.material import PBRMaterial
 
-from formats.boxes import CEILING_ID_BASE, FLOOR_ID_BASE, WALL_ID_BASE
-from formats.camera import Intrinsics, pose_from_ypr, write_tum
-from formats.errors import SceneFormatError
-from formats.tour import Tour
+from vrformats.boxes import CEILING_ID_BASE, FLOOR_ID_BASE, WALL_ID_BASE
+from vrformats.camera import Intrinsics, pose_from_ypr, write_tum
+from vrformats.errors import SceneFormatError
+from vrformats.tour import Tour
 from synth.scene.classes import class_table
 from synth.scene.model import LightFixture, Room, Wall, load_layout, save_layout
 from meshes import write_glb
@@ -539,7 +539,7 @@ SCRIPT = textwrap.dedent(r'''
     import numpy as np
     import bpy
     from mathutils import Matrix
-    from formats.camera import Intrinsics
+    from vrformats.camera import Intrinsics
     from synth.scene.model import load_layout
     from synth.render.meshes import layout_parts
     from synth.scene.lighting import load_lighting, resolve_lighting

@@ -15,8 +15,8 @@ import pytest
 
 from jobspecs import write_spec
 
-from formats.tour import Tour
-from formats.errors import UserError
+from vrformats.tour import Tour
+from vrformats.errors import UserError
 from synth import jobs
 from synth.cli import main as synth_main
 from synth.resources import REPO_ROOT

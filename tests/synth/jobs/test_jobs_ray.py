@@ -14,8 +14,8 @@ import pytest
 
 from jobspecs import write_spec
 
-from formats import frames as fr
-from formats.errors import UserError
+from vrformats import frames as fr
+from vrformats.errors import UserError
 from synth import jobs
 from synth.jobs import ray_backend
 from synth.cli import main as synth_main

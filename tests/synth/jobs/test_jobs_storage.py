@@ -12,7 +12,7 @@ import pytest
 
 from jobspecs import write_spec
 
-from formats.errors import UserError
+from vrformats.errors import UserError
 from synth import jobs
 from synth.jobs import ray_backend
 from synth.jobs import storage
@@ -77,14 +77,14 @@ def test_writes_are_atomic_and_listed(tmp_path, mem, kind, monkeypatch):
     seen = []
     real_pipe = st.fs.pipe_file
     monkeypatch.setattr(st.fs, "pipe_file", lambda path, data, **kw: (seen.append(path), real_pipe(path, data, **kw))[1])
-    import formats.atomic
+    import vrformats.atomic
 
     real_replace = os.replace
-    monkeypatch.setattr(formats.atomic.os, "replace", lambda a, b: (seen.append(a), real_replace(a, b))[1])
+    monkeypatch.setattr(vrformats.atomic.os, "replace", lambda a, b: (seen.append(a), real_replace(a, b))[1])
     st.write_bytes(frames / "000001.exr", b"one")
     assert st.missing(frames, [0, 1, 2]) == [0, 2]  # the listing follows the driver's own writes
     assert st.read_bytes(frames / "000001.exr") == b"one" and st.url(frames / "000001.exr") == f"{uri}/t/frames/000001.exr"
-    if kind == "file":  # a temporary name in the same folder, then a rename (formats.atomic)
+    if kind == "file":  # a temporary name in the same folder, then a rename (vrformats.atomic)
         assert [Path(p).name for p in seen] == [f".000001.exr.{os.getpid()}.tmp"]
         assert sorted(os.listdir(tmp_path / "job" / "t" / "frames")) == ["000001.exr"]
     else:  # one put: memory:// stores the bytes once the write is complete

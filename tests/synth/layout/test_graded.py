@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import pytest
 
-from formats.errors import UserError
+from vrformats.errors import UserError
 from synth.cli import main as synth_main
 from synth.layout.graded import BEYOND, check_strengths, graded_variants, level_name, moved_ids
 from synth.layout.validity import check_layout
@@ -108,7 +108,7 @@ def test_dimmer_runs_from_day_through_evening_to_night_and_below():
 def test_a_bad_dimmer_level_names_the_file_and_field(tmp_path, level):
     import yaml
 
-    from formats.errors import SceneFormatError
+    from vrformats.errors import SceneFormatError
     from synth.scene.lighting import load_lighting
 
     f = tmp_path / "dim.yaml"
@@ -150,9 +150,9 @@ def test_noise_scale_multiplies_every_noise_and_0_is_ideal(tmp_path):
     import numpy as np
     import yaml
 
-    from formats.camera import Intrinsics
-    from formats.errors import SceneFormatError
-    from formats.sensors import apply_sensor, load_sensor, scale_noise
+    from vrformats.camera import Intrinsics
+    from vrformats.errors import SceneFormatError
+    from vrformats.sensors import apply_sensor, load_sensor, scale_noise
 
     sl = load_sensor("structured_light")
     assert scale_noise(sl, 0).is_ideal

@@ -31,8 +31,8 @@ from tests.synth.blender.test_gltf_render import glb_chunks, srgb_to_linear, sta
 from trimesh.visual import TextureVisuals
 from trimesh.visual.material import PBRMaterial
 
-from formats.camera import Intrinsics, pose_from_ypr
-from formats.errors import SceneFormatError
+from vrformats.camera import Intrinsics, pose_from_ypr
+from vrformats.errors import SceneFormatError
 
 REPO = Path(__file__).resolve().parents[3]
 RCAD = Path("/work/rcad_git/replica_cad/objects")  # the real files, where this machine has them
@@ -316,7 +316,7 @@ BLENDER_SCRIPT = textwrap.dedent(r'''
     import json, sys
     import numpy as np
     import bpy
-    from formats.camera import Intrinsics
+    from vrformats.camera import Intrinsics
     from synth.blender import scene_builder as sb
     from synth.blender.worker import read_blender_exr
     from synth.mesh.gltf import load_glb_parts

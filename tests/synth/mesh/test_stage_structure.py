@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from formats.boxes import CEILING_ID_BASE, FLOOR_ID_BASE, WALL_ID_BASE
-from formats.errors import SceneFormatError
+from vrformats.boxes import CEILING_ID_BASE, FLOOR_ID_BASE, WALL_ID_BASE
+from vrformats.errors import SceneFormatError
 from synth.scene.model import Stage, structure_boxes
 from synth.mesh.stage_structure import DEFAULT_THICKNESS, derive_structure, face_ids
 from meshes import box_mesh

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from formats.errors import SceneFormatError, UnknownNameError
+from vrformats.errors import SceneFormatError, UnknownNameError
 from synth.scene import geometry as geo
 from synth.scene.classes import parse_class_table
 from synth.scene.model import object_box

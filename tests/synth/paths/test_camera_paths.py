@@ -12,7 +12,7 @@ import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
-from formats.errors import SceneFormatError, UnknownNameError, UserError
+from vrformats.errors import SceneFormatError, UnknownNameError, UserError
 from synth.cli import main as synth_main
 from synth.paths.clearance import path_clearance
 from synth.paths.files import load_path, save_path

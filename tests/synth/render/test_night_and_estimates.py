@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import yaml
 
-from formats.errors import SceneFormatError
+from vrformats.errors import SceneFormatError
 from jobspecs import write_spec
 from replicacad_real_fixture import write_real_fixture
 from synth.cli import main as synth_main

@@ -14,9 +14,9 @@ import OpenEXR
 import pytest
 from scipy import ndimage
 
-from formats import frames as fr
-from formats.camera import Intrinsics, pose_from_ypr, read_tum, write_tum
-from formats.tour import Tour
+from vrformats import frames as fr
+from vrformats.camera import Intrinsics, pose_from_ypr, read_tum, write_tum
+from vrformats.tour import Tour
 from synth.cli import main as synth_main
 from synth.tour.check import check_tour
 from synth.render.fast_render import FastRenderer

@@ -15,8 +15,8 @@ import types
 import numpy as np
 import pytest
 
-import formats.camera
-import formats.yamlfile
+import vrformats.camera
+import vrformats.yamlfile
 import synth.layout.apartment
 import synth.scene.geometry
 import synth.layout.placement
@@ -80,7 +80,7 @@ def one_ulp_off(monkeypatch):
         fake_math = types.SimpleNamespace(**{k: getattr(math, k) for k in dir(math) if not k.startswith("_")})
         for name in ("sin", "cos", "atan2", "hypot", "sqrt"):
             setattr(fake_math, name, _nudged(getattr(math, name)))
-        for mod in (synth.layout.apartment, synth.layout.placement, synth.layout.rearrange, synth.scene.geometry, synth.scene.model, formats.camera):
+        for mod in (synth.layout.apartment, synth.layout.placement, synth.layout.rearrange, synth.scene.geometry, synth.scene.model, vrformats.camera):
             monkeypatch.setattr(mod, "math", fake_math)
         for name in ("yaw_to_quat", "matrix_to_quat", "rot_z", "quat_to_matrix", "quat_yaw"):
             monkeypatch.setattr(synth.scene.geometry, name, _nudged(getattr(synth.scene.geometry, name)))
@@ -131,7 +131,7 @@ def test_quantising_is_idempotent_and_keeps_rotations_unit():
 
 def test_shipped_layouts_are_stored_quantised():
     for p in sorted(layouts_dir().glob("apt_*.yaml")):
-        doc = formats.yamlfile.read_yaml(p)
+        doc = vrformats.yamlfile.read_yaml(p)
         again = dump_yaml(layout_to_dict(layout_from_dict(doc, source=str(p))))
         assert again == p.read_text(), p.name
         for o in doc["objects"]:

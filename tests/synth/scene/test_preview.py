@@ -9,7 +9,7 @@ import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
-from formats.errors import UserError
+from vrformats.errors import UserError
 from synth.scene import geometry as geo
 from synth.scene.classes import class_table
 from synth.scene.preview import class_color, diff_layouts, figure_size, plot_layout

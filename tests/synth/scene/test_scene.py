@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import yaml
 
-from formats.camera import wrap_angle
-from formats.errors import SceneFormatError, UnknownNameError
+from vrformats.camera import wrap_angle
+from vrformats.errors import SceneFormatError, UnknownNameError
 from synth.scene import geometry as geo
 from synth.cli import main as synth_main
 from synth.scene.model import (
@@ -218,7 +218,7 @@ def test_geometry_quaternion_round_trip():
 
 
 def test_wrap_angle_range_is_minus_pi_exclusive_to_pi_inclusive():
-    """formats.camera.wrap_angle, the one wrap (layout yaws): (-pi, pi], so half a turn is always
+    """vrformats.camera.wrap_angle, the one wrap (layout yaws): (-pi, pi], so half a turn is always
     +pi whichever way it was reached, and the old scalar code's values are kept bit for bit."""
     pi = math.pi
     assert wrap_angle(pi) == pi and wrap_angle(-pi) == pi

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from formats.errors import SceneFormatError
+from vrformats.errors import SceneFormatError
 from synth.sources.replicacad.habitat_format import dataset_config_path, dataset_root
 from synth.sources.replicacad.habitat_lighting import (WATTS_PER_INTENSITY, assign_lights, dataset_light_defaults, fixtures_for_imported,
                                     parse_lighting_config, read_lighting_config)

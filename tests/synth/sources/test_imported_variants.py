@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from formats.errors import SceneFormatError
+from vrformats.errors import SceneFormatError
 from synth.scene import geometry as geo
 from synth.scene.fixtures import layout_fixtures
 from synth.layout.validity import check_layout

@@ -13,7 +13,7 @@ import struct
 import numpy as np
 import pytest
 
-from formats.errors import SceneFormatError
+from vrformats.errors import SceneFormatError
 from synth.sources.replicacad.navmesh import navmesh_for_scene, read_navmesh, standin_stage, StandinSpec, write_standin_glb
 
 from replicacad_real_fixture import FILES

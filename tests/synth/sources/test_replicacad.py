@@ -19,7 +19,7 @@ import pytest
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from formats.errors import SceneFormatError, UnknownNameError
+from vrformats.errors import SceneFormatError, UnknownNameError
 from synth.scene.classes import parse_class_table
 from synth.sources.replicacad.importer import Y_UP_TO_Z_UP, list_scenes, load_asset_mesh, load_replicacad
 from synth.scene.model import load_layout, object_box, save_layout

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from formats.errors import SceneFormatError
+from vrformats.errors import SceneFormatError
 from synth.cli import main as synth_main
 
 SCENE = "apt_0"

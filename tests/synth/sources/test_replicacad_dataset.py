@@ -13,7 +13,7 @@ import pytest
 
 from replicacad_real_fixture import FILES, write_real_fixture
 
-from formats.errors import SceneFormatError
+from vrformats.errors import SceneFormatError
 from synth.layout.validity import check_layout
 from synth.scene.classes import class_table, lexicon_table
 from synth.mesh.collision import overlap_depth, penetration, touching

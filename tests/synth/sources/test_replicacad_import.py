@@ -327,7 +327,7 @@ def _linear(srgb) -> np.ndarray:
 def _check_texture_colours(tour_dir: Path, layout_file: Path) -> None:
     from scipy import ndimage
 
-    from formats.tour import Tour
+    from vrformats.tour import Tour
 
     want = {k: _linear(v) / _linear(v).sum() for k, v in TEXTURE_SRGB.items()}
     tour, lay = Tour(tour_dir), load_layout(layout_file)

@@ -13,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from formats import camera as cam
-from formats.tour import tonemap
+from vrformats import camera as cam
+from vrformats.tour import tonemap
 from conftest import make_tour
 from synth.cli import main as synth_main
 from synth.tour.check import DARK_P99_LUMINANCE, check_tour, format_report, frame_brightness

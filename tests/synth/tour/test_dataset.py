@@ -14,12 +14,12 @@ import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
-import formats.frames as frames_mod
-from formats import camera as cam
-from formats.errors import SceneFormatError, UserError
-from formats.frames import FrameFileError, write_frame
+import vrformats.frames as frames_mod
+from vrformats import camera as cam
+from vrformats.errors import SceneFormatError, UserError
+from vrformats.frames import FrameFileError, write_frame
 from conftest import make_tour
-from formats.tour import Tour, tonemap
+from vrformats.tour import Tour, tonemap
 from synth.cli import main as synth_main
 from synth.tour.check import check_tour, choose_pairs, depth_consistency, format_report
 from synth.tour.show import contact_sheet, id_colors

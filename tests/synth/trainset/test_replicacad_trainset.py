@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import yaml
 
-from formats.errors import SceneFormatError
+from vrformats.errors import SceneFormatError
 from replicacad_real_fixture import write_real_fixture
 from synth.trainset.trainset import HELD_OUT_SCENES, load_trainset, parse_trainset, prepare
 from synth.layout.rearrange import RearrangePlan, VariantSpec, clutter, make_variant, new_problems, reference_walkway, template_pool

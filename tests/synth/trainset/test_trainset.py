@@ -15,9 +15,9 @@ import pytest
 import yaml
 from scipy.spatial.transform import Rotation
 
-from formats.design import read_design
-from formats.errors import SceneFormatError, UserError
-from formats.tour import Tour
+from vrformats.design import read_design
+from vrformats.errors import SceneFormatError, UserError
+from vrformats.tour import Tour
 from synth.cli import main as synth_main
 from synth.jobs import load_spec
 from synth.scene.lighting import LightingJitter, jitter_preset, load_lighting, parse_preset, preset_document

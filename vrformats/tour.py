@@ -3,17 +3,17 @@
 A tour directory, as the renderers write it::
 
     TOUR/
-      camera.json    {"width", "height", "K", "fx", "fy", "cx", "cy", "fps", + formats.camera.CAMERA_DOC keys}
+      camera.json    {"width", "height", "K", "fx", "fy", "cx", "cy", "fps", + vrformats.camera.CAMERA_DOC keys}
       poses.txt      TUM, camera-to-world, OpenCV axes; frame index = round(t * fps); one line per frame
-      objects.json   ground-truth boxes of the tour's layout (``formats.boxes``: videoreloc-boxes/1)
+      objects.json   ground-truth boxes of the tour's layout (``vrformats.boxes``: videoreloc-boxes/1)
       meta.json      {"toolkit", "layout", "lighting" (null: geometry-only tour), "path", "renderer", "seed",
                       "settings", "frames": [first, last], "n_frames", "rgb_every", "complete", ...}
-      frames/NNNNNN.exr   one per frame (formats.frames: R, G, B half; Z; instance; semantic)
+      frames/NNNNNN.exr   one per frame (vrformats.frames: R, G, B half; Z; instance; semantic)
       previews/NNNNNN.png optional 8-bit sRGB previews
 
 ``Tour`` reads the small files up front and the frames lazily, one EXR at a time.
 
-The tour's format has two homes here, this reader with its conventions and ``formats.export`` (the
+The tour's format has two homes here, this reader with its conventions and ``vrformats.export`` (the
 other methods' formats a tour is exported to), both in the format layer because reloc reads tours
 and imports nothing of synth. The tour's synth-side code is ``synth.tour``: rendering a tour
 (``synth tour render``, ``synth.tour.render``), the checker (``synth tour check``,
@@ -167,7 +167,7 @@ class Tour:
     missing frame is a ``FrameFileError`` naming its file when read. ``strict=False`` (what
     ``check_tour`` uses) accepts either, to report it.
 
-    ``sensor`` (a ``formats.sensors`` preset name, file or ``Sensor``): frames are read as that RGB-D
+    ``sensor`` (a ``vrformats.sensors`` preset name, file or ``Sensor``): frames are read as that RGB-D
     camera would measure them, seeded per (tour name, frame, sensor, ``sensor_seed``), so every
     reader of the same frame gets the same noise; ``ideal`` (or None) reads the render as it is.
     """
@@ -189,7 +189,7 @@ class Tour:
                                    f"(frame = round(t * fps), fps {self.fps:g} from {CAMERA_FILE})")
         self._row = {int(i): k for k, i in enumerate(self.frame_indices)}
         self.meta = _read_json(self.root / META_FILE, "tour metadata")
-        # a sensor model applied as frames are read (formats.sensors): one render, any camera
+        # a sensor model applied as frames are read (vrformats.sensors): one render, any camera
         self.sensor, self.sensor_seed = None, int(sensor_seed)
         if sensor is not None:
             from .sensors import Sensor, load_sensor
@@ -380,8 +380,8 @@ def write_tour(root, poses, intrinsics: Intrinsics, frames: dict | None = None, 
                header: str | None = None) -> "Tour":
     """Write a tour folder in the format ``Tour`` reads, for a tool that makes tours without the
     renderers (an importer of another dataset, a test): ``frames`` (frame id -> keyword arguments of
-    ``formats.frames.write_frame``: ``rgb``, ``depth``, ``instance``, ``semantic``), ``camera.json``
-    (``formats.camera.camera_document``), ``poses.txt`` (camera-to-world, one pose per ``frame_ids``,
+    ``vrformats.frames.write_frame``: ``rgb``, ``depth``, ``instance``, ``semantic``), ``camera.json``
+    (``vrformats.camera.camera_document``), ``poses.txt`` (camera-to-world, one pose per ``frame_ids``,
     default 0..n-1), ``meta.json`` (``meta`` over a header naming the frames, with ``layout``,
     ``lighting``, ``path`` and ``renderer`` defaulting to placeholders) and ``objects.json`` when
     ``objects`` is given. Every file is written atomically; returns the ``Tour``."""

@@ -1,13 +1,13 @@
-"""The shipped-name lookup of the spec arguments (formats.shipped): a path wins, a bare name is the
+"""The shipped-name lookup of the spec arguments (vrformats.shipped): a path wins, a bare name is the
 shipped spec of its kind, a broken shipped spec says what is wrong with it."""
 
 from __future__ import annotations
 
 import pytest
 
-from formats.errors import SceneFormatError, UnknownNameError
-from formats.shipped import resolve_spec, shipped_names
-from formats.yamlfile import read_yaml
+from vrformats.errors import SceneFormatError, UnknownNameError
+from vrformats.shipped import resolve_spec, shipped_names
+from vrformats.yamlfile import read_yaml
 
 
 def _folder(tmp_path):

@@ -1,7 +1,7 @@
 """The sRGB transfer function (IEC 61966-2-1), both directions: the one home of its constants.
 
 ``srgb_encode`` (linear -> sRGB, clipped to [0, 1] first) is what every 8-bit image of the toolkit
-goes through (``srgb8``: previews, ``formats.tour.tonemap``, the detectors' inputs); ``srgb_decode``
+goes through (``srgb8``: previews, ``vrformats.tour.tonemap``, the detectors' inputs); ``srgb_decode``
 (sRGB -> linear) turns sRGB colours (black-body fits, texture values) into linear light.
 
 These work on numpy arrays. The detector's training runs the same curve on PyTorch tensors

@@ -1,7 +1,7 @@
 """Process lifetime, one home for synth and reloc: drivers that stop on a signal, workers that die
 with their parent, and one run per output folder.
 
-* **Signals.** ``run_command`` (``formats.errors``) runs every CLI command under
+* **Signals.** ``run_command`` (``vrformats.errors``) runs every CLI command under
   :func:`signals_interrupt`: SIGTERM and SIGHUP raise :class:`Interrupted` in the main thread, as
   Ctrl-C raises ``KeyboardInterrupt`` (of which it is a subclass), so that every ``finally`` and
   every ``except KeyboardInterrupt`` of a driver runs for all three. A driver that holds workers
@@ -334,7 +334,7 @@ def start_reaper() -> "subprocess.Popen | None":
 
     if not Path("/proc/self/stat").exists():
         return None
-    code = "import sys; from formats.lifetime import _reap; _reap(int(sys.argv[1]))"
+    code = "import sys; from vrformats.lifetime import _reap; _reap(int(sys.argv[1]))"
     root = str(Path(__file__).resolve().parents[1])
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")]))}
     return subprocess.Popen([sys.executable, "-c", code, str(os.getpid())], env=env, stdin=subprocess.DEVNULL,

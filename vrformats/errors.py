@@ -1,5 +1,5 @@
 """Errors a user can act on. The CLIs print them as one line and exit with status 2
-(``formats.cli.run_command``)."""
+(``vrformats.cli.run_command``)."""
 
 from __future__ import annotations
 

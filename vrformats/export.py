@@ -1,8 +1,8 @@
 """``synth tour export``: a tour in the layouts other relocalizers already read.
 
-It lives in ``formats`` (no Blender, no scene model) because both sides use it: the ``synth tour
+It lives in ``vrformats`` (no Blender, no scene model) because both sides use it: the ``synth tour
 export`` command (``synth.tour.cli``) and ``reloc experiment``'s external methods
-(``reloc.experiments.external``). With ``formats.tour`` (the reader and the tour folder's
+(``reloc.experiments.external``). With ``vrformats.tour`` (the reader and the tour folder's
 conventions) it is the tour's only format-side home; the tour's synth-side code is ``synth.tour``.
 
 Other people's relocalizers (ACE, DSAC*, hloc, RGB-D SLAM systems) get our tours through four
@@ -10,7 +10,7 @@ layouts, each written the way its own loader reads it (sources below). Every exp
 ``export.json`` (format ``synth-export/1``), written last and atomically: the export's format, role,
 tour (path and content key), intrinsics in the toolkit's and in the tool's convention, depth
 encoding, exposure, the exported frames by file name (``frames``: name relative to the export root
--> tour frame index) and the geometry-only frames left out (``skipped``). ``formats.poses`` and
+-> tour frame index) and the geometry-only frames left out (``skipped``). ``vrformats.poses`` and
 ``reloc eval --poses`` map the tools' pose files back to tour frames with it.
 
 Frame files keep the tour's frame index in their names (``frame-000120.color.png`` is tour frame
@@ -74,12 +74,12 @@ Conventions, and where they come from:
   cx = ours + 0.5 and cy = ours + 0.5; that is what cameras.txt holds. IMAGE_ID is the tour
   frame index + 1.
 
-Exposure: images are ``formats.tour.tonemap`` of the tour's linear RGB (scale, sRGB encode,
+Exposure: images are ``vrformats.tour.tonemap`` of the tour's linear RGB (scale, sRGB encode,
 clip), rounded to 8 bits. "auto" (the default, camera-like) scales each frame on its own;
 "fixed" uses one factor for the whole tour, the median of the per-frame auto factors; a number
 is that factor. export.json records every factor used.
 
-Sensor: ``sensor`` (a ``formats.sensors`` preset name, file or ``Sensor``) exports the frames as that
+Sensor: ``sensor`` (a ``vrformats.sensors`` preset name, file or ``Sensor``) exports the frames as that
 RGB-D camera measures them (``Tour(..., sensor=, sensor_seed=)``: the same noisy frames every other
 reader of the tour gets with that seed); export.json records its name, seed and parameters, and a
 folder exported with another sensor or seed is refused like another exposure. ``ideal`` (the
@@ -106,19 +106,19 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.atomic import replacing, write_json_atomic, write_text_atomic
-from formats.camera import matrix_to_quat
-from formats.errors import SceneFormatError, UserError, check_output_folder
-from formats.fields import is_integer, is_number
-from formats.tour import CAMERA_FILE, META_FILE, POSES_FILE, Tour, ranges_text, tonemap
-from formats.yamlfile import read_json
+from vrformats.atomic import replacing, write_json_atomic, write_text_atomic
+from vrformats.camera import matrix_to_quat
+from vrformats.errors import SceneFormatError, UserError, check_output_folder
+from vrformats.fields import is_integer, is_number
+from vrformats.tour import CAMERA_FILE, META_FILE, POSES_FILE, Tour, ranges_text, tonemap
+from vrformats.yamlfile import read_json
 
 ROLES = ("mapping", "query")
 MANIFEST_FORMAT = "synth-export/1"
 MANIFEST_FILE = "export.json"
 REQUEST_FILE = ".synth-export.json"  # the request, written before the first frame; kept
 UINT16_MAX = 65535  # depth: uint16 value = round(metres * scale), 0 = no surface (or out of range)
-TIMESTAMP_DECIMALS = 6  # as formats.camera.write_tum
+TIMESTAMP_DECIMALS = 6  # as vrformats.camera.write_tum
 
 
 # ---------------------------------------------------------------------------------------------
@@ -167,7 +167,7 @@ def _has_rgb_channels(path: Path) -> bool:
     """Whether a frame EXR carries R, G, B (header only)."""
     import OpenEXR
 
-    from formats.frames import RGB_CHANNELS, FrameFileError
+    from vrformats.frames import RGB_CHANNELS, FrameFileError
 
     try:
         with OpenEXR.File(str(path), header_only=True) as f:
@@ -191,13 +191,13 @@ def _encode_png(img: np.ndarray) -> bytes:
 
 
 def rgb8(rgb_linear: np.ndarray, factor: float) -> np.ndarray:
-    """8-bit sRGB of linear RGB scaled by ``factor`` (formats.tour.tonemap, then rounded)."""
+    """8-bit sRGB of linear RGB scaled by ``factor`` (vrformats.tour.tonemap, then rounded)."""
     img, _ = tonemap(rgb_linear, factor)
     return (img * 255.0 + 0.5).astype(np.uint8)
 
 
 def auto_factor(rgb_linear: np.ndarray) -> float:
-    """The camera-like per-frame exposure factor of formats.tour.tonemap."""
+    """The camera-like per-frame exposure factor of vrformats.tour.tonemap."""
     return float(tonemap(rgb_linear, None)[1])
 
 
@@ -660,7 +660,7 @@ def export_tour(tour_dir, fmt: str, out_dir, role: str = "query", exposure: str 
     nothing (frames already written are kept; a killed export resumes), while a folder holding a
     DIFFERENT export (another tour, format, role, exposure or sensor) is an error naming OUT/export.json
     and the field that differs. Bad input raises a UserError before anything is written. ``sensor``,
-    ``sensor_seed``: read the frames through that RGB-D camera model (``formats.sensors``).
+    ``sensor_seed``: read the frames through that RGB-D camera model (``vrformats.sensors``).
     """
     fmt = _check_choice(fmt, FORMATS, "--format", "export format")
     layout = FORMATS[fmt]
@@ -784,7 +784,7 @@ def _manifest(tour: Tour, tour_path: str, key: str, layout: ExportFormat, role: 
         if exp_req == "fixed":
             exposure["rule"] = "median of the per-frame auto factors of the tour's RGB frames"
     exposure["transform"] = ("8-bit sRGB = round(255 * srgb_encode(clip(linear RGB * factor, 0, 1))) "
-                             "(formats.tour.tonemap); auto factor = 0.9 / 97th percentile of the frame's luminance")
+                             "(vrformats.tour.tonemap); auto factor = 0.9 / 97th percentile of the frame's luminance")
     frames: dict[str, int] = {}
     for f in exported:
         for kind in layout.named_kinds:

@@ -4,7 +4,7 @@ A render job (``synth render SPEC``) writes into its output folder::
 
     OUT/design.json     {"format": "videoreloc-design/1", "job": NAME, "spec": SPEC FILE,
                          "tours": {tour name: {"layout", "lighting", "path", "n_frames"}}}
-    OUT/<tour name>/    one tour each (``formats.tour``), whose meta.json records the same fields
+    OUT/<tour name>/    one tour each (``vrformats.tour``), whose meta.json records the same fields
 
 ``design.json`` is written before any frame is rendered, so a reader knows which tours are still
 missing; each tour's ``meta.json`` is written when its frames are done. Readers of a design

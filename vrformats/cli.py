@@ -5,7 +5,7 @@
 - ``--quiet``: no progress bar or progress lines; the result line and errors still print;
 - ``--workers N``: how many processes work at a time (a positive integer);
 - ``--sensor NAME|FILE`` and ``--sensor-seed S``: read (or export) frames as an RGB-D camera
-  measures them (``formats.sensors``);
+  measures them (``vrformats.sensors``);
 - ``--out``: where the command writes, with the command's own description of what it writes.
 
 Each ``add_*`` returns the argparse action, so a caller can still adjust it. ``ArgumentParser`` is
@@ -93,10 +93,10 @@ def add_out(p: argparse.ArgumentParser, what: str, required: bool = True, defaul
 def add_sensor(p: argparse.ArgumentParser, verb: str = "read the frames", default: str = "ideal: the render as it is"):
     """``--sensor`` and ``--sensor-seed``."""
     p.add_argument("--sensor", metavar="NAME|FILE",
-                   help=f"{verb} as this RGB-D camera measures them: a formats/sensor_presets name (ideal, "
+                   help=f"{verb} as this RGB-D camera measures them: a vrformats/sensor_presets name (ideal, "
                         f"structured_light, tof) or a sensor YAML file (default: {default})")
     return p.add_argument("--sensor-seed", type=int, default=0, metavar="S",
-                          help="seed of the sensor noise (per frame: formats.sensors.frame_seed; default 0)")
+                          help="seed of the sensor noise (per frame: vrformats.sensors.frame_seed; default 0)")
 
 
 _WRITE_ERRNOS = {errno.ENOSPC, errno.EFBIG, errno.EDQUOT, errno.EROFS}
@@ -104,7 +104,7 @@ _WRITE_ERRNOS = {errno.ENOSPC, errno.EFBIG, errno.EDQUOT, errno.EROFS}
 
 def run_command(prog: str, fn, args) -> int:
     """Run a CLI command function: a UserError prints one line and exits 2; Ctrl-C, SIGTERM and SIGHUP
-    stop it in order (``formats.lifetime``: its workers are stopped, one line, exit 130 / 143 / 129);
+    stop it in order (``vrformats.lifetime``: its workers are stopped, one line, exit 130 / 143 / 129);
     a reader that closed the pipe (``synth scene show apt_0 | head``) ends it quietly."""
     import os
     import sys

@@ -6,7 +6,7 @@ camera would have measured, deterministically for a seed. ``frame_seed`` derives
 (tour, frame, sensor, run seed) with SHA-256, so every method and every process sees the same noisy
 frame.
 
-Presets (``formats/sensor_presets/<name>.yaml``; every figure is cited in the file, and the ones
+Presets (``vrformats/sensor_presets/<name>.yaml``; every figure is cited in the file, and the ones
 that are choices say so):
 
 * ``ideal``: no effect at all; ``apply_sensor`` returns its inputs (today's output).
@@ -268,7 +268,7 @@ def _section(doc, cls, file: str, key: str):
             out[k] = boolean(file, v, field)
             continue
         if k in _INF_OK and isinstance(v, float) and v == math.inf:
-            x = math.inf  # "no limit": the one non-finite value these keys take (formats.fields.number refuses it)
+            x = math.inf  # "no limit": the one non-finite value these keys take (vrformats.fields.number refuses it)
         else:
             x = number(file, v, field, lo=0.0)
         if k in _PROBABILITIES and x > 1:
@@ -382,7 +382,7 @@ def list_sensors() -> list[str]:
 
 
 def _sensor_file(s: str, source=None, field: str = "sensor", folder: Path | None = None) -> Path:
-    """The file a sensor name or path names: a preset name (``formats/sensor_presets/<name>.yaml``),
+    """The file a sensor name or path names: a preset name (``vrformats/sensor_presets/<name>.yaml``),
     else a YAML file (relative to ``folder``, the naming file's, when given). An unknown preset is
     reported against ``source`` and ``field`` (the file and key that named it)."""
     p = Path(s)
@@ -399,7 +399,7 @@ MAX_BASE_CHAIN = 8  # a scaled sensor's base may itself be scaled, this many lev
 
 
 def load_sensor(name_or_file, _chain: tuple = ()) -> Sensor:
-    """A preset by name (``formats/sensor_presets/<name>.yaml``) or a sensor YAML file."""
+    """A preset by name (``vrformats/sensor_presets/<name>.yaml``) or a sensor YAML file."""
     if isinstance(name_or_file, Sensor):
         return name_or_file
     p = _sensor_file(str(name_or_file))

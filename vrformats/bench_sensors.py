@@ -16,7 +16,7 @@ The machine is shared and noisy: quote the medians and the ratios, never one run
 """
 
 from __future__ import annotations
-from formats.cli import positive_int
+from vrformats.cli import positive_int
 
 import argparse
 import statistics

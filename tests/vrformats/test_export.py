@@ -1,6 +1,6 @@
 """`synth tour export`: tours in the 7-Scenes, ACE, TUM RGB-D and COLMAP layouts.
 
-The tests build a tiny tour by hand (formats.frames.write_frame: random HDR RGB on every other
+The tests build a tiny tour by hand (vrformats.frames.write_frame: random HDR RGB on every other
 frame, random planar depth with holes and far surfaces, known poses), export it, and read every
 export back with plain OpenCV / numpy / scipy code written here, in each tool's own convention:
 poses (world-to-camera converted back here), depth quantisation, 8-bit sRGB against an sRGB
@@ -19,10 +19,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from formats import camera as cam
-from formats.errors import SceneFormatError, UserError
+from vrformats import camera as cam
+from vrformats.errors import SceneFormatError, UserError
 from synth.cli import main as synth_main
-from formats.export import FORMATS, export_tour, read_manifest, summary_line
+from vrformats.export import FORMATS, export_tour, read_manifest, summary_line
 from conftest import make_tour
 
 W, H = 48, 36
@@ -390,8 +390,8 @@ def test_different_export_into_same_folder_fails(tour, tmp_path, change, field):
 def test_export_through_a_sensor_holds_what_every_reader_of_that_sensor_gets(tour, tmp_path):
     """An export read through a sensor holds the frames Tour(sensor=, sensor_seed=) gives every other
     method (the experiment's external methods see the same noisy frames), and says so in export.json."""
-    from formats.export import depth16
-    from formats.tour import Tour
+    from vrformats.export import depth16
+    from vrformats.tour import Tour
 
     root, truth = tour
     # the fixture's depth is random per pixel (all edges and grazing): a sensor with axial noise alone

@@ -2,7 +2,7 @@
 
 Every check takes ``(file, value, field)`` and either returns the value in its checked type or raises
 ``SceneFormatError(file, field, message)``, whose text reads ``FILE: FIELD: message`` (one line,
-``formats.errors``). ``field`` is a dotted path into the document (``designs[0].path.frames``) or
+``vrformats.errors``). ``field`` is a dotted path into the document (``designs[0].path.frames``) or
 None for the whole file. Booleans are never numbers (``True`` is not 1), and a YAML ``"no"`` is not
 ``False``: a boolean field takes only ``true``/``false``.
 """
@@ -68,7 +68,7 @@ _UNSAFE = re.compile("[\x00-\x1f\x7f-\x9f\u061c\u200e\u200f\u202a-\u202e\u2066-\
 def terminal_safe(text) -> str:
     """``text`` with control and bidi characters escaped (``\\x1b``, ``\\u202e``): what a file says can
     be printed without driving the terminal (colours, cursor moves, a reversed line). The one home of
-    that rule: error lines (``formats.cli``) and progress bars go through it."""
+    that rule: error lines (``vrformats.cli``) and progress bars go through it."""
     t = str(text)
     return _UNSAFE.sub(lambda m: m.group(0).encode("unicode_escape").decode("ascii"), t) if _UNSAFE.search(t) else t
 

@@ -9,7 +9,7 @@ Every reader bounds what a file can make it do (a file may come from someone els
 * YAML aliases: a document that expands to more than ``MAX_VALUES`` values (a "billion laughs" of
   anchors and aliases) is refused before any code walks it.
 
-Error messages show bounded excerpts of values (``formats.fields.shown``), never a whole value.
+Error messages show bounded excerpts of values (``vrformats.fields.shown``), never a whole value.
 """
 
 from __future__ import annotations

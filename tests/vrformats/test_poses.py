@@ -1,4 +1,4 @@
-"""Pose files of other relocalizers (formats.poses) and ``reloc eval --poses CONVENTION``.
+"""Pose files of other relocalizers (vrformats.poses) and ``reloc eval --poses CONVENTION``.
 
 The same camera-to-world poses, written in every convention (by ``write_poses`` and, independently,
 by plain text code here that follows each tool's documented convention: world-to-camera inverted
@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from formats.camera import Intrinsics, write_tum
-from formats.errors import SceneFormatError, UserError
-from formats.poses import CONVENTIONS, frame_names, load_names, read_poses, write_poses
-from formats.tour import Tour, write_tour
+from vrformats.camera import Intrinsics, write_tum
+from vrformats.errors import SceneFormatError, UserError
+from vrformats.poses import CONVENTIONS, frame_names, load_names, read_poses, write_poses
+from vrformats.tour import Tour, write_tour
 from reloc.cli import main as reloc_main
 from cli_errors import one_line_error
 

@@ -1,4 +1,4 @@
-"""formats.sensors: seeded RGB-D sensor models, checked against closed-form expectations on synthetic frames."""
+"""vrformats.sensors: seeded RGB-D sensor models, checked against closed-form expectations on synthetic frames."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from formats.camera import Intrinsics
-from formats.errors import SceneFormatError
-from formats.sensors import (ColorModel, DepthModel, Motion, Sensor, apply_sensor, exposure, frame_seed,
+from vrformats.camera import Intrinsics
+from vrformats.errors import SceneFormatError
+from vrformats.sensors import (ColorModel, DepthModel, Motion, Sensor, apply_sensor, exposure, frame_seed,
                              incidence_angle, load_sensor, motion_blur, motion_flow, parse_sensor)
 
 W, H = 200, 160
@@ -579,7 +579,7 @@ def test_user_file_and_round_trip_of_presets(tmp_path):
         assert col.motion_blur and col.electrons_per_ms > 0 and col.exposure_max_ms == pytest.approx(1000 / 30, abs=0.05)
 
 
-# ---- a tour read through a sensor (formats.tour.Tour(sensor=...)) ----------------------------------
+# ---- a tour read through a sensor (vrformats.tour.Tour(sensor=...)) ----------------------------------
 
 
 @pytest.fixture(scope="module")
@@ -593,7 +593,7 @@ def small_tour(tmp_path_factory):
 
 
 def test_a_tour_read_through_a_sensor(small_tour):
-    from formats.tour import Tour
+    from vrformats.tour import Tour
 
     plain = Tour(small_tour).frame(2)
     assert np.array_equal(Tour(small_tour, sensor="ideal").frame(2).depth, plain.depth)  # ideal: the render itself
@@ -611,8 +611,8 @@ def test_a_tour_read_through_a_sensor(small_tour):
 
 
 def test_a_tour_passes_the_motion_around_each_frame(small_tour, monkeypatch):
-    import formats.sensors as sensors
-    from formats.tour import Tour
+    import vrformats.sensors as sensors
+    from vrformats.tour import Tour
 
     seen = {}
     real = sensors.apply_sensor
@@ -640,9 +640,9 @@ def test_a_tour_passes_the_motion_around_each_frame(small_tour, monkeypatch):
 def test_a_tour_with_rgb_through_a_sensor(small_tour, tmp_path):
     import shutil
 
-    from formats import frames as fr
-    from formats.sensors import frame_seed
-    from formats.tour import Tour
+    from vrformats import frames as fr
+    from vrformats.sensors import frame_seed
+    from vrformats.tour import Tour
 
     root = tmp_path / small_tour.name
     shutil.copytree(small_tour, root)
@@ -683,8 +683,8 @@ def test_read_speed_benchmark_reports_every_preset(small_tour, tmp_path, capsys)
     hand, exposure from the colour model, and a table line per preset."""
     import shutil
 
-    from formats import frames as fr
-    from formats.tour import Tour
+    from vrformats import frames as fr
+    from vrformats.tour import Tour
     from reloc.cli import main as reloc_main
 
     root = tmp_path / small_tour.name
@@ -694,7 +694,7 @@ def test_read_speed_benchmark_reports_every_preset(small_tour, tmp_path, capsys)
         f = plain.frame(int(i))
         fr.write_frame(plain.frame_path(int(i)), rgb=np.full(f.depth.shape + (3,), 0.3, np.float32), depth=f.depth,
                        instance=f.instance, semantic=f.semantic)
-    from formats.bench_sensors import bench
+    from vrformats.bench_sensors import bench
 
     r = bench(root, frames=4)
     rows = {x["sensor"]: x for x in r["rows"]}

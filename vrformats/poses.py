@@ -1,6 +1,6 @@
 """Pose files of other relocalizers: read and write them in a stated convention. One place.
 
-Every reader returns what the toolkit uses everywhere (``formats.camera``): tour frame index ->
+Every reader returns what the toolkit uses everywhere (``vrformats.camera``): tour frame index ->
 4x4 **camera-to-world** pose ``T_world_cam`` in **OpenCV** camera axes (x right, y down, z forward).
 A convention is always stated by the caller, never guessed from the file.
 
@@ -40,7 +40,7 @@ Sources (read for this module):
   fields), its ground-truth ``poses.txt`` does not (8 fields): both are accepted. The benchmark's
   world is the reference image's camera; here it is the tour's world frame. ``write_poses`` writes
   confidence 1.
-- tum: ``formats.camera`` (TUM RGB-D ``t tx ty tz qx qy qz qw``, camera-to-world); here the time
+- tum: ``vrformats.camera`` (TUM RGB-D ``t tx ty tz qx qy qz qw``, camera-to-world); here the time
   must lie within ``TUM_TIME_TOL`` (1 ms) of a frame time ``frame / fps``.
 
 Names (ace, colmap, mapfree) are matched to tour frames through ``names``, an export manifest's
