@@ -131,28 +131,25 @@ def register_cli(subparsers) -> None:
     a.add_argument("--config")
     add_json(a, "the report")
     a.set_defaults(fn=cmd_frontend)
-    a = sub.add_parser("stability", help="an experiment's figures under last-bit perturbations of the learned detector")
-    from . import stability
-
-    stability.add_arguments(a)
-    a.set_defaults(fn=stability.cmd_stability)
-    a = sub.add_parser("odometry", help="odometry speed against drift per metre for resolutions and strides")
-    from . import bench_odometry
-
-    bench_odometry.add_arguments(a)
-    a.set_defaults(fn=cmd_odometry)
     from vrformats import bench_sensors
 
+    from . import bench_odometry, stability
     from ..detection import bench_speed
     from ..map import bench_rules
 
-    a = sub.add_parser("detector-speed", help="learned-detector models side by side: median ms per frame")
-    bench_speed.add_arguments(a)
-    a.set_defaults(fn=cmd_detector_speed)
-    a = sub.add_parser("map-rules", help="what each map-building rule costs: boxes matched, missing, extra per relaxed rule")
-    bench_rules.add_arguments(a)
-    a.set_defaults(fn=cmd_map_rules)
-    a = sub.add_parser("sensors", help="a tour's read speed, valid depth and exposure through each sensor model")
-    bench_sensors.add_arguments(a)
-    a.set_defaults(fn=cmd_sensors)
+    # the benchmarks whose options their own module adds: (subcommand, help, module, command)
+    for name, text, module, fn in (
+            ("stability", "an experiment's figures under last-bit perturbations of the learned detector", stability,
+             stability.cmd_stability),
+            ("odometry", "odometry speed against drift per metre for resolutions and strides", bench_odometry,
+             cmd_odometry),
+            ("detector-speed", "learned-detector models side by side: median ms per frame", bench_speed,
+             cmd_detector_speed),
+            ("map-rules", "what each map-building rule costs: boxes matched, missing, extra per relaxed rule",
+             bench_rules, cmd_map_rules),
+            ("sensors", "a tour's read speed, valid depth and exposure through each sensor model", bench_sensors,
+             cmd_sensors)):
+        a = sub.add_parser(name, help=text)
+        module.add_arguments(a)
+        a.set_defaults(fn=fn)
 
