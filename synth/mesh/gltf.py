@@ -80,6 +80,7 @@ from trimesh.visual.material import PBRMaterial
 from vrformats.errors import SceneFormatError
 from vrformats.fields import inside_root, listing, shown
 from vrformats.yamlfile import check_shape
+from vrformats.color import srgb_decode
 from vrformats.lfs import LFS_HINT, LFS_POINTER_PREFIX, is_lfs_pointer  # noqa: F401 - re-exported for readers
 
 from ..scene.geometry import Y_UP_TO_Z_UP
@@ -700,10 +701,7 @@ def blender_mapping(transform: dict) -> dict:
             "scale": (sx, sy, 1.0)}
 
 
-def srgb_to_linear(c) -> np.ndarray:
-    """sRGB-encoded values in 0..1 to linear (the sRGB transfer function)."""
-    c = np.asarray(c, dtype=np.float64)
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+srgb_to_linear = srgb_decode  # sRGB-encoded values in 0..1 to linear: the one curve, vrformats.color
 
 
 _IMAGE_ARRAYS: OrderedDict[int, tuple] = OrderedDict()  # id(PIL image) -> (PIL image, linear RGB float32 array)

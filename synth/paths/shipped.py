@@ -17,10 +17,9 @@ from .query import plan_query_path
 
 __all__ = ["SHIPPED", "plan_path", "replan", "generate_shipped"]
 
-# The paths under scenes/paths/ (``synth path generate`` rewrites them). The query path cannot keep
-# 0.3 m in all six built-in layouts: floor lamps of different variants leave a hallway bottleneck
-# in front of the bathroom door where at most ~0.29 m is possible (see ``synth.paths``), so it is
-# planned with 0.25 m.
+# The paths under scenes/paths/ (``synth path generate`` rewrites them), planned with the planners'
+# defaults: both keep 0.3 m from every object of their layouts (scenes/paths/query.yaml records a
+# minimum of 0.32 m over apt_0..apt_5).
 SHIPPED: dict[str, dict[str, Any]] = {
     "query": {"kind": "query", "layouts": [f"apt_{i}" for i in range(6)], "frames": DEFAULTS.query_frames,
               "seed": DEFAULTS.seed, "clearance": DEFAULTS.clearance},

@@ -39,11 +39,12 @@ from pathlib import Path
 from vrformats.atomic import write_json_atomic, write_text_atomic
 from vrformats.errors import SceneFormatError, UserError
 from vrformats.fields import boolean
+from ...paths.model import DEFAULTS
 
 ENV_ROOT = "REPLICACAD_ROOT"
 KEYS = {"root", "allow_unknown", "obstacles"}
 OBSTACLES = ("all", "band")  # synth.paths: what the planned paths keep their clearance from
-PATH_KINDS = {"query": 4000, "mapping": 6000}  # default frames: the paper's query and mapping tours
+PATH_KINDS = {"query": DEFAULTS.query_frames, "mapping": DEFAULTS.mapping_frames}  # default frames (the paper's tours)
 PREPARED = "prepared.json"
 
 
