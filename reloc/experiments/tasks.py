@@ -22,7 +22,6 @@ from vrformats.yamlfile import read_json
 from vrformats.tour import Tour
 
 from . import methods
-from .methods.common import config_of, detector_for, load_map
 
 DONE = "done.json"
 
@@ -38,10 +37,6 @@ def mark_done(d: Path, key: str, seconds: float, extra: dict | None = None) -> N
     write_json_atomic(d / DONE, {"key": key, "seconds": round(seconds, 2), **(extra or {})})
 
 
-# the methods' shared helpers, under their old names here (tests and tools use ``tasks._load``)
-_config = config_of
-_detector = detector_for
-_load = load_map
 
 
 def run_map_task(task: dict) -> dict:

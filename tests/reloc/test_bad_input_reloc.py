@@ -309,7 +309,7 @@ def test_run_json_records_the_detector_and_its_corruption(world, tmp_path, capsy
 
 def test_experiment_runs_record_the_spec_detector(world, tmp_path):
     """The experiment's VideoReloc runs go through relocalize with the spec's ``detector`` settings."""
-    from reloc.experiments.tasks import _detector
+    from reloc.experiments.methods.common import detector_for as _detector
     from reloc.map.boxmap import BoxMap
     from reloc.backend.run import relocalize
 

@@ -155,15 +155,15 @@ def test_the_map_section_reaches_every_loaded_box_map(tmp_path, monkeypatch):
     ``reloc run`` load the map with: a shorter edge range keeps fewer edges than the paper's."""
     import json
 
-    from reloc.experiments import tasks
+    from reloc.experiments.methods.common import load_map
     from reloc.map.boxmap import BoxMap
     from synth.scene.model import boxes_document, load_layout
 
     path = tmp_path / "map.json"
     path.write_text(json.dumps(boxes_document(load_layout("apt_0"))))
     cfg = _load(tmp_path, "map:\n  triangle_edge_max_m: 2.0\n")
-    paper = tasks._load("boxes", str(path), Config().map)
-    short = tasks._load("boxes", str(path), cfg.map)
+    paper = load_map("boxes", str(path), Config().map)
+    short = load_map("boxes", str(path), cfg.map)
     assert paper.config.triangle_edge_max_m == 8.0 and short.config.triangle_edge_max_m == 2.0
     assert 0 < len(short.edges) < len(paper.edges)
     # reloc run: the map is loaded with the --config's map section (stopped right after the load)
