@@ -23,6 +23,7 @@ from collections import Counter, defaultdict
 
 import numpy as np
 
+from vrformats.errors import UserError
 from vrformats.tour import Tour
 
 from ..detection.learned import LearnedDetector
@@ -98,8 +99,10 @@ def evaluate(model, tour_dirs, every: int = 1, min_pixels: int = 20, progress: b
     acc = defaultdict(lambda: {"conf": np.zeros((n, n), np.int64), "gt": 0, "found": 0, "dets": 0, "matched": 0,
                                "frames": 0, "per_frame": []})
     times = []
+    blind = []  # tours without a single RGB frame among those read
     for d in tour_dirs:
         tour = Tour(d, sensor=sens)
+        seen = 0
         lighting = preset_of(tour.meta.get("lighting"))
         names = tour.class_names()  # semantic id -> name
         sem_map = np.zeros(65536, np.int64)
@@ -110,6 +113,7 @@ def evaluate(model, tour_dirs, every: int = 1, min_pixels: int = 20, progress: b
             f = tour.frame(int(i), rgb=True, depth=True, instance=True, semantic=True)
             if f.rgb is None:
                 continue
+            seen += 1
             t0 = time.perf_counter()
             pred = det.predict(f.rgb)  # what detect() does, keeping the class map for the pixel scores
             dets = det.instances(*pred, f.depth)
@@ -133,8 +137,17 @@ def evaluate(model, tour_dirs, every: int = 1, min_pixels: int = 20, progress: b
             a["matched"] += matched
             a["frames"] += 1
             a["per_frame"].append((fconf, len(gt_masks), found))
-        if progress:
+        if not seen:
+            blind.append(str(d))
+        elif progress:
             print(f"evaluated {tour.name}", file=sys.stderr)
+    for lighting in [k for k, a in acc.items() if not a["frames"]]:
+        del acc[lighting]
+    if not acc:
+        raise UserError(f"{blind[0]}: no frame with RGB{' (nor in ' + str(len(blind) - 1) + ' more tours)' if len(blind) > 1 else ''}; "
+                        "a geometry-only tour cannot be seen by a detector: render RGB (rgb_every, the Blender renderer)")
+    if blind and progress:
+        print(f"skipped {len(blind)} tours without RGB frames: {', '.join(blind)}", file=sys.stderr)
     rep = {"model": str(model), "sensor": sens.name if sens else "ideal", "ms_per_frame": round(1000 * float(np.median(times)), 1) if times else None,
            "lightings": {}}
     for lighting, a in sorted(acc.items()):

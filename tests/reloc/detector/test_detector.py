@@ -327,3 +327,20 @@ def test_fine_tuning_starts_from_the_given_model(tiny, capsys):
     assert "initialised from" in capsys.readouterr().err
     assert reloc_main(["detector", "train", str(tiny / "set.npz"), "--out", str(tiny / "t2"), "--init", str(tiny / "nope.onnx")]) == 2
     assert "nope.onnx: model not found" in capsys.readouterr().err
+
+
+def test_detector_eval_on_a_geometry_only_tour_is_one_line(tmp_path, capsys):
+    """A tour rendered without RGB (the fast renderer's geometry) has nothing a detector can see:
+    one line naming the tour, not numpy's "need at least one array to stack"."""
+    from tests.conftest import make_tour
+    from vrformats.camera import Intrinsics
+    from reloc.resources import SHIPPED_MODEL
+    from tests.cli_errors import one_line_error
+
+    depth = np.full((48, 64), 2.0, np.float32)
+    ids = np.zeros((48, 64), np.uint16)
+    tour = make_tour(tmp_path / "geo", [np.eye(4)] * 2, {i: dict(depth=depth, instance=ids, semantic=ids) for i in range(2)},
+                     intrinsics=Intrinsics.from_fov(64, 48, 75.0), layout="apt_0", lighting="day", path="query")
+    args = ["detector", "eval", str(tour), "--model", str(SHIPPED_MODEL), "--quiet"]
+    assert reloc_main(args) == 2
+    one_line_error(capsys, "geo", "RGB")
