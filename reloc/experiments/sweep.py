@@ -18,7 +18,8 @@ bootstrap (``reloc.experiments.intervals``: the same resampled path segments as 
 figure, so levels are paired), and its ratio to the lowest level, with an interval. The *breaking
 point* is the lowest level whose ratio falls below ``fraction``; a method that holds at every level
 has none (``reloc check`` reads it as infinity: ``videoreloc.breaking_point.rearrangement >= 0.5``
-passes). The breaking point has an interval too: ``.lo``, the first level whose ratio's interval
+passes). A method with no recall at the lowest level has no ratio to it: it is broken from the start,
+and its breaking point (and both bounds) is that level. The breaking point has an interval too: ``.lo``, the first level whose ratio's interval
 reaches below the fraction (where the method may break), and ``.hi``, the first whose whole interval
 lies below it (where it surely breaks); checks should use ``.lo``. ``tables/sweep.md`` holds the
 table, ``plots/sweep.png`` the dose-response plot.
@@ -132,6 +133,10 @@ def compute_sweep(res: dict, sweep: Sweep, boot) -> dict:
                 return hit[0] if hit else None
 
             f = sweep.fraction
+            if rows[0]["recall"] == 0:  # no recall on the reference level: no ratio, broken from the start
+                runs[key] = {"levels": rows, "breaking_point": lv0, "breaking_point_lo": lv0, "breaking_point_hi": lv0,
+                             "broken_at_reference": True}
+                continue
             runs[key] = {"levels": rows,
                          "breaking_point": first(lambda r: r["ratio"] is not None and r["ratio"] < f),
                          # the interval of the breaking point: the first level whose ratio may be below the
@@ -190,7 +195,10 @@ def sweep_table(res: dict) -> tuple[str, list[dict]]:
         bp = run["breaking_point"]
         cells = [f"{_pct(r['recall'])}{_ci(r['ci'])}" for r in run["levels"]]
         span = f" [{lv(run.get('breaking_point_lo'))}, {lv(run.get('breaking_point_hi'))}]"
-        lines.append("| " + " | ".join([labels.get(key, key)] + cells + [("none (holds)" if bp is None else f"{bp:g}") + span])
+        verdict = ("none (holds)" if bp is None else f"{bp:g}") + span
+        if run.get("broken_at_reference"):
+            verdict = f"{bp:g}: no recall at level {levels[0]:g}"
+        lines.append("| " + " | ".join([labels.get(key, key)] + cells + [verdict])
                      + " |")
         rows.append({"key": key, "breaking_point": bp, "levels": run["levels"]})
     lines += ["", "Ratio to level " + f"{levels[0]:g}" + " (% [95 % interval], paired: the same resampled path segments):", "",

@@ -63,6 +63,22 @@ def test_levels_ratios_and_breaking_points_from_known_counts(tmp_path):
     assert (tmp_path / "sweep.png").stat().st_size > 5000
 
 
+def test_a_method_at_zero_on_the_reference_level_is_broken_there_not_holding(tmp_path):
+    """No recall at level 0 leaves no ratio to level 0: the method is broken from the start, which
+    the table, the figures and the checks must say (not "none (holds)", not infinity)."""
+    sweep = parse_sweep({"factor": "rearrangement", "levels": LEVELS, "fraction": 0.8}, "s.yaml")
+    res = _results({"dead": {0: 0.0, 0.5: 0.0, 1.0: 0.0}, "ok": {0: 0.9, 0.5: 0.85, 1.0: 0.8}})
+    res["sweep"] = compute_sweep(res, sweep)
+    dead = res["sweep"]["runs"]["dead.closure"]
+    assert (dead["breaking_point_lo"], dead["breaking_point"], dead["breaking_point_hi"]) == (0, 0, 0)
+    m = metric_table(res)
+    assert m["dead.breaking_point.rearrangement"] == 0 and m["ok.breaking_point.rearrangement"] == math.inf
+    md, _ = sweep_table(res)
+    dead_row = next(line for line in md.splitlines() if line.startswith("| DEAD |"))
+    assert "holds" not in dead_row and "no recall at level 0" in dead_row, dead_row
+    assert "none (holds)" in next(line for line in md.splitlines() if line.startswith("| OK |"))
+
+
 def test_a_noisy_level_has_an_interval_that_holds_its_recall():
     sweep = parse_sweep({"factor": "rearrangement", "levels": LEVELS}, "s.yaml")
     res = _results({"m": {0: 0.9, 0.5: 0.6, 1.0: 0.3}})
