@@ -193,6 +193,20 @@ def figure_table(results: dict) -> dict[str, tuple[str, tuple]]:
     return out
 
 
+# What a factor figure compares, for the message when a design has no tours to compute it from
+FACTOR_NEEDS = {"day": "day", "evening": "evening", "night": "night", "delta_L": "day and night",
+                "unchanged": "unchanged-layout", "rearranged": "rearranged-layout",
+                "delta_R": "unchanged-layout and rearranged-layout", "kept": "unchanged-layout and rearranged-layout"}
+
+
+def design_lacks(name: str) -> str:
+    """Why a design has no value for metric ``name``: the query tours it needs, for a factor figure."""
+    factor = name.rsplit(".", 1)[-1]
+    if factor in FACTOR_NEEDS:
+        return f"{factor} needs {FACTOR_NEEDS[factor]} query tours, which its design lacks (check a figure the design has)"
+    return "its design or its runs give no value for it"
+
+
 class _Resolver:
     """Values of a check's tokens: numbers, metrics, ``METRIC.lo``/``.hi`` bounds and, for two figures
     with intervals, their paired difference."""
@@ -234,6 +248,9 @@ class _Resolver:
         if bound in ("lo", "hi") and base and token not in self.vals:
             name = self._name(base, field)
             if name not in self.figs:
+                if self.vals[name] is None:
+                    raise SceneFormatError(self.path, field, f"{token!r}: this experiment has no {name}: "
+                                           f"{design_lacks(name)}")
                 raise SceneFormatError(self.path, field, f"{token!r}: {name} has no interval (recall, coverage and "
                                        "Table II's figures have one; rerun reloc experiment if these results predate them)")
             iv = self.boot.interval(self.resamples(name))

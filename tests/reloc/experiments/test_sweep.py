@@ -167,3 +167,23 @@ def test_every_shipped_sweep_check_can_fail(tmp_path, capsys):
         assert reloc_main(["check", str(checks), str(d)]) == want
         out = capsys.readouterr().out
         assert (f"{n} passed, 0 failed" if want == 0 else f"0 passed, {n} failed") in out, out
+
+
+def test_a_check_on_a_figure_the_design_cannot_have_says_so(tmp_path, capsys):
+    """A day-only design has no night-minus-day loss: ``reloc check`` must say the design lacks it
+    (which lightings it needs), not advise rerunning the experiment."""
+    import json
+
+    import yaml
+
+    from reloc.cli import main as reloc_main
+    from tests.cli_errors import one_line_error
+
+    res = _results({"videoreloc": {0: 0.9, 0.5: 0.85, 1.0: 0.8}})  # three layouts, all by day
+    (tmp_path / "exp").mkdir()
+    (tmp_path / "exp" / "results.json").write_text(json.dumps(res))
+    checks = tmp_path / "checks.yaml"
+    checks.write_text(yaml.safe_dump({"checks": ["videoreloc.delta_L.lo >= -0.45"]}))
+    assert reloc_main(["check", str(checks), str(tmp_path / "exp")]) == 2
+    line = one_line_error(capsys, "checks.yaml", "checks[0]", "delta_L", "night")
+    assert "rerun" not in line and "predate" not in line, line
