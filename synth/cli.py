@@ -11,6 +11,8 @@ import sys
 
 from vrformats.cli import ArgumentParser, run_command
 
+from . import __version__
+
 
 def build_parser() -> argparse.ArgumentParser:
     # one module per command group, imported when the parser is built
@@ -23,6 +25,7 @@ def build_parser() -> argparse.ArgumentParser:
     from .tour import cli as tour_cli
 
     p = ArgumentParser(prog="synth", description="Build, check and render controlled-change indoor scenes.")
+    p.add_argument("--version", action="version", version=f"synth {__version__}")
     sub = p.add_subparsers(dest="group", required=True)
     scene_cmds = scene_cli.register_cli(sub)  # synth scene list|show|check|stats|preview|export-boxes|generate|build|rearrange|...
     for source in SOURCES.values():

@@ -38,6 +38,15 @@ def scenes_dir() -> Path:
     return Path(env) if env else DATA_DIR
 
 
+def generated_dir(sub: str) -> Path:
+    """Where ``synth scene generate`` / ``synth path generate`` write by default: the scenes folder's
+    ``sub`` (``layouts``, ``paths``) when it is yours to rewrite (``$SYNTH_SCENES_DIR``, or a source
+    checkout), else ``./scenes/SUB`` in the working folder: an installed package's files are not."""
+    if os.environ.get("SYNTH_SCENES_DIR") or checkout_root() is not None:
+        return scenes_dir() / sub
+    return Path.cwd() / "scenes" / sub
+
+
 def layouts_dir() -> Path:
     return scenes_dir() / "layouts"
 

@@ -148,19 +148,18 @@ def cmd_generate(args) -> int:
     from tqdm import tqdm
 
     from .apartment import DEFAULT_SEED, generate_apartment
-    from ..resources import layouts_dir
+    from ..resources import generated_dir
     from .rearrange import BUILTIN_VARIANTS, make_variant, reference_walkway
     from ..scene.model import save_layout
 
-    out = Path(args.out_dir) if args.out_dir else layouts_dir()
+    out = Path(args.out_dir) if args.out_dir else generated_dir("layouts")
     ref = generate_apartment(DEFAULT_SEED, "apt_0")
     save_layout(ref, out / "apt_0.yaml")
     specs = [v for v in BUILTIN_VARIANTS if not args.only or v.name in args.only]
     walkway = reference_walkway(ref)
     for spec in tqdm(specs, desc="variants", unit="layout", disable=args.quiet):
         save_layout(make_variant(ref, spec, walkway=walkway), out / f"{spec.name}.yaml")
-    if not args.quiet:
-        print(f"wrote apt_0 and {len(specs)} variants to {out}")
+    print(f"wrote apt_0 and {len(specs)} variants to {out}")  # the result: --quiet drops only the progress bar
     return 0
 
 
@@ -368,7 +367,7 @@ def register_cli(subparsers):
     a.add_argument("--out", required=True)
     a.set_defaults(fn=cmd_preview)
     a = ss.add_parser("generate", help="regenerate the built-in layouts apt_0..apt_5")
-    a.add_argument("--out-dir", help="default: scenes/layouts")
+    a.add_argument("--out-dir", help="default: scenes/layouts of a checkout or $SYNTH_SCENES_DIR; installed: ./scenes/layouts")
     a.add_argument("--only", nargs="*", help="variant names to regenerate (apt_0 is always written)")
     add_quiet(a)
     a.set_defaults(fn=cmd_generate)

@@ -208,7 +208,7 @@ def register_cli(subparsers) -> None:
     common(a, d.mapping_frames)
     a.set_defaults(fn=_cmd_plan_mapping)
     a = sub.add_parser("generate", help="rewrite the shipped paths (scenes/paths: query, mapping)")
-    a.add_argument("--out-dir", help="default: scenes/paths")
+    a.add_argument("--out-dir", help="default: scenes/paths of a checkout or $SYNTH_SCENES_DIR; installed: ./scenes/paths")
     a.add_argument("--only", nargs="*", choices=sorted(SHIPPED))
     a.set_defaults(fn=_cmd_generate)
     a = sub.add_parser("show", help="frames, length, duration, speed, heights, rooms visited")

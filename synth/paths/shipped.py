@@ -10,7 +10,8 @@ from typing import Any
 from vrformats.errors import UserError
 
 from ..scene.model import Layout
-from .files import paths_dir, save_path
+from ..resources import generated_dir
+from .files import save_path
 from .mapping import plan_mapping_path
 from .model import DEFAULTS, CameraPath
 from .query import plan_query_path
@@ -56,10 +57,10 @@ def replan(path: CameraPath) -> CameraPath:
 
 
 def generate_shipped(out_dir=None, names=None) -> list[Path]:
-    """(Re)write the shipped paths (``SHIPPED``) into ``out_dir`` (default scenes/paths)."""
+    """(Re)write the shipped paths (``SHIPPED``) into ``out_dir`` (default ``resources.generated_dir("paths")``)."""
     from ..scene.model import load_layout
 
-    out_dir = Path(out_dir) if out_dir else paths_dir()
+    out_dir = Path(out_dir) if out_dir else generated_dir("paths")
     written = []
     for name, spec in SHIPPED.items():
         if names and name not in names:

@@ -178,3 +178,30 @@ def test_a_bad_option_is_one_line_exit_2(argv, part, capsys, tmp_path, monkeypat
     err = capsys.readouterr().err
     assert e.value.code == 2 and len(err.strip().splitlines()) == 1 and part in err and "--help)" in err, err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_generate_writes_the_working_folder_when_installed_and_quiet_keeps_the_result(tmp_path, monkeypatch, capsys):
+    """Installed from a wheel (no checkout), the generate commands must not write into
+    site-packages: their default is ./scenes/... of the working folder. ``--quiet`` drops the
+    progress bar, not the line saying what was written."""
+    import synth.resources as resources
+
+    monkeypatch.delenv("SYNTH_SCENES_DIR", raising=False)
+    monkeypatch.setattr(resources, "checkout_root", lambda: None)
+    monkeypatch.chdir(tmp_path)
+    assert resources.generated_dir("layouts") == tmp_path / "scenes" / "layouts"
+    assert synth_main(["scene", "generate", "--only", "apt_1", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert f"wrote apt_0 and 1 variants to {tmp_path / 'scenes' / 'layouts'}" in out, out
+    assert sorted(p.name for p in (tmp_path / "scenes" / "layouts").iterdir()) == ["apt_0.yaml", "apt_1.yaml"]
+    assert resources.generated_dir("paths") == tmp_path / "scenes" / "paths"
+    monkeypatch.setattr(resources, "checkout_root", lambda: REPO)  # a checkout rewrites its own scenes/
+    assert resources.generated_dir("paths") == resources.scenes_dir() / "paths"
+
+
+def test_synth_has_a_version_like_reloc(capsys):
+    import synth
+
+    with pytest.raises(SystemExit) as e:
+        synth_main(["--version"])
+    assert e.value.code == 0 and capsys.readouterr().out.strip() == f"synth {synth.__version__}"
