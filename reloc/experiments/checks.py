@@ -313,8 +313,55 @@ def format_checks(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def failure_message(r: dict) -> str:
+    """A failed check in one line: its expression, the value, the bound and the interval that decided."""
+    iv = _fmt_iv(r)
+    return (f"{r['expression']}: value {_fmt(r['value'])}, against {_fmt(r['against'])}"
+            + ("" if iv == "-" else f", interval {iv}") + f" ({r['why']})")
+
+
+def junit_xml(rows: list[dict], suite: str, results_dir, seconds: float = 0.0) -> str:
+    """The checks as JUnit XML, the report CI servers read: one ``testsuite`` named ``reloc.check.SUITE``,
+    one ``testcase`` per check (its name the check's, classname the suite), a ``failure`` for a failed
+    check whose message carries the value, the bound and the interval; properties name the results."""
+    import datetime
+    import socket
+    import xml.etree.ElementTree as ET
+
+    fails = [r for r in rows if not r["passed"]]
+    ts = ET.Element("testsuite", {
+        "name": f"reloc.check.{suite}", "tests": str(len(rows)), "failures": str(len(fails)), "errors": "0",
+        "skipped": "0", "time": f"{seconds:.3f}", "hostname": socket.gethostname(),
+        "timestamp": datetime.datetime.now(datetime.timezone.utc).replace(microsecond=0).isoformat()})
+    props = ET.SubElement(ts, "properties")
+    ET.SubElement(props, "property", {"name": "results", "value": str(results_dir)})
+    for r in rows:
+        tc = ET.SubElement(ts, "testcase", {"classname": f"reloc.check.{suite}", "name": r["check"], "time": "0"})
+        if not r["passed"]:
+            f = ET.SubElement(tc, "failure", {"message": failure_message(r), "type": "CheckFailed"})
+            f.text = json.dumps({k: r[k] for k in ("expression", "value", "against", "interval", "interval_of", "why")})
+        else:
+            out = ET.SubElement(tc, "system-out")
+            out.text = f"{r['expression']}: value {_fmt(r['value'])}, against {_fmt(r['against'])}, interval {_fmt_iv(r)}"
+    suites = ET.Element("testsuites", {"name": "reloc check", "tests": str(len(rows)), "failures": str(len(fails)),
+                                       "errors": "0", "time": f"{seconds:.3f}"})
+    suites.append(ts)
+    ET.indent(suites)
+    return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(suites, encoding="unicode") + "\n"
+
+
 def cmd_check(args) -> int:
+    import time
+
+    from vrformats.atomic import write_text_atomic
+    from vrformats.errors import check_output_file
+
+    if args.junit:
+        check_output_file(args.junit)
+    t0 = time.perf_counter()
     rows = run_checks(args.checks, args.results)
+    if args.junit:
+        write_text_atomic(args.junit, junit_xml(rows, Path(args.checks).stem, args.results, time.perf_counter() - t0))
     if args.json:
         print(json.dumps(rows, indent=2))
     else:
@@ -327,4 +374,5 @@ def register_cli(subparsers) -> None:
     p.add_argument("checks", metavar="CHECKS.yaml", help="check spec, or a shipped name (reloc/specs: demo_checks, ...)")
     p.add_argument("results", metavar="RESULTS_DIR", help="a reloc experiment results folder")
     add_json(p, "the table of checks")
+    p.add_argument("--junit", metavar="FILE.xml", help="also write the checks as JUnit XML (one testcase per check) for a CI server")
     p.set_defaults(fn=cmd_check)
