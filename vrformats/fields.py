@@ -240,10 +240,18 @@ def frame_size(file, v, field: str) -> tuple[int, int]:
     if not isinstance(v, list) or len(v) != 2:
         fail(file, field, f"expected [width, height], got {shown(v)}")
     w, h = (positive_int(file, x, field) for x in v)
-    if max(w, h) > MAX_SIDE or w * h > MAX_PIXELS:
-        fail(file, field, f"{w}x{h} is too large: at most {MAX_SIDE} px a side and {MAX_PIXELS:,} pixels "
-                          f"(a frame would need about {w * h * BYTES_PER_PIXEL / 2**30:.1f} GiB)")
+    problem = size_problem(w, h)
+    if problem:
+        fail(file, field, problem)
     return w, h
+
+
+def size_problem(w: int, h: int) -> str | None:
+    """Why a ``w`` x ``h`` frame is too large to render (the bounds above), or None."""
+    if max(w, h) > MAX_SIDE or w * h > MAX_PIXELS:
+        return (f"{w}x{h} is too large: at most {MAX_SIDE} px a side and {MAX_PIXELS:,} pixels "
+                f"(a frame would need about {w * h * BYTES_PER_PIXEL / 2**30:.1f} GiB)")
+    return None
 
 
 def out_folder(file, v, field: str = "out") -> str:

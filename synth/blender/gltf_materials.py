@@ -31,7 +31,10 @@ import os
 import tempfile
 from pathlib import Path
 
-import bpy
+from . import require_python
+
+require_python()  # before bpy: one line, not "No module named bpy", on another Python
+import bpy  # noqa: E402
 
 from .shading import CACHES, EMISSION_LIGHT_NODE, Tree, finish, is_alive
 

@@ -41,7 +41,10 @@ from __future__ import annotations
 import colorsys
 import math
 
-import bpy
+from . import require_python
+
+require_python()  # before bpy: one line, not "No module named bpy", on another Python
+import bpy  # noqa: E402
 
 from ..assets.materials import MATERIALS
 from .shading import CACHES, Color, Tree, find_socket, finish, is_alive, norm_color, seeded_rng

@@ -8,7 +8,10 @@ through ``vrformats.camera.blender_from_opencv``, and the intrinsics become lens
 
 from __future__ import annotations
 
-import bpy
+from . import require_python
+
+require_python()  # before bpy: one line, not "No module named bpy", on another Python
+import bpy  # noqa: E402
 import numpy as np
 from mathutils import Matrix, Vector
 

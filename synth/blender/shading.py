@@ -13,7 +13,10 @@ from __future__ import annotations
 
 import math
 
-import bpy
+from . import require_python
+
+require_python()  # before bpy: one line, not "No module named bpy", on another Python
+import bpy  # noqa: E402
 import numpy as np
 
 EMISSION_NODE = "emission"

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vrformats.fields import terminal_safe
+from vrformats.fields import size_problem, terminal_safe
 from vrformats import frames as fr
 from vrformats.atomic import replacing, write_json_atomic
 from vrformats.camera import Intrinsics, camera_document, write_tum
@@ -121,6 +121,13 @@ def prepare(spec: TourSpec, create: bool = True) -> Prepared:
     quality(spec.quality)
     if spec.width <= 0 or spec.height <= 0:
         raise UserError(f"image size must be positive, got {spec.width}x{spec.height}")
+    too_large = size_problem(spec.width, spec.height)
+    if too_large:
+        raise UserError(f"image size {too_large}")
+    if spec.renderer == "blender":
+        from ..blender import require_python
+
+        require_python()
     if spec.chunk_size <= 0 or spec.workers <= 0:
         raise UserError("chunk size and workers must be positive")
     layout_file = resolve_layout_path(spec.layout)
