@@ -36,13 +36,15 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
-import open3d as o3d
 from scipy.spatial import cKDTree
 
 from vrformats.atomic import save_npz_atomic, write_json_atomic
 from vrformats.camera import write_tum
 from vrformats.errors import UserError
 from vrformats.fields import is_number
+from vrformats.native import import_open3d
+
+o3d = import_open3d()  # a missing libGL is one line naming its package
 
 
 

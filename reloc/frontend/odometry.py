@@ -162,7 +162,9 @@ class PreparedFrame:
 
 
 def _o3d():
-    import open3d as o3d
+    from vrformats.native import import_open3d
+
+    o3d = import_open3d()  # a missing libGL is one line naming its package
     import open3d.core as o3c
     import open3d.t.pipelines.odometry as od
 

@@ -228,7 +228,9 @@ def touching(a_pieces: list[np.ndarray], b_pieces: list[np.ndarray], gap: float 
 def _stage_scene(root: str, asset: str, position: tuple, rotation: tuple):
     """Open3D ray-casting scene of a stage mesh in the world; None when the mesh cannot be read (the
     checks then go without it, saying so once)."""
-    import open3d as o3d
+    from vrformats.native import import_open3d
+
+    o3d = import_open3d()
 
     from vrformats.errors import SceneFormatError, UnknownNameError
 
@@ -250,7 +252,9 @@ def stage_distance(layout, pieces: list[np.ndarray]) -> float:
     """Smallest distance (m) from an object's collision pieces (their vertices) to the stage mesh of
     an imported layout: how near it comes to the floor, a wall or anything built into the stage (a
     shelf, a hook); inf without a stage mesh."""
-    import open3d as o3d
+    from vrformats.native import import_open3d
+
+    o3d = import_open3d()
 
     st, root = layout.stage, layout.meta.get("root")
     if st.asset is None or root is None or not pieces:
@@ -265,7 +269,9 @@ def stage_distance(layout, pieces: list[np.ndarray]) -> float:
 
 def stage_drop(layout, point) -> float:
     """How far below ``point`` the stage mesh is (a ray straight down; inf without a stage mesh or a hit)."""
-    import open3d as o3d
+    from vrformats.native import import_open3d
+
+    o3d = import_open3d()
 
     st, root = layout.stage, layout.meta.get("root")
     if st.asset is None or root is None:

@@ -17,12 +17,14 @@ what texture each surface shows, not a shaded image.
 from __future__ import annotations
 
 import numpy as np
-import open3d as o3d
 
 from vrformats.camera import Intrinsics
+from vrformats.native import import_open3d
 
 from .meshes import layout_parts
 from ..scene.model import Layout
+
+o3d = import_open3d()  # a missing libGL is one line naming its package
 
 INVALID = o3d.t.geometry.RaycastingScene.INVALID_ID
 PROCEDURAL_ALBEDO = (0.7, 0.7, 0.7)  # base colour of a procedural part without a colour of its own

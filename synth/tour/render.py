@@ -128,6 +128,9 @@ def prepare(spec: TourSpec, create: bool = True) -> Prepared:
         from ..blender import require_python
 
         require_python()
+    from vrformats.native import import_open3d
+
+    import_open3d()  # geometry and clearance need it: a missing system library is one line, before any file
     if spec.chunk_size <= 0 or spec.workers <= 0:
         raise UserError("chunk size and workers must be positive")
     layout_file = resolve_layout_path(spec.layout)
