@@ -296,3 +296,20 @@ def test_tests_mirror_the_packages():
     not_a_package = sorted(f for f in folders if f != "project" and not (REPO / f / "__init__.py").is_file())
     assert not_a_package == [], f"test folders that mirror no package: {not_a_package}"
     assert not list(tests.glob("test_*.py")), "a test file at tests/ itself: put it in the folder of what it tests"
+
+
+def test_license_and_citation_say_what_the_project_is():
+    """LICENSE is the MIT text pyproject names; CITATION.cff cites the toolkit and, as the preferred
+    citation, the paper it implements (validated once with cffconvert --validate: schema 1.2.0)."""
+    import yaml
+
+    root = Path(__file__).resolve().parents[2]
+    assert (root / "LICENSE").read_text().startswith("MIT License")
+    cff = yaml.safe_load((root / "CITATION.cff").read_text())
+    assert cff["cff-version"] == "1.2.0" and cff["license"] == "MIT"
+    import synth
+
+    assert cff["version"] == synth.__version__
+    paper = cff["preferred-citation"]
+    assert paper["title"].startswith("VideoReloc: Long-Term Indoor Video Relocalization")
+    assert len(paper["authors"]) == 9 and paper["url"] == "https://videoreloc.github.io"

@@ -111,6 +111,10 @@ def test_the_wheel_ships_the_data_and_specs(installed):
     assert {n.split("/")[0] for n in names} == set(PACKAGES) | {wheel.name.split("-")[0] + "-" + wheel.name.split("-")[1] + ".dist-info"}
     assert not any(n.startswith(tuple(DATA_FOLDERS.values()) + ("reloc/models/", "reloc/specs/")) and n.endswith(".py")
                    for n in names)
+    dist_info = wheel.name.split("-")[0] + "-" + wheel.name.split("-")[1] + ".dist-info"
+    assert f"{dist_info}/licenses/LICENSE" in names  # the MIT text travels with the wheel
+    meta = zipfile.ZipFile(wheel).read(f"{dist_info}/METADATA").decode()
+    assert "License-Expression: MIT" in meta and "Requires-Python: <3.12,>=3.11" in meta
     _say(log, f"{wheel.name}: {len(names)} files, {len(data)} under scenes, {len(specs)} specs, "
               f"reloc/models/detector_v2_160x120.onnx {zipfile.ZipFile(wheel).getinfo('reloc/models/detector_v2_160x120.onnx').file_size} bytes")
 
