@@ -7,7 +7,8 @@ positions coloured continuously by position error (``error_colors``: green at 0 
 0.5 m, red at 1 m and beyond). The lower panel shows the rolling medians (``rolling_median``) of
 the position error (m) and the rotation error (deg) against the frame index on one log axis, with
 the 1 m and 10 deg thresholds dashed; the column title gives the recall at 1 m/10 deg over ALL
-ground-truth frames (a frame without a pose is a failure).
+ground-truth frames (a frame without a pose is a failure), or, for a method scored on a subset of
+the frames (the one-frame unit), the table's recall over the frames it is scored on.
 
 ``recall_bars`` draws the recall at 1 m/10 deg of every table row per lighting (left) and for
 unchanged against rearranged layouts (right), from ``results.json``'s factors.
@@ -180,8 +181,12 @@ def _view_limits(bmap, gt_P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def tour_figure(bmap, gt: dict, estimates: dict, out_png, title: str = "", window: int = ROLLING_WINDOW,
-                dpi: float = DPI) -> Path:
+                dpi: float = DPI, scored: dict | None = None) -> Path:
     """One figure for a query tour: a column per method (label -> {frame: 4x4 camera-to-world}).
+
+    ``scored``: label -> (recall, frames) of a method scored on a subset of the frames (the
+    experiment's per-tour figure, e.g. the one-frame unit on every 15th frame); its column title gives
+    that recall. Other columns' recall is over ALL ground-truth frames.
 
     ``bmap`` is a ``reloc.map.boxmap.BoxMap`` (or None: no map drawn); ``gt`` maps frame -> 4x4 ground
     truth. A label whose estimates are empty or None shows "no poses". Estimated positions outside
@@ -230,7 +235,12 @@ def tour_figure(bmap, gt: dict, estimates: dict, out_png, title: str = "", windo
                         ha="left", va="bottom", color="0.25", zorder=10)
         else:
             _no_poses(ax)
-        ax.set_title(f"{label}\nrecall 1 m/10\u00b0: {100 * r:.1f}%  ({len(frames)}/{n_gt} posed)", fontsize=9)
+        if scored and label in scored and scored[label][1] != n_gt:
+            r_s, n_s = scored[label]
+            scores = f"recall 1 m/10\u00b0: {100 * r_s:.1f}% of {n_s} scored frames  ({len(frames)} posed)"
+        else:
+            scores = f"recall 1 m/10\u00b0: {100 * r:.1f}%  ({len(frames)}/{n_gt} posed)"
+        ax.set_title(f"{label}\n{scores}", fontsize=9)
         ax.set_xlabel("x (m)", fontsize=8, labelpad=1)
         if c == 0:
             ax.set_ylabel("y (m)", fontsize=8, labelpad=1)
@@ -438,10 +448,15 @@ def plot_experiment(results_dir) -> list[Path]:
         fps = float(tinfo.get("fps") or tour.fps)
         gt = {int(i): T for i, T in zip(tour.frame_indices, tour.poses)}
         estimates: dict[str, dict] = {}
+        scored: dict[str, tuple] = {}
         for row in rows:
             label = row_label(row)
             if label in estimates:
                 label = f"{label} [{row.get('key')}]"
+            fig_ = (((results.get("methods") or {}).get(row.get("method")) or {}).get("modes", {})
+                    .get(row.get("mode"), {}).get("tours", {}).get(tname) or {})
+            if fig_.get("recall_1m_10deg") is not None and fig_.get("frames"):
+                scored[label] = (float(fig_["recall_1m_10deg"]), int(fig_["frames"]))
             path = _trajectory_file(results_dir, results, row, tname)
             est: dict = {}
             if path.is_file():
@@ -457,7 +472,7 @@ def plot_experiment(results_dir) -> list[Path]:
         if tinfo.get("sensor") not in (None, "ideal"):
             bits.append(f"sensor {tinfo['sensor']}")
         title = f"{tname}" + (f"  ({', '.join(bits)}; {len(gt)} frames)" if bits else f"  ({len(gt)} frames)")
-        written.append(tour_figure(bmap, gt, estimates, plots / tour_png_name(tname), title=title))
+        written.append(tour_figure(bmap, gt, estimates, plots / tour_png_name(tname), title=title, scored=scored))
     written.append(recall_bars(results, plots / "recall_bars.png"))
     if results.get("sweep"):
         from .sweep import plot_sweep

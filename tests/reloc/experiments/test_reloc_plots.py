@@ -451,3 +451,25 @@ def test_oracle_rows_are_drawn_as_the_upper_bound():
     assert _is_bound({"key": "videoreloc_oracle.causal"})
     assert not _is_bound({"method": "videoreloc", "mode": "closure"})
     assert not _is_bound({"key": "appearance.causal"})
+
+
+def test_a_sampled_baseline_is_titled_with_its_recall_on_the_frames_it_is_scored_on(results_dir, captured):
+    """The one-frame unit is scored on every 15th frame: its column's recall is the table's (over
+    the frames it is scored on), not its hits divided by every frame of the tour."""
+    gt = gt_poses()
+    sampled = list(range(0, N, 15))
+    cam.write_tum(results_dir / "runs" / "one_frame" / TOUR / "causal.txt", [gt[i] for i in sampled], fps=FPS,
+                  frames=sampled)
+    res = json.loads((results_dir / "results.json").read_text())
+    res["rows"].append({"key": "one_frame.causal", "method": "one_frame", "mode": "causal",
+                        "label": "One-frame object unit", "dagger": False})
+    res["methods"]["one_frame"] = {"label": "One-frame object unit", "map_bytes": 2048, "primary": "causal", "modes": {
+        "causal": {"tours": {TOUR: {"recall_1m_10deg": 1.0, "coverage": 1.0, "frames": len(sampled),
+                                    "file": f"runs/one_frame/{TOUR}/causal.txt"}}, "factors": {"day": 1.0}}}}
+    (results_dir / "results.json").write_text(json.dumps(res))
+    plot_experiment(results_dir)
+    top = {ax.get_title().split("\n")[0]: ax.get_title() for ax in captured[tour_png_name(TOUR)].axes if ax.get_title()}
+    title = top["One-frame object unit"]
+    assert "100.0%" in title and f"{len(sampled)} scored" in title, title
+    posed = N - len(MISSING)  # a method scored on every frame keeps its title
+    assert f"{100 * posed / N:.1f}%" in top["VideoReloc, with clip closure"]
