@@ -11,7 +11,7 @@ import sys
 
 from vrformats.cli import ArgumentParser, run_command
 
-from . import __version__
+from .version import __version__
 
 
 def build_parser() -> argparse.ArgumentParser:

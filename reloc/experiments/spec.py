@@ -8,7 +8,7 @@ the optional tables::
     name: demo
     render: demo                       # render job spec: a file relative to this one, or a shipped name (render_jobs)
     out: out/demo/experiment           # results folder
-    mapping: {layout: apt_0, lighting: day, path: mapping}
+    mapping: {layout: apt_0, lighting: day, path: mapping}   # lighting left out: a geometry-only design
     query: query                       # every layout x lighting tour of this path is a query tour
     unchanged: apt_0                   # the reference layout for Delta_R and kept
     map: build                         # VideoReloc's box map: build (from the mapping tour) | ground-truth
@@ -261,8 +261,11 @@ def load_experiment(path) -> ExperimentSpec:
         raise SceneFormatError(render, "out", "expected the render job's output folder (or give tours: in the experiment spec)")
     mapping = _mapping_of(doc["mapping"], src, "mapping")
     for k in ("layout", "lighting", "path"):
-        if not isinstance(mapping.get(k), str):
-            _fail(src, f"mapping.{k}", "expected a name")
+        if k == "lighting" and mapping.get(k) is None:  # a geometry-only design (renderer: fast)
+            mapping[k] = None
+        elif not isinstance(mapping.get(k), str):
+            _fail(src, f"mapping.{k}", "expected a name" + (" (leave it out for a geometry-only design)"
+                                                            if k == "lighting" else ""))
     known = registry.names()  # the registered methods (reloc.experiments.methods)
     methods = doc.get("methods", list(registry.default_names()))
     if isinstance(methods, str):

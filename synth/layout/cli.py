@@ -225,9 +225,9 @@ def _check_out_file(out: Path, suffixes=(".yaml", ".yml")) -> None:
 def cmd_rearrange(args) -> int:
     """A new rearranged variant of BASE from a seed: the operator, ranges and checks of apt_1..apt_5."""
     from .validity import check_layout
-    from .rearrange import NoVariantFound, RearrangePlan, VariantSpec, make_variant, new_problems, reference_walkway, target_ranges
+    from .rearrange import new_problems, new_variant, target_ranges
     from ..scene.model import save_layout
-    from ..scene.stats import PAPER_RANGES, change_stats
+    from ..scene.stats import change_stats
 
     out = Path(args.out)
     if args.seed < 0:
@@ -236,20 +236,7 @@ def cmd_rearrange(args) -> int:
         raise UserError(f"--attempts must be positive, got {args.attempts}")
     _check_out_file(out)
     ref = _load(args.base)
-    name = args.name or out.stem
-    if name == ref.name:
-        raise UserError(f"--name: the variant needs a name other than its base's ('{ref.name}')")
-    walkway = reference_walkway(ref)
-    try:
-        var = make_variant(ref, VariantSpec(name, args.seed, RearrangePlan()), walkway=walkway, max_attempts=args.attempts)
-    except NoVariantFound as e:
-        last = e.last or {}
-        ranges = getattr(e, "ranges", None) or PAPER_RANGES
-        label = "paper" if ranges == PAPER_RANGES else "target"
-        detail = ", ".join(f"{k} {last[k]} ({label} {lo}-{hi})" for k, (lo, hi) in ranges.items() if k in last)
-        why = "" if e.last_check_ok is not False else "; it was in range but failed the layout checks"
-        raise UserError(f"no variant of {ref.name} from seed {args.seed} within the {label} ranges that checks clean "
-                        f"after {e.attempts} attempt(s) (last: {detail}{why}); try another --seed") from None
+    var = new_variant(ref, args.name or out.stem, args.seed, attempts=args.attempts)  # synth.rearrange's code path
     save_layout(var, out)
     rep, ref_rep = check_layout(var), check_layout(ref)
     st = change_stats(ref, var)

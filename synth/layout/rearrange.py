@@ -878,3 +878,27 @@ def make_variant(ref: Layout, spec: VariantSpec, ranges: dict | None = None, max
                 return var
     raise NoVariantFound(f"no rearrangement of {ref.name} within the target ranges after {max_attempts} attempts "
                          f"(last: {last})", max_attempts, last, last_ok, ranges)
+
+
+def new_variant(ref: Layout, name: str, seed: int, plan: RearrangePlan | None = None, attempts: int = 40) -> Layout:
+    """A new rearranged variant of ``ref`` from a seed, as ``synth scene rearrange`` and
+    ``synth.rearrange`` make it: kept out of the reference's walkway (so one query path serves both),
+    retried on sub-seeds until in range and clean (:func:`make_variant`). No such variant is one
+    UserError line with the last attempt's statistics against the ranges."""
+    if seed < 0:
+        raise UserError(f"--seed must be >= 0, got {seed}")
+    if attempts <= 0:
+        raise UserError(f"--attempts must be positive, got {attempts}")
+    if name == ref.name:
+        raise UserError(f"--name: the variant needs a name other than its base's ('{ref.name}')")
+    try:
+        return make_variant(ref, VariantSpec(name, seed, plan or RearrangePlan()), walkway=reference_walkway(ref),
+                            max_attempts=attempts)
+    except NoVariantFound as e:
+        last = e.last or {}
+        ranges = getattr(e, "ranges", None) or PAPER_RANGES
+        label = "paper" if ranges == PAPER_RANGES else "target"
+        detail = ", ".join(f"{k} {last[k]} ({label} {lo}-{hi})" for k, (lo, hi) in ranges.items() if k in last)
+        why = "" if e.last_check_ok is not False else "; it was in range but failed the layout checks"
+        raise UserError(f"no variant of {ref.name} from seed {seed} within the {label} ranges that checks clean "
+                        f"after {e.attempts} attempt(s) (last: {detail}{why}); try another --seed") from None

@@ -39,7 +39,7 @@ from vrformats.tour import CAMERA_FILE
 from vrformats.errors import UserError, check_output_folder
 from vrformats.lifetime import folder_lock
 
-from .. import __version__
+from ..version import __version__
 from ..render.chunks import chunk_job, missing_frames, run_chunk_process, split, stopping_workers
 from ..render.settings import DEFAULTS, DEVICES, quality
 from ..scene.model import boxes_document, load_layout, resolve_layout_path

@@ -54,7 +54,7 @@ FOREIGN = {
     "pip": "pip itself; only `pip install '.[EXTRA]'` is checked (the extra must exist in pyproject.toml)",
 }
 # options whose value is a file or folder a command writes: not required to exist
-OUTPUT_OPTIONS = {"--out", "--out-dir", "--save-calibration", "--save", "--report"}
+OUTPUT_OPTIONS = {"--out", "--out-dir", "--save-calibration", "--save", "--report", "--junit"}
 # top-level folders and files of the repository: a path starting with one of these must exist
 REPO_TOPS = ("render_jobs/", "scenes/", "models/", "docs/", "tools/", "tests/", "vrformats/", "synth/", "reloc/",
              ".ci/", "Makefile", "pyproject.toml")
@@ -525,6 +525,8 @@ def module_problem(dotted: str) -> str | None:
         name = rest[0]
         src = f.read_text()
         if re.search(rf"^\s*(def|class)\s+{name}\b|^\s*{name}\s*(:[^=]*)?=|^\s*from \S+ import .*\b{name}\b", src, re.MULTILINE):
+            return None
+        if re.search(rf"^from \S+ import \([^)]*\b{name}\b", src, re.MULTILINE):  # a parenthesised import
             return None
         return f"{dotted}: {rel(f)} defines no {name}"
     return f"{dotted}: no such module"

@@ -131,7 +131,8 @@ def test_stages_import_one_way():
 
     Map building and the front-end are siblings: each may import the map format (``reloc.map.boxmap``)
     and detection (``reloc.detection``, which imports neither of them), never the other. The
-    detector's training tools (``reloc.detector``) import detection only. Nothing imports the experiments.
+    detector's training tools (``reloc.detector``) import detection only. Nothing imports the
+experiments but the two front doors, the command line and the Python API.
     """
     mods = _modules()
     shared = {"reloc", "reloc.config", "reloc.geometry", "reloc.io", "reloc.resources"}  # resources: shipped files
@@ -143,7 +144,7 @@ def test_stages_import_one_way():
         for t in _imports(m, p, mods):
             if not t.startswith("reloc") or t in shared:
                 continue
-            if t.startswith("reloc.experiments") and not (m.startswith("reloc.experiments") or m == "reloc.cli"):
+            if t.startswith("reloc.experiments") and not (m.startswith("reloc.experiments") or m in ("reloc.cli", "reloc.api")):
                 bad.append((m, t))
             elif stage is not None and not any(t == a or t.startswith(a + ".") for a in MAY_IMPORT[stage]):
                 bad.append((m, t))
@@ -168,8 +169,9 @@ def test_the_format_layer_is_the_only_bridge():
 # are below everything; every command-line module (``synth.cli``, ``synth.<layer>.cli``) is the top.
 # The mesh layer (``synth.mesh``: glTF, URDF, collision, support surfaces) reads standard formats for every
 # dataset; the scene sources (``synth.sources.<name>``: ReplicaCAD) sit above layout and below the renderers.
-SYNTH_LAYERS = ("scene", "assets", "mesh", "paths", "layout", "sources", "render", "blender", "tour", "jobs", "trainset", "cli")
-SYNTH_BASE = {"synth", "synth.resources"}
+SYNTH_LAYERS = ("scene", "assets", "mesh", "paths", "layout", "sources", "render", "blender", "tour", "jobs", "trainset", "cli",
+                "api")
+SYNTH_BASE = {"synth", "synth.resources", "synth.version"}
 
 
 def synth_layer(module: str) -> int | None:
@@ -177,8 +179,8 @@ def synth_layer(module: str) -> int | None:
     if module in SYNTH_BASE:
         return None
     parts = module.split(".")
-    if parts[-1] == "cli":
-        return SYNTH_LAYERS.index("cli")
+    if parts[-1] in ("cli", "api"):  # the command line and the Python API: the top, side by side
+        return SYNTH_LAYERS.index(parts[-1])
     if parts[1] not in SYNTH_LAYERS:
         raise AssertionError(f"{module}: not in any of synth's layers; add its package to SYNTH_LAYERS")
     return SYNTH_LAYERS.index(parts[1])
@@ -205,10 +207,10 @@ def test_synth_layers_import_downwards():
     assert synth_upward_imports(mods) == []
     # every synth module is in a layer, and the layers are the subpackages on disk
     on_disk = {p.name for p in (REPO / "synth").iterdir() if (p / "__init__.py").exists()}
-    assert on_disk == set(SYNTH_LAYERS) - {"cli"}
+    assert on_disk == set(SYNTH_LAYERS) - {"cli", "api"}
     flat = sorted(m for m in mods if m.count(".") == 1 and m not in SYNTH_BASE and m.startswith("synth.")
                   and mods[m].name != "__init__.py")
-    assert flat == ["synth.cli"], f"modules at synth's top level besides cli and resources: {flat}"
+    assert flat == ["synth.api", "synth.cli"], f"modules at synth's top level besides api, cli, resources and version: {flat}"
 
 
 def test_an_upward_synth_import_is_found(tmp_path, monkeypatch):
@@ -313,3 +315,14 @@ def test_license_and_citation_say_what_the_project_is():
     paper = cff["preferred-citation"]
     assert paper["title"].startswith("VideoReloc: Long-Term Indoor Video Relocalization")
     assert len(paper["authors"]) == 9 and paper["url"] == "https://videoreloc.github.io"
+
+
+def test_one_version_everywhere():
+    import tomllib
+
+    import reloc
+    import synth
+
+    root = Path(__file__).resolve().parents[2]
+    version = tomllib.loads((root / "pyproject.toml").read_text())["project"]["version"]
+    assert synth.__version__ == reloc.__version__ == version
