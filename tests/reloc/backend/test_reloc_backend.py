@@ -139,7 +139,7 @@ def read_tum_independently(path):
 
 
 @pytest.mark.slow
-def test_run_and_eval_on_a_rearranged_tour(data, tmp_path, capsys):
+def test_run_and_eval_on_a_rearranged_tour(data, tmp_path, capsys, monkeypatch):
     from reloc.cli import main
 
     tour, bmap = data["tour"], data["map"]
@@ -147,11 +147,29 @@ def test_run_and_eval_on_a_rearranged_tour(data, tmp_path, capsys):
     assert main(["run", "--map", bmap.source, "--tour", str(tour.root), "--out", str(out), "--budget", "60",
                  "--quiet"]) == 0
     capsys.readouterr()
-    for f in ("causal.txt", "closure.txt", "budget_60.txt", "frames.json", "clips.json", "run.json"):
+    for f in ("causal.txt", "closure.txt", "budget_60.txt", "frames.json", "clips.json", "run.json", "trajectory.png"):
         assert (out / f).is_file(), f
     assert not list(out.glob(".*tmp"))
-    assert main(["eval", str(out), "--gt", str(tour.root), "--json"]) == 0
+    assert main(["eval", str(out), "--gt", str(tour.root), "--json", "--plot", str(tmp_path / "eval.png"),
+                 "--map", bmap.source]) == 0
     rep = json.loads(capsys.readouterr().out)
+    # the figures: a column per trajectory, titled with the recall eval reports (the same frames)
+    from PIL import Image
+
+    assert Image.open(out / "trajectory.png").size == Image.open(tmp_path / "eval.png").size
+    import reloc.figures
+
+    titles = {}
+    real = reloc.figures.save_figure
+
+    def spy(fig, o, dpi):
+        titles.update({a.get_title().split("\n")[0]: a.get_title() for a in fig.axes if a.get_title()})
+        return real(fig, o, dpi)
+
+    monkeypatch.setattr(reloc.figures, "save_figure", spy)
+    assert main(["eval", str(out), "--gt", str(tour.root), "--plot", str(tmp_path / "eval2.png")]) == 0
+    assert f"{100 * rep['closure']['recall_1m_10deg']:.1f}%" in titles["with clip closure"], titles
+    assert f"{100 * rep['causal']['recall_1m_10deg']:.1f}%" in titles["causal"], titles
     for key in ("causal", "closure"):
         assert set(rep[key]) >= {"recall_1m_10deg", "recall_25cm_5deg", "median_pos_m", "median_rot_deg", "coverage"}
     assert rep["closure"]["recall_1m_10deg"] >= 0.9, rep
