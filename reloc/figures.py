@@ -277,3 +277,71 @@ def run_figure(tour, trajectories: dict, out_png, bmap=None, title: str | None =
     bits = [str(meta[k]) for k in ("layout", "lighting") if meta.get(k)]
     head = title or f"{tour.name}  ({', '.join(bits + [f'{len(gt)} frames'])})"
     return tour_figure(bmap, gt, trajectories, out_png, title=head)
+
+
+MATCHED = (0.20, 0.65, 0.25)  # a built box matched to a ground-truth box of its class
+WRONG_CLASS = (1.0, 0.60, 0.0)  # matched, but labelled with another class
+EXTRA = (0.35, 0.45, 0.95)  # built, matching nothing
+MISSED = (0.85, 0.0, 0.0)  # a ground-truth box no built box matched
+
+
+def map_figure(doc: dict, out_png, gt_doc: dict | None = None, errors: dict | None = None, title: str = "",
+               dpi: float = DPI) -> Path:
+    """A built map (``videoreloc-boxes/1``) top-down: objects and walls (floors and ceilings left out).
+    With the ground truth (``gt_doc`` and ``reloc.map.scoring.box_errors``' ``errors``), built boxes
+    are filled by how they matched (green: matched, orange: matched with another class, blue: extra)
+    and the ground-truth boxes are outlined (red: missed by the map)."""
+    from matplotlib.patches import Patch
+
+    def polys(boxes):
+        if not boxes:
+            return np.empty((0, 4, 2))
+        return box_corners([b["center"] for b in boxes], [b["size"] for b in boxes], [b["yaw"] for b in boxes])
+
+    def shown(boxes):
+        return [b for b in boxes if b.get("kind", "object") in ("object", "wall")]
+
+    built = shown(doc.get("boxes", []))
+    gt = shown((gt_doc or {}).get("boxes", []))
+    state = {}
+    if errors is not None:
+        for r in errors["boxes"]:
+            state[r["id"]] = MATCHED if r["class_ok"] else WRONG_CLASS
+        for u in errors["unmatched"]:
+            state[u["id"]] = EXTRA
+    missed = {u["id"] for u in (errors or {}).get("unobserved", [])}
+    allc = np.concatenate([polys(built).reshape(-1, 2), polys(gt).reshape(-1, 2), np.zeros((1, 2))])
+    lo, hi = allc.min(0) - 0.3, allc.max(0) + 0.3
+    ext = np.maximum(hi - lo, 1e-6)
+    W = 8.0
+    H = float(np.clip(W * ext[1] / ext[0], 3.0, 10.0)) + 1.2
+    fig = Figure(figsize=(W + 2.6, H), dpi=dpi)
+    FigureCanvasAgg(fig)
+    ax = fig.add_axes((0.07, 0.08, 0.68, 0.82))
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_aspect("equal", adjustable="box")
+    if built:
+        faces = [state.get(b["id"], OBJECT_FACE if errors is None else EXTRA) for b in built]
+        ax.add_collection(PolyCollection(polys(built), facecolors=faces, edgecolors="0.2", linewidths=0.4, alpha=0.75,
+                                         zorder=2))
+    if gt:
+        edges = [MISSED if g["id"] in missed else (0.3, 0.3, 0.3) for g in gt]
+        ax.add_collection(PolyCollection(polys(gt), facecolors="none", edgecolors=edges,
+                                         linewidths=[1.6 if g["id"] in missed else 0.7 for g in gt], zorder=3))
+    ax.set_xlabel("x (m)", fontsize=9)
+    ax.set_ylabel("y (m)", fontsize=9)
+    ax.tick_params(labelsize=8)
+    if errors is not None:
+        drawn = [state.get(b["id"], EXTRA) for b in built]  # the counts of what is drawn (objects and walls)
+        n = {c: sum(1 for v in drawn if v == c) for c in (MATCHED, WRONG_CLASS, EXTRA)}
+        handles = [Patch(facecolor=MATCHED, label=f"matched ({n[MATCHED]})"),
+                   Patch(facecolor=WRONG_CLASS, label=f"matched, other class ({n[WRONG_CLASS]})"),
+                   Patch(facecolor=EXTRA, label=f"extra ({n[EXTRA]})"),
+                   Patch(facecolor="none", edgecolor="0.3", label=f"ground truth ({len(gt)})"),
+                   Patch(facecolor="none", edgecolor=MISSED, linewidth=1.6,
+                         label=f"missed ({sum(1 for g in gt if g['id'] in missed)})")]
+        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, frameon=False)
+    fig.suptitle(title or f"map of {doc.get('layout', '?')}: {len(built)} object and wall boxes (floors and ceilings "
+                 "left out)", fontsize=11)
+    return save_figure(fig, out_png, dpi)

@@ -74,11 +74,31 @@ def cmd_build(args) -> int:
 def cmd_show(args) -> int:
     from .boxmap import BoxMap
 
-    s = BoxMap.load(args.file).summary()
+    if args.gt and not args.plot:
+        raise UserError("--gt: only with --plot FILE (the figure of the map against the ground truth)")
+    if args.plot:
+        check_output_file(args.plot)
+    bmap = BoxMap.load(args.file)
+    s = bmap.summary()
     for k, v in s.items():
         if isinstance(v, dict):
             v = ", ".join(f"{a} {b}" for a, b in v.items())
         print(f"{k:<18} {v}")
+    if args.plot:
+        from vrformats.yamlfile import read_json
+
+        from ..figures import map_figure
+
+        doc = read_json(args.file)
+        gt_doc = errors = None
+        if args.gt:
+            from vrformats.tour import Tour
+
+            tour = Tour(args.gt)
+            gt_doc = tour.objects()
+            errors = errors_against_ground_truth(tour, doc)
+            print(summary_line(doc, bmap.size_bytes, errors, None))
+        print(f"plot: {map_figure(doc, args.plot, gt_doc, errors)}")
     return 0
 
 
@@ -102,6 +122,9 @@ def register_cli(subparsers) -> None:
 
     add_detector_arguments(a)
     a.set_defaults(fn=cmd_build)
-    a = ms.add_parser("show", help="summary of a map file")
+    a = ms.add_parser("show", help="summary of a map file; --plot: the map top-down, against the ground truth with --gt")
     a.add_argument("file")
+    a.add_argument("--plot", metavar="FILE.png", help="draw the map's object and wall boxes top-down")
+    a.add_argument("--gt", metavar="TOUR_DIR", help="with --plot: colour the boxes against this tour's ground truth "
+                   "(matched, other class, extra, missed)")
     a.set_defaults(fn=cmd_show)
