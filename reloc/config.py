@@ -1,9 +1,9 @@
 """Every threshold of VideoReloc in one place, with the paper's values as defaults.
 
 Section references are to the paper, *VideoReloc: Long-Term Indoor Video Relocalization against a
-Kilobyte-Scale Semantic Scene Graph* (Li et al.; https://videoreloc.github.io; CITATION.cff):
-Sec. III-B map, III-C per-clip graph construction, III-D candidates and verification, III-E
-orientation cues and refinement, IV-A implementation details. Values the paper does not state are marked "ours" with
+Kilobyte-Scale Semantic Scene Graph* (https://videoreloc.github.io; CITATION.cff): Sec. III-B map,
+III-C per-clip graph construction, III-D candidates and verification, III-E orientation cues and
+refinement, IV-A implementation details. Values the paper does not state are marked "ours" with
 the reason for the choice.
 
 A config is a frozen dataclass tree; ``Config().replace("registration.center_match_m", 0.4)``

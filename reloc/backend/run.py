@@ -320,6 +320,23 @@ def load_clip_poses(run_dir) -> dict[int, dict[int, np.ndarray]]:
     return out
 
 
+def plot_run(out, tour, bmap=None, png=None) -> Path:
+    """``OUT/trajectory.png`` (or ``png``): the run's causal and closure trajectories over the map,
+    against the tour's ground truth (``reloc.figures.run_figure``)."""
+    from vrformats.camera import read_tum
+
+    from ..figures import run_figure
+
+    out = Path(out)
+    trajs = {}
+    for name, label in (("causal", "causal"), ("closure", "with clip closure")):
+        f = out / f"{name}.txt"
+        if f.is_file():
+            frames, poses = read_tum(f, fps=tour.fps)
+            trajs[label] = {int(i): T for i, T in zip(frames, poses)}
+    return run_figure(tour, trajs, png or out / "trajectory.png", bmap=bmap)
+
+
 def cmd_run(args) -> int:
     from vrformats.tour import Tour
 
@@ -344,6 +361,8 @@ def cmd_run(args) -> int:
     print(f"{s['frames']} frames in {s['seconds']:.1f} s ({s['fps']} frames/s): {s['clips']} clips in {s['runs']} "
           f"run(s), {s['placed_by_front_end']} placed by the front-end; poses: causal {s['causal_frames']}, "
           f"closure {s['closure_frames']} -> {args.out}")
+    if not args.no_plot:
+        print(f"plot: {plot_run(args.out, tour, bmap)}")
     if "note" in s:
         print(f"note: {s['note']}")
     dg = s["degenerate_frames"]
@@ -356,7 +375,7 @@ def cmd_run(args) -> int:
 def register_cli(subparsers) -> None:
     from ..detection.factory import add_detector_arguments
 
-    p = subparsers.add_parser("run", help="relocalize a tour: causal.txt, closure.txt, frames.json, clips.json")
+    p = subparsers.add_parser("run", help="relocalize a tour: causal.txt, closure.txt, frames.json, clips.json, trajectory.png")
     p.add_argument("--map", required=True, help="map file (videoreloc-boxes/1 JSON)")
     p.add_argument("--tour", required=True, help="rendered tour directory")
     p.add_argument("--out", required=True, help="output directory")
@@ -369,6 +388,7 @@ def register_cli(subparsers) -> None:
     p.add_argument("--no-run-level", action="store_true", help="ablation: no run-level decision")
     p.add_argument("--fixed-clips", action="store_true", help="ablation: fixed 100-frame clips")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--no-plot", action="store_true", help="do not draw OUT/trajectory.png (the trajectories over the map)")
     add_sensor(p, "read the tour")
     add_quiet(p)
     add_detector_arguments(p)

@@ -14,6 +14,7 @@ same, with one output labelled by the file's name.
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 from vrformats.atomic import write_json_atomic
@@ -21,7 +22,7 @@ from vrformats.camera import read_tum
 from vrformats.errors import SceneFormatError, UserError
 from vrformats.cli import add_json
 
-from .evaluation import summarize
+from ..evaluation import summarize
 
 TRAJECTORIES = ("causal", "closure")
 
@@ -122,7 +123,31 @@ def cmd_eval(args) -> int:
     if args.save:
         write_json_atomic(args.save, rep)
     print(json.dumps(rep, indent=2) if args.json else format_eval(rep))
+    if args.plot:
+        bmap = None
+        if args.map:
+            from ..map.boxmap import BoxMap
+
+            bmap = BoxMap.load(args.map)
+        if args.poses is None:
+            from ..backend.run import plot_run
+
+            png = plot_run(args.out_dir, tour, bmap, png=args.plot)
+        else:
+            from ..figures import run_figure
+
+            png = run_figure(tour, {f"{Path(args.out_dir).name} ({args.poses})": _poses_of(args, tour)}, args.plot, bmap=bmap)
+        print(f"plot: {png}", file=sys.stderr if args.json else sys.stdout)
     return 0
+
+
+def _poses_of(args, tour) -> dict:
+    """The pose file of ``reloc eval --poses`` as {frame: camera-to-world}, read as ``evaluate_poses`` reads it."""
+    from vrformats.poses import NAMED, check_convention, load_names, read_poses
+
+    conv = check_convention(args.poses)
+    names = load_names(args.names) if conv in NAMED else None
+    return read_poses(Path(args.out_dir), conv, names=names, fps=tour.fps, frames={int(i) for i in tour.frame_indices})
 
 
 def register_cli(subparsers) -> None:
@@ -138,4 +163,6 @@ def register_cli(subparsers) -> None:
     p.add_argument("--gt", required=True, metavar="TOUR_DIR", help="the tour with the ground-truth poses")
     add_json(p)
     p.add_argument("--save", metavar="FILE.json", help="also write the JSON here")
+    p.add_argument("--plot", metavar="FILE.png", help="also draw the trajectories over the map against the ground truth")
+    p.add_argument("--map", metavar="MAP.json", help="with --plot: the map to draw (default: none)")
     p.set_defaults(fn=cmd_eval)

@@ -24,7 +24,7 @@ import numpy as np
 from ..config import Config
 from ..detection.base import Detector, check_rgb_schedule, needs_rgb
 from ..detection.factory import detector_record
-from .evaluation import summarize
+from ..evaluation import summarize
 from ..frontend.stream import FrontEnd, StaticPoses, default_detector, make_pose_stream, read_frame
 from ..map.boxmap import BoxMap
 

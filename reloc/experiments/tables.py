@@ -41,7 +41,7 @@ from vrformats.errors import SceneFormatError
 from vrformats.yamlfile import read_json
 
 from . import methods as registry
-from .evaluation import END_REASONS, THRESHOLDS, end_reason_kind, odometry_drift, pose_errors, summarize
+from ..evaluation import END_REASONS, THRESHOLDS, end_reason_kind, odometry_drift, pose_errors, summarize
 from .intervals import (OK_COARSE, OK_FINE, Bootstrap, IntervalSettings, factor_figures, figure_values, n_segments,
                         pooled_figures, segment_counts, tour_figures, units_note)
 from .methods.common import map_report_path, unit_file  # noqa: F401  (where the runs and maps keep them)

@@ -34,7 +34,12 @@ def cmd_tour_render(args) -> int:
 
 def cmd_check(args) -> int:
     from .check import check_tour, format_report
+    from .summary import design_summary, format_summary, is_design_folder
 
+    if is_design_folder(args.dir):  # a render job's folder: what it holds, tour by tour
+        s = design_summary(args.dir)
+        print(json.dumps(s, indent=2) if args.json else format_summary(s))
+        return 0 if s["complete"] == len(s["tours"]) else 1
     rep = check_tour(args.dir, consistency_pairs=args.pairs)
     if args.json:
         print(json.dumps(rep, indent=2))
@@ -48,7 +53,23 @@ def cmd_show(args) -> int:
 
     from .show import contact_sheet
 
+    from .summary import design_mosaic, is_design_folder
+
+    if is_design_folder(args.dir):  # a render job's folder: the first frame of every tour
+        print(f"wrote {design_mosaic(args.dir, args.out, path=args.path)}")
+        return 0
     tour = Tour(args.dir)
+    if args.strip is not None:
+        from .show import tour_strip
+
+        print(f"wrote {tour_strip(tour, args.out, count=args.strip)}")
+        return 0
+    if args.video:
+        from .show import tour_video
+
+        out, n = tour_video(tour, args.out, every=args.every, fps=args.fps)
+        print(f"wrote {out} ({n} frames)")
+        return 0
     index = int(tour.frame_indices[0]) if args.frame is None else args.frame
     out = contact_sheet(tour, index, args.out, exposure=args.exposure)
     print(f"wrote {out}")
@@ -130,15 +151,26 @@ def _add_check_show_export(sub, old_name: bool = False) -> None:
     fn = _old_name if old_name else (lambda f, _cmd: f)
     a = sub.add_parser("check", help="completeness, channels, depth, ids and pose/depth consistency of a tour "
                                     "(exit 1 if problems are found)")
-    a.add_argument("dir", help="tour directory (holds camera.json, poses.txt, frames/)")
+    a.add_argument("dir", help="tour directory (holds camera.json, poses.txt, frames/), or a render job's folder "
+                   "(a summary of its tours)")
     add_json(a, "the full report")
     a.add_argument("--pairs", type=int, default=8, help="neighbouring frame pairs for the depth consistency test")
     a.set_defaults(fn=fn(cmd_check, "check"))
-    a = sub.add_parser("show", help="contact sheet of one frame: RGB, depth, instance, semantic")
-    a.add_argument("dir", help="tour directory")
+    a = sub.add_parser("show", help="contact sheet of one frame (RGB, depth, instance, semantic), a strip or an animation "
+                                   "of a tour, or a mosaic of a render job's tours")
+    a.add_argument("dir", help="tour directory, or a render job's folder (a mosaic of its tours' first frames)")
     a.add_argument("--frame", type=int, help="frame index (default: the first)")
     a.add_argument("--out", required=True, help="output image (.png)")
     a.add_argument("--exposure", type=float, help="linear RGB scale (default: automatic)")
+    mode = a.add_mutually_exclusive_group()
+    mode.add_argument("--strip", type=int, nargs="?", const=6, metavar="N",
+                      help="a contact strip of N frames along the tour (default 6), RGB | depth | ids per row (.png/.jpg)")
+    mode.add_argument("--video", action="store_true", help="an animation, RGB | depth | ids side by side (.gif; .mp4 "
+                      "with imageio-ffmpeg)")
+    a.add_argument("--every", type=int, help="with --video: every N-th frame (default: the tour's RGB frames)")
+    a.add_argument("--path", help="for a render job's folder (a mosaic of every tour's first frame): only the tours "
+                   "of this camera path")
+    a.add_argument("--fps", type=float, default=10.0, help="with --video: frames per second (default 10)")
     a.set_defaults(fn=fn(cmd_show, "show"))
     a = sub.add_parser("export", help="write a tour in a layout other relocalizers read: 7scenes (DSAC*, ACE, hloc), "
                                      "ace (ACE/DSAC* train|test), tum-rgbd (RGB-D SLAM, evo), colmap (hloc)")

@@ -163,3 +163,165 @@ def contact_sheet(tour: Tour, index: int, out, exposure: float | None = None, dp
     return save_figure(fig, out, dpi)
 
 
+
+
+# ---------------------------------------------------------------------------------------------
+# a whole tour at a glance: a contact strip and an animation of RGB | depth | instance ids
+
+PANELS = ("RGB", "depth", "instance ids")
+GAP_PX = 4  # between panels and rows
+LABEL_PX = 14  # the caption line above each row
+
+
+def _tour_scales(tour: Tour, picks: list[int]) -> tuple[float | None, float]:
+    """One RGB exposure and one depth range for every frame shown (no flicker between frames): the
+    median automatic exposure and the 99.5th depth percentile over up to 12 of ``picks``."""
+    exposures, depths = [], []
+    for i in picks[:: max(1, len(picks) // 12)][:12]:
+        f = tour.frame(int(i), instance=False, semantic=False)
+        if f.rgb is not None:
+            exposures.append(tonemap(f.rgb)[1])
+        if f.depth is not None:
+            d = f.depth[np.isfinite(f.depth) & (f.depth > 0)]
+            if d.size:
+                depths.append(float(np.percentile(d, 99.5)))
+    return (float(np.median(exposures)) if exposures else None), (max(depths) if depths else 1.0)
+
+
+def frame_row(tour: Tour, index: int, exposure: float | None, depth_max: float, scale: int = 1) -> np.ndarray:
+    """Frame ``index`` as one uint8 image: RGB | depth (turbo, 0 to ``depth_max`` m, no hit black) |
+    instance ids (stable colours, 0 black), each ``scale`` times the frame's size. A frame without a
+    channel shows a grey panel."""
+    import matplotlib
+
+    f = tour.frame(int(index), semantic=False)
+    H, W = tour.intrinsics.height, tour.intrinsics.width
+    grey = np.full((H, W, 3), 0.25, np.float32)
+    rgb = tonemap(f.rgb, exposure)[0] if f.rgb is not None else grey
+    if f.depth is not None:
+        ok = np.isfinite(f.depth) & (f.depth > 0)
+        d = matplotlib.colormaps["turbo"](np.clip(np.where(ok, f.depth, 0) / max(depth_max, 1e-3), 0, 1))[..., :3]
+        d[~ok] = 0.0
+    else:
+        d = grey
+    ids = _colorize_ids(f.instance, salt=0)[0] if f.instance is not None else grey
+    gap = np.ones((H, GAP_PX // max(scale, 1) or 1, 3), np.float32)
+    row = np.concatenate([rgb, gap, d, gap, ids], axis=1)
+    row = (np.clip(row, 0, 1) * 255 + 0.5).astype(np.uint8)
+    if scale > 1:
+        row = row.repeat(scale, axis=0).repeat(scale, axis=1)
+    return row
+
+
+def _captioned(row: np.ndarray, text: str, missing_rgb: bool):
+    from PIL import Image, ImageDraw
+
+    img = Image.new("RGB", (row.shape[1], row.shape[0] + LABEL_PX), "white")
+    img.paste(Image.fromarray(row), (0, LABEL_PX))
+    draw = ImageDraw.Draw(img)
+    draw.text((2, 1), text, fill="black")
+    if missing_rgb:
+        w = (row.shape[1] - 2 * GAP_PX) // 3
+        draw.text((w // 2 - 18, LABEL_PX + row.shape[0] // 2 - 6), "no RGB", fill="white")
+    return img
+
+
+def _picks(tour: Tour, count: int) -> list[int]:
+    """``count`` frames spread along the tour, on frames with RGB when the tour has any."""
+    idx = [int(i) for i in tour.frame_indices]
+    if not idx:
+        raise UserError(f"{tour.root}: the tour has no frames")
+    if tour.has_rgb() and tour.rgb_every > 1:
+        idx = [i for i in idx if i % tour.rgb_every == 0] or idx
+    if count >= len(idx):
+        return idx
+    return [idx[round(k * (len(idx) - 1) / (count - 1))] for k in range(count)] if count > 1 else idx[:1]
+
+
+def tour_strip(tour: Tour, out, count: int = 6, scale: int = 2) -> Path:
+    """A contact strip of ``count`` frames spread along the tour, one row per frame: RGB | depth |
+    instance ids, captioned with the frame, its time and the tour; written atomically (PNG or JPEG)."""
+    from PIL import Image
+
+    from vrformats.atomic import write_bytes_atomic
+
+    if count < 1:
+        raise UserError(f"--count must be at least 1, got {count}")
+    out = Path(out)
+    fmt = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG"}.get(out.suffix.lower())
+    if fmt is None:
+        raise UserError(f"{out}: a strip is written as .png or .jpg")
+    picks = _picks(tour, count)
+    exposure, depth_max = _tour_scales(tour, picks)
+    rows = []
+    for i in picks:
+        f_has_rgb = tour.has_rgb() and i % tour.rgb_every == 0
+        rows.append(_captioned(frame_row(tour, i, exposure, depth_max, scale),
+                               f"{tour.name}  frame {i}  t={i / tour.fps:.1f} s", not f_has_rgb))
+    head = f"RGB | depth 0-{depth_max:.1f} m | instance ids"
+    W = max(r.width for r in rows)
+    sheet = Image.new("RGB", (W, LABEL_PX + sum(r.height + GAP_PX for r in rows)), "white")
+    from PIL import ImageDraw
+
+    ImageDraw.Draw(sheet).text((2, 1), head, fill="black")
+    y = LABEL_PX
+    for r in rows:
+        sheet.paste(r, (0, y))
+        y += r.height + GAP_PX
+    import io
+
+    buf = io.BytesIO()
+    sheet.save(buf, format=fmt, **({"quality": 88} if fmt == "JPEG" else {"optimize": True}))
+    return write_bytes_atomic(out, buf.getvalue())
+
+
+def tour_video(tour: Tour, out, every: int | None = None, fps: float = 10.0, max_frames: int = 300,
+               scale: int = 1) -> tuple[Path, int]:
+    """An animation of the tour, RGB | depth | instance ids side by side: a GIF (Pillow), or an MP4
+    when the file ends in .mp4 and imageio-ffmpeg is installed. ``every``: every N-th frame
+    (default: the tour's RGB frames, at most ``max_frames``). Returns (file, frames written)."""
+    from PIL import Image
+
+    from vrformats.atomic import write_bytes_atomic
+
+    out = Path(out)
+    suffix = out.suffix.lower()
+    if suffix not in (".gif", ".mp4"):
+        raise UserError(f"{out}: an animation is written as .gif (or .mp4 with imageio-ffmpeg installed)")
+    if not (0 < fps <= 60):
+        raise UserError(f"--fps must be in (0, 60], got {fps:g}")
+    idx = [int(i) for i in tour.frame_indices]
+    if not idx:
+        raise UserError(f"{tour.root}: the tour has no frames")
+    step = every or (tour.rgb_every if tour.has_rgb() else 1)
+    if step < 1:
+        raise UserError(f"--every must be at least 1, got {step}")
+    picks = idx[::step]
+    if len(picks) > max_frames:
+        picks = picks[:: -(-len(picks) // max_frames)]
+    exposure, depth_max = _tour_scales(tour, picks)
+    frames = [Image.fromarray(frame_row(tour, i, exposure, depth_max, scale)) for i in picks]
+    if suffix == ".mp4":
+        import importlib.util
+
+        try:
+            import imageio.v3 as iio
+
+            if importlib.util.find_spec("imageio_ffmpeg") is None:  # the encoder imageio needs for .mp4
+                raise ImportError("imageio_ffmpeg")
+        except ImportError:
+            raise UserError(f"{out}: MP4 needs imageio and imageio-ffmpeg (pip install imageio imageio-ffmpeg); "
+                            "write a .gif instead") from None
+        import tempfile
+
+        with tempfile.TemporaryDirectory() as tmp:
+            tmp_file = Path(tmp) / "tour.mp4"
+            even = [np.asarray(f)[: f.height // 2 * 2, : f.width // 2 * 2] for f in frames]
+            iio.imwrite(tmp_file, np.stack(even), fps=fps, codec="libx264")
+            return write_bytes_atomic(out, tmp_file.read_bytes()), len(frames)
+    import io
+
+    buf = io.BytesIO()
+    frames[0].save(buf, format="GIF", save_all=True, append_images=frames[1:], duration=round(1000 / fps), loop=0,
+                   optimize=False)
+    return write_bytes_atomic(out, buf.getvalue()), len(frames)

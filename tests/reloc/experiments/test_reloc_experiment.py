@@ -475,9 +475,18 @@ def test_tables_iii_and_iv_with_intervals_end_to_end(tiny_design, capsys):
     """tables: [units, ablation] on the tiny design: every unit length writes its trajectory, whose
     recall matches units.json; Tables III and IV print intervals, and the ablation rows' paired
     differences to the full method are in results.json."""
+    # two of the four query tours (one unchanged by day, one rearranged at night: both of Table III's
+    # groups) and the mapping tour, copied without design.json: the tables' runs (five ablation
+    # variants, every unit length) cost per tour, and two show every property checked here
+    import shutil
+
+    sub = tiny_design / "tours_2"
+    if not sub.exists():
+        for name in ("apt_0__day__query", "apt_1__night__query", "apt_0__day__mapping"):
+            shutil.copytree(tiny_design / "tours" / name, sub / name)
     spec = yaml.safe_load((tiny_design / "exp.yaml").read_text())
     spec.update({"out": str(tiny_design / "exp_tables"), "methods": ["videoreloc", "one_frame"],
-                 "tables": ["units", "ablation"]})
+                 "tables": ["units", "ablation"], "tours": str(sub)})
     (tiny_design / "exp_tables.yaml").write_text(yaml.safe_dump(spec))
     assert reloc_main(["experiment", str(tiny_design / "exp_tables.yaml"), "--quiet", "--no-plots"]) == 0
     capsys.readouterr()

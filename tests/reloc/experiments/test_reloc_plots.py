@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import reloc.experiments.plots as plots
+import reloc.figures
 from reloc.experiments.plots import box_corners, error_colors, per_frame, plot_experiment, rolling_median, tour_png_name
 from reloc.experiments.report import markdown_to_html, split_row, table_to_html, write_report
 
@@ -127,7 +128,7 @@ def png_size(path):
 
 @pytest.fixture
 def captured(monkeypatch):
-    """The figures plots.py saves, by file name (saved for real as well)."""
+    """The figures plots.py and reloc.figures save, by file name (saved for real as well)."""
     figs = {}
     real = plots.save_figure
 
@@ -135,7 +136,10 @@ def captured(monkeypatch):
         figs[out.name] = fig
         return real(fig, out, dpi)
 
+    import reloc.figures
+
     monkeypatch.setattr(plots, "save_figure", spy)
+    monkeypatch.setattr(reloc.figures, "save_figure", spy)  # the per-tour figure's module
     return figs
 
 
@@ -348,7 +352,7 @@ def test_tour_figure_with_empty_estimates_and_no_map(tmp_path, captured):
         if label.contains(*top.transData.transform(P[i, :2])):
             continue
         # an antialiased 0.8 pt line: its darkest pixel near each position is within 0.2 of the grey
-        assert near(img, pixel_of(top, P[i, 0], P[i, 1], img), plots.GT_COLOR, tol=0.2), i
+        assert near(img, pixel_of(top, P[i, 0], P[i, 1], img), reloc.figures.GT_COLOR, tol=0.2), i
         seen += 1
     assert seen >= 8
     assert all(pixels_like(img, top.bbox, c) == 0 for c in (GREEN, YELLOW, RED))

@@ -14,7 +14,7 @@ import yaml
 from vrformats.camera import pose_from_ypr
 from reloc.cli import main as reloc_main
 from reloc.experiments import tables
-from reloc.experiments.evaluation import END_REASONS, end_reason_kind, odometry_drift
+from reloc.evaluation import END_REASONS, end_reason_kind, odometry_drift
 from jobspecs import write_experiment_spec
 
 REPO = Path(__file__).resolve().parents[3]

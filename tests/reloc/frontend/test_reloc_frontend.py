@@ -12,7 +12,7 @@ import pytest
 from reloc.config import Config
 from reloc.detection.base import FrameData
 from reloc.detection.oracle import Corruption, OracleDetector
-from reloc.experiments.evaluation import summarize
+from reloc.evaluation import summarize
 from reloc.frontend.stream import FrontEnd, GroundTruthPoses
 from reloc.geometry import pose_distance
 from reloc.map.boxmap import BoxMap
