@@ -350,11 +350,38 @@ def junit_xml(rows: list[dict], suite: str, results_dir, seconds: float = 0.0) -
     return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(suites, encoding="unicode") + "\n"
 
 
+CHECKS_RECORD = "checks.json"  # the last ``reloc check``'s results, in the results folder; the report shows them
+
+
+def record_checks(rows: list[dict], check_file, results_dir) -> Path | None:
+    """``RESULTS_DIR/checks.json`` (the check spec and the rows), and the report rewritten with them
+    where the folder has one (``report.write_report``). A folder that cannot be written to is one
+    line on stderr: the checks' own exit status does not change."""
+    import sys
+
+    from vrformats.atomic import write_json_atomic
+
+    results_dir = Path(results_dir)
+    try:
+        path = write_json_atomic(results_dir / CHECKS_RECORD, {"checks": str(check_file), "rows": rows}, indent=1)
+        if (results_dir / "report.md").is_file():
+            from .report import write_report
+
+            write_report(results_dir)
+        return path
+    except OSError as e:
+        print(f"reloc check: {results_dir / CHECKS_RECORD} not written ({e.strerror or e}); the report keeps "
+              f"no record of these checks", file=sys.stderr)
+        return None
+
+
 def cmd_check(args) -> int:
     import time
 
     from vrformats.atomic import write_text_atomic
     from vrformats.errors import check_output_file
+
+    from ..resources import check_spec
 
     if args.junit:
         check_output_file(args.junit)
@@ -362,6 +389,7 @@ def cmd_check(args) -> int:
     rows = run_checks(args.checks, args.results)
     if args.junit:
         write_text_atomic(args.junit, junit_xml(rows, Path(args.checks).stem, args.results, time.perf_counter() - t0))
+    record_checks(rows, check_spec(args.checks), args.results)
     if args.json:
         print(json.dumps(rows, indent=2))
     else:

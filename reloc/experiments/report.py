@@ -4,8 +4,13 @@
 (the ``videoreloc-experiment/1`` schema): title and experiment name, the evaluation protocol in
 short, the design (query tours) and methods, the tables that ``reloc/tables.py`` wrote
 (``tables/main.md``, ``factors.md``, ``units.md``, ``ablation.md``: the paper's Tables I-IV, then
-any others), the plots
-that ``reloc/plots.py`` wrote (recall bars, then one figure per tour) and the timings.
+any others), the recall of every method on every tour (with its 95 % interval), the results of
+the last ``reloc check`` on the folder (``checks.json``, which ``reloc check`` writes and after
+which it rewrites the report), the plots that ``reloc/plots.py`` wrote (recall bars, then one
+figure per tour, each a link to the full-size image), the timings, and what produced the results:
+the code's commit (or the package version when installed), the machine (CPU model, cores) and the
+library versions (``results.json``'s ``environment``, recorded by the run; a folder without it
+gets this machine's, said so).
 
 The markdown is the source; the HTML is converted from it by the small converter here
 (``markdown_to_html``: headings, paragraphs, bullet lists, images on a line of their own and
@@ -54,6 +59,7 @@ tbody tr:nth-child(even) { background: #fafafa; }
 code { background: #f3f3f3; padding: 0 .2em; border-radius: 3px; }
 figure { margin: 1em 0; }
 figure img { max-width: 100%; border: 1px solid #ddd; }
+td.fail { color: #b00; font-weight: bold; }
 figcaption { font-size: 0.9em; color: #555; }
 """.strip()
 
@@ -175,7 +181,8 @@ def markdown_to_html(text: str) -> str:
         if m:
             flush()
             alt = m.group("alt")
-            out.append(f'<figure><img src="{esc(m.group("src"))}" alt="{esc(alt)}">'
+            src = esc(m.group("src"))  # the image links to itself: full size, whatever the page's width
+            out.append(f'<figure><a href="{src}"><img src="{src}" alt="{esc(alt)}"></a>'
                        f"<figcaption>{_inline(alt)}</figcaption></figure>")
             i += 1
             continue
@@ -253,6 +260,95 @@ def _plot_files(results_dir: Path, results: dict) -> list[tuple[str, Path]]:
     return out
 
 
+def _pct(v) -> str:
+    return "\u2014" if not _is_number(v) else f"{100 * v:.1f}%"
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _per_tour_section(results: dict) -> list[str]:
+    """Every table row's recall at 1 m/10 deg on every query tour, with its 95 % interval."""
+    tours = results.get("tours") or {}
+    rows = [r for r in (results.get("rows") or []) if isinstance(r, dict)]
+    methods = results.get("methods") or {}
+    if not tours or not rows:
+        return []
+    from .plots import row_label
+
+    body = []
+    for tname in tours:
+        for row in rows:
+            try:
+                mode = methods[row["method"]]["modes"][row["mode"]]
+            except (KeyError, TypeError):
+                continue
+            t = (mode.get("tours") or {}).get(tname) or {}
+            iv = ((mode.get("intervals") or {}).get("tours") or {}).get(tname) or {}
+            iv = iv.get("recall_1m_10deg") if isinstance(iv, dict) else None
+            interval = (f"{100 * iv[0]:.1f}\u2013{100 * iv[1]:.1f}%" if isinstance(iv, list) and len(iv) == 2
+                        and all(_is_number(x) for x in iv) else "\u2014")
+            frames = t.get("frames", "")
+            body.append([tname, row_label(row), _pct(t.get("recall_1m_10deg")), interval, _pct(t.get("coverage")),
+                         frames])
+    if not body:
+        return []
+    return ["## Recall per tour", "", "Recall at 1 m/10\u00b0 of every method on every query tour, over the frames "
+            "it is scored on (frames), with its 95 % interval (\u2014: none).", "",
+            _md_table(["tour", "method", "recall 1 m/10\u00b0", "95 % interval", "coverage", "frames"], body), ""]
+
+
+def _checks_section(results_dir: Path) -> list[str]:
+    """The last ``reloc check``'s results (``checks.json``), or how to add them."""
+    from .checks import CHECKS_RECORD
+
+    md = ["## Checks", ""]
+    path = results_dir / CHECKS_RECORD
+    doc = None
+    if path.is_file():
+        try:
+            import json
+
+            doc = json.loads(path.read_text())
+        except (OSError, ValueError):
+            doc = None
+    rows = doc.get("rows") if isinstance(doc, dict) else None
+    if not isinstance(rows, list) or not rows:
+        return md + [f"No checks were run on these results: `reloc check CHECKS.yaml {results_dir}` runs them and "
+                     "adds them here.", ""]
+
+    def num(v):
+        return "\u2014" if not _is_number(v) else f"{v:.4g}"
+
+    body = []
+    for r in rows:
+        if not isinstance(r, dict):
+            continue
+        iv = r.get("interval")
+        ivs = (f"[{iv[0]:.3g}, {iv[1]:.3g}]" + (" (difference)" if r.get("interval_of") == "difference" else "")
+               if isinstance(iv, list) and len(iv) == 2 and all(_is_number(x) for x in iv) else "\u2014")
+        result = "pass" if r.get("passed") else f"**FAIL** ({r.get('why') or 'false'})"
+        body.append([r.get("check", ""), f"`{r.get('expression', '')}`", num(r.get("value")), num(r.get("against")),
+                     ivs, result])
+    n_fail = sum(1 for r in rows if isinstance(r, dict) and not r.get("passed"))
+    return md + [f"`reloc check {doc.get('checks', '?')}`: {len(body) - n_fail} passed, {n_fail} failed.", "",
+                 _md_table(["check", "expression", "value", "against", "interval", "result"], body), ""]
+
+
+def _environment_section(results: dict) -> list[str]:
+    """What produced the results: code, machine, libraries (recorded by the run, else this machine's)."""
+    from vrformats.environment import describe, environment
+
+    env = results.get("environment")
+    note = ""
+    if not isinstance(env, dict):
+        env = environment()
+        note = " (not recorded with the results: this is the machine and code that wrote the report)"
+    return ["## Produced by", "", f"What ran the experiment{note}:", "",
+            *[f"- {what}: {value}" for what, value in describe(env)], ""]
+
+
 def build_markdown(results_dir, results: dict) -> str:
     """The report as markdown (image paths relative to ``results_dir``)."""
     results_dir = Path(results_dir)
@@ -318,6 +414,9 @@ def build_markdown(results_dir, results: dict) -> str:
     for heading, path in tables:
         md += [f"### {heading}", "", _demote(path.read_text().strip(), by=3), ""]
 
+    md += _per_tour_section(results)
+    md += _checks_section(results_dir)
+
     md += ["## Plots", ""]
     plots = _plot_files(results_dir, results)
     if not plots:
@@ -330,6 +429,8 @@ def build_markdown(results_dir, results: dict) -> str:
         md += ["## Timings", ""]
         rows = [[k, _seconds(v)] for k, v in secs.items()]
         md += [_md_table(["step", "seconds"], rows), "", "\u2014: no time recorded.", ""]
+
+    md += _environment_section(results)
 
     degenerate = results.get("degenerate_frames")
     if degenerate:

@@ -347,6 +347,9 @@ def _run_experiment(spec: ExperimentSpec, out: Path, workers: int | None, progre
     results["failed"] = runner.failed
     results["degenerate_frames"] = _degenerate_frames(out, queries, methods)
     results["code"] = code
+    from vrformats.environment import environment
+
+    results["environment"] = environment()  # the commit, machine and libraries the report names
     ran = {"maps": map_seconds, "runs": run_seconds}
     if spec.replicates > 1:  # the same experiment reseeded, each in its own folder; their spread beside the intervals
         reps = [results]

@@ -444,31 +444,17 @@ def measure_environment() -> dict:
     import os
     import platform
     import subprocess
-    from importlib import metadata
+
+    from vrformats.environment import cpu_model, git_commit, toolkit_version
 
     env: dict = {"cpu_count": os.cpu_count() or 1, "platform": platform.platform(),
-                 "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
-    try:
-        env["toolkit_version"] = metadata.version("videoreloc-synth")
-    except metadata.PackageNotFoundError:
-        env["toolkit_version"] = "unknown"
-    try:
-        from ..resources import checkout_root
-
-        root = checkout_root()  # None when installed: site-packages may lie inside some other git tree
-        commit = subprocess.run(["git", "-C", str(root), "rev-parse", "--short", "HEAD"], capture_output=True,
-                                text=True, timeout=5) if root is not None else None
-        if commit is not None and commit.returncode == 0 and commit.stdout.strip():
-            env["toolkit_version"] += f"+g{commit.stdout.strip()}"
-    except (OSError, subprocess.SubprocessError):
-        pass
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                env["cpu_model"] = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
+                 "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+                 "toolkit_version": toolkit_version()}
+    commit = git_commit()
+    if commit:
+        env["toolkit_version"] += f"+g{commit}"
+    if cpu_model():
+        env["cpu_model"] = cpu_model()
     try:
         r = subprocess.run(["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"], capture_output=True, text=True,
                            timeout=10)

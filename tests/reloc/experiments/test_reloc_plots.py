@@ -477,3 +477,49 @@ def test_a_sampled_baseline_is_titled_with_its_recall_on_the_frames_it_is_scored
     assert "100.0%" in title and f"{len(sampled)} scored" in title, title
     posed = N - len(MISSING)  # a method scored on every frame keeps its title
     assert f"{100 * posed / N:.1f}%" in top["VideoReloc, with clip closure"]
+
+
+def test_report_has_per_tour_recall_checks_environment_and_linked_plots(results_dir, tmp_path):
+    """report.html: the per-tour table (recall with its interval), the last `reloc check`'s results,
+    the commit/machine/libraries, and every plot a link to its full-size image."""
+    from reloc.cli import main as reloc_main
+    from vrformats.environment import cpu_model
+
+    res = json.loads((results_dir / "results.json").read_text())
+    res["methods"]["videoreloc"]["modes"]["closure"]["intervals"] = {
+        "tours": {TOUR: {"recall_1m_10deg": [0.70, 0.80]}}}
+    for m, mode in (("videoreloc", "closure"), ("appearance", "causal")):  # the pooled figures reloc check reads
+        d = res["methods"][m]["modes"][mode]
+        d["all"] = {k: d["tours"][TOUR].get(k) for k in ("recall_1m_10deg", "coverage")}
+    res["environment"] = {"toolkit": "0.1.0", "commit": "abc1234", "cpu_model": "Test CPU 9000", "cpu_count": 64,
+                          "platform": "Linux-test", "libraries": {"python": "3.11.9", "numpy": "1.26.4"}}
+    (results_dir / "results.json").write_text(json.dumps(res))
+    plot_experiment(results_dir)
+    html_path, md_path = write_report(results_dir)
+    md, h = md_path.read_text(), html_path.read_text()
+    posed = N - len(MISSING)
+    assert f"| {TOUR} | VideoReloc, with clip closure | {100 * posed / N:.1f}% | 70.0\u201380.0% | " in md
+    assert f"| {TOUR} | Appearance (SIFT + PnP), per frame | 0.0% | \u2014 | 0.0% | {N} |" in md
+    assert "No checks were run on these results" in md
+    assert "- code: videoreloc-synth commit abc1234" in md
+    assert "- machine: Test CPU 9000, 64 cores; Linux-test" in md and "numpy 1.26.4" in md
+    name = tour_png_name(TOUR)
+    assert f'<a href="plots/{name}"><img src="plots/{name}"' in h
+
+    # reloc check records its rows beside the results and rewrites the report with them
+    checks = tmp_path / "c.yaml"
+    checks.write_text("checks:\n  - videoreloc.closure.recall_1m_10deg >= 0.5\n"
+                      "  - {check: 'appearance.causal.recall_1m_10deg >= 0.5', name: appearance works}\n")
+    assert reloc_main(["check", str(checks), str(results_dir)]) == 1
+    rec = json.loads((results_dir / "checks.json").read_text())
+    assert [r["passed"] for r in rec["rows"]] == [True, False] and rec["checks"] == str(checks)
+    md, h = md_path.read_text(), html_path.read_text()
+    assert "1 passed, 1 failed" in md and "No checks were run" not in md
+    assert "| appearance works | `appearance.causal.recall_1m_10deg >= 0.5` | 0 | 0.5 | \u2014 | **FAIL** (false) |" in md
+    assert "<strong>FAIL</strong> (false)" in h
+
+    # a results folder without a recorded environment: this machine's, said so
+    del res["environment"]
+    (results_dir / "results.json").write_text(json.dumps(res))
+    md = write_report(results_dir)[1].read_text()
+    assert "not recorded with the results" in md and f"{cpu_model() or 'unknown CPU'}" in md
