@@ -206,6 +206,10 @@ def _run_plan(plan: Plan, old: dict | None, backend: str, workers: int, progress
         write_json_atomic(p.out / "meta.json", meta, indent=1)
         if store is not None:
             store.write_bytes(p.out / "meta.json", (p.out / "meta.json").read_bytes())
+        elif spec.previews and meta.get("complete", True):  # the Blender worker previews its RGB frames; the rest here
+            from ..tour.show import write_previews
+
+            write_previews(p.out)
     summary = {"job": spec.name, "out": plan.where, "tours": len(plan.tours), "chunks": counts,
                "frames_total": plan.frames_total, "frames_rendered_now": rendered, "wall_time_s": wall,
                "frames_per_s": round(rendered / wall, 3) if wall > 0 else None, "backend": backend, "workers": workers,

@@ -328,4 +328,8 @@ def _render_prepared(spec: TourSpec, p, progress: bool, t0: float) -> dict:
         host={"platform": platform.platform(), "cpus": os.cpu_count()},
     )
     write_json_atomic(p.out / "meta.json", meta, indent=1)
+    if spec.previews:  # the Blender worker previews its RGB frames; the fast renderer's and the geometry frames' here
+        from .show import write_previews
+
+        write_previews(p.out)
     return meta

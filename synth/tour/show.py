@@ -325,3 +325,26 @@ def tour_video(tour: Tour, out, every: int | None = None, fps: float = 10.0, max
     frames[0].save(buf, format="GIF", save_all=True, append_images=frames[1:], duration=round(1000 / fps), loop=0,
                    optimize=False)
     return write_bytes_atomic(out, buf.getvalue()), len(frames)
+
+
+def write_previews(tour_dir) -> int:
+    """``--previews`` for the frames the Blender worker did not preview (the fast renderer's, the
+    geometry frames between RGB frames): ``previews/NNNNNN.png``, depth | instance ids at the frame's
+    size, written atomically; frames that already have a preview keep it. Returns how many were written."""
+    from PIL import Image
+
+    from vrformats.atomic import replacing
+
+    tour = Tour(tour_dir)
+    d = Path(tour_dir) / "previews"
+    todo = [int(i) for i in tour.frame_indices if not (d / f"{int(i):06d}.png").is_file()]
+    if not todo:
+        return 0
+    d.mkdir(exist_ok=True)
+    _, depth_max = _tour_scales(tour, todo)
+    W = tour.intrinsics.width
+    for i in todo:
+        row = frame_row(tour, i, None, depth_max)[:, W + max(GAP_PX, 1):]  # depth | ids: no RGB to show
+        with replacing(d / f"{i:06d}.png") as tmp:
+            Image.fromarray(row).save(tmp, format="PNG")
+    return len(todo)

@@ -95,3 +95,21 @@ def test_a_render_jobs_folder_is_summarised_and_drawn(tmp_path, capsys):
         for n in ("apt_t__day__query", "apt_t__night__query", "apt_u__day__query", "apt_u__night__query")}}))
     assert synth_main(["tour", "check", str(job)]) == 1
     assert "3 complete" in capsys.readouterr().out
+
+
+def test_previews_of_geometry_frames_and_of_a_fast_render(tmp_path):
+    """--previews wrote nothing for the fast renderer: now every frame without an RGB preview gets
+    depth | ids, and a preview already there (the Blender worker's) is kept."""
+    from synth.tour.show import write_previews
+
+    t = _tour(tmp_path / "apt_t__day__query")
+    (t / "previews").mkdir()
+    Image.new("RGB", (W, H), "red").save(t / "previews" / "000000.png")
+    assert write_previews(t) == N - 1 and write_previews(t) == 0
+    assert np.asarray(Image.open(t / "previews" / "000000.png"))[0, 0].tolist() == [255, 0, 0]
+    p = Image.open(t / "previews" / "000005.png")
+    assert p.size[1] == H and 2 * W <= p.size[0] <= 2 * W + 8
+    out = tmp_path / "fast"
+    assert synth_main(["tour", "render", "apt_0", "query", "--renderer", "fast", "--frames", "2", "--size", "32x24",
+                       "--previews", "--quiet", "--out", str(out)]) == 0
+    assert sorted(f.name for f in (out / "previews").iterdir()) == ["000000.png", "000001.png"]
