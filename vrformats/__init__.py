@@ -10,6 +10,7 @@
 * ``frames``: the EXR frame format (RGB, planar depth, instance and semantic ids) and sRGB;
 * ``boxes``: the box format (``videoreloc-boxes/1``) of ground truth and maps, and the instance id bases;
 * ``tour``: the tour folder format and its reader, ``Tour``;
+* ``environment``: what produced a result (toolkit version and commit, machine, library versions);
 * ``native``: imports of wheels that link system libraries (open3d): a missing one is one line;
 * ``design``: a rendered design (``design.json``, tour names), listed from its tours' meta.json.
 """
