@@ -32,6 +32,7 @@ __all__ = ["ERROR_CMAP", "ERROR_MAX_M", "POS_THRESHOLD_M", "ROT_THRESHOLD_DEG", 
 POS_THRESHOLD_M, ROT_THRESHOLD_DEG = THRESHOLDS["recall_1m_10deg"]
 ERROR_MAX_M = 1.0  # the colour scale: 0 m green, 0.5 m yellow, >= 1 m red
 ROLLING_WINDOW = 31  # frames
+MAX_COLUMNS = 2  # methods side by side in a tour figure (more wrap onto further rows): about 1,050 px wide
 DPI = 100
 
 ERROR_CMAP = LinearSegmentedColormap.from_list(
@@ -173,7 +174,8 @@ def tour_figure(bmap, gt: dict, estimates: dict, out_png, title: str = "", windo
     from matplotlib.ticker import LogLocator, NullLocator
 
     labels = list(estimates) or ["(no methods)"]
-    ncol = len(labels)
+    ncol = min(len(labels), MAX_COLUMNS)
+    nblock = -(-len(labels) // ncol)  # rows of methods
     gt_frames, gt_P = _gt_arrays(gt)
     n_gt = len(gt_frames)
     lo, hi = _view_limits(bmap, gt_P)
@@ -183,18 +185,21 @@ def tour_figure(bmap, gt: dict, estimates: dict, out_png, title: str = "", windo
     col_w = 4.0
     top_h = float(np.clip(col_w * ext[1] / ext[0], 2.0, 6.0))
     bot_h, left, gap, right = 1.7, 0.85, 0.55, 1.05  # right: room for the colour bar
-    head = 0.55 + (0.4 if title else 0.0)  # column titles (two lines) + figure title
-    mid, foot = 0.75, 0.8  # foot: the frame axis label and the legend of the error curves
+    col_head, mid, xlab = 0.55, 0.75, 0.45  # column titles (two lines), between the panels, frame axis label
+    block_h = col_head + top_h + mid + bot_h + xlab
+    head = 0.1 + (0.4 if title else 0.0)  # the figure title
+    foot = 0.4  # the legend of the error curves
     W = left + ncol * col_w + (ncol - 1) * gap + right
-    H = head + top_h + mid + bot_h + foot
+    H = head + nblock * block_h + foot
     fig = Figure(figsize=(W, H), dpi=dpi)
     FigureCanvasAgg(fig)
-    gs = fig.add_gridspec(2, ncol, height_ratios=[top_h, bot_h], left=left / W, right=1 - right / W,
-                          top=1 - head / H, bottom=foot / H, wspace=gap / col_w, hspace=mid / ((top_h + bot_h) / 2))
     major = LogLocator(base=10.0, numticks=8)
-    for c, label in enumerate(labels):
-        ax = fig.add_subplot(gs[0, c])
-        axb = fig.add_subplot(gs[1, c])
+    for k, label in enumerate(labels):
+        b, c = divmod(k, ncol)
+        x0 = left + c * (col_w + gap)
+        y_top = H - head - b * block_h - col_head
+        ax = fig.add_axes((x0 / W, (y_top - top_h) / H, col_w / W, top_h / H))
+        axb = fig.add_axes((x0 / W, (y_top - top_h - mid - bot_h) / H, col_w / W, bot_h / H))
         ax.set_xlim(lo[0], hi[0])
         ax.set_ylim(lo[1], hi[1])
         ax.set_aspect("equal", adjustable="box")
@@ -257,7 +262,8 @@ def tour_figure(bmap, gt: dict, estimates: dict, out_png, title: str = "", windo
                loc="lower center", ncol=4, fontsize=8, frameon=False, bbox_to_anchor=(0.5, 0.02 / H))
 
     # one colour bar, to the right of the top row
-    y0, y1 = foot + bot_h + mid, H - head
+    y1 = H - head - col_head  # beside the first row's map panels
+    y0 = y1 - top_h
     cax = fig.add_axes(((W - right + 0.25) / W, (y0 + 0.1 * (y1 - y0)) / H, 0.14 / W, 0.8 * (y1 - y0) / H))
     cb = fig.colorbar(ScalarMappable(norm=Normalize(0.0, ERROR_MAX_M), cmap=ERROR_CMAP), cax=cax, extend="max")
     cb.set_label("position error (m)", fontsize=8)

@@ -523,3 +523,17 @@ def test_report_has_per_tour_recall_checks_environment_and_linked_plots(results_
     (results_dir / "results.json").write_text(json.dumps(res))
     md = write_report(results_dir)[1].read_text()
     assert "not recorded with the results" in md and f"{cpu_model() or 'unknown CPU'}" in md
+
+
+def test_many_methods_wrap_into_rows_so_a_figure_keeps_a_page_width(tmp_path, captured):
+    """Seven methods (the demo's rows) at most reloc.figures.MAX_COLUMNS side by side: the figure is
+    as wide as two columns (readable in report.html without scaling), the methods in four rows."""
+    gt = gt_poses(60)
+    est = {f"method {k}": dict(gt) for k in range(7)}
+    out = plots.tour_figure(None, gt, est, tmp_path / "wide.png", title="seven")
+    w, h = png_size(out)
+    assert reloc.figures.MAX_COLUMNS == 2 and 900 <= w <= 1200 and h > w, (w, h)
+    tops = [ax for ax in captured["wide.png"].axes if ax.get_title().startswith("method")]
+    assert len(tops) == 7
+    assert len({round(ax.get_position().x0, 3) for ax in tops}) == 2
+    assert len({round(ax.get_position().y0, 3) for ax in tops}) == 4
