@@ -528,7 +528,7 @@ def test_report_has_per_tour_recall_checks_environment_and_linked_plots(results_
 def test_many_methods_wrap_into_rows_so_a_figure_keeps_a_page_width(tmp_path, captured):
     """Seven methods (the demo's rows) at most reloc.figures.MAX_COLUMNS side by side: the figure is
     as wide as two columns (readable in report.html without scaling), the methods in four rows."""
-    gt = gt_poses(60)
+    gt = dict(enumerate(gt_poses(60)))
     est = {f"method {k}": dict(gt) for k in range(7)}
     out = plots.tour_figure(None, gt, est, tmp_path / "wide.png", title="seven")
     w, h = png_size(out)
