@@ -155,6 +155,9 @@ def cmd_generate(args) -> int:
     out = Path(args.out_dir) if args.out_dir else generated_dir("layouts")
     ref = generate_apartment(DEFAULT_SEED, "apt_0")
     save_layout(ref, out / "apt_0.yaml")
+    unknown = sorted(set(args.only or ()) - {v.name for v in BUILTIN_VARIANTS})
+    if unknown:
+        raise UserError(f"--only {unknown[0]}: not a built-in variant; choose from {', '.join(v.name for v in BUILTIN_VARIANTS)}")
     specs = [v for v in BUILTIN_VARIANTS if not args.only or v.name in args.only]
     walkway = reference_walkway(ref)
     for spec in tqdm(specs, desc="variants", unit="layout", disable=args.quiet):

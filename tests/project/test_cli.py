@@ -195,6 +195,8 @@ def test_generate_writes_the_working_folder_when_installed_and_quiet_keeps_the_r
     assert f"wrote apt_0 and 1 variants to {tmp_path / 'scenes' / 'layouts'}" in out, out
     assert sorted(p.name for p in (tmp_path / "scenes" / "layouts").iterdir()) == ["apt_0.yaml", "apt_1.yaml"]
     assert resources.generated_dir("paths") == tmp_path / "scenes" / "paths"
+    assert synth_main(["scene", "generate", "--only", "apt_9", "--quiet"]) == 2  # was: silently no variant
+    assert "--only apt_9" in capsys.readouterr().err
     monkeypatch.setattr(resources, "checkout_root", lambda: REPO)  # a checkout rewrites its own scenes/
     assert resources.generated_dir("paths") == resources.scenes_dir() / "paths"
 
