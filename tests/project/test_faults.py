@@ -106,11 +106,13 @@ def _signal_and_check(proc, kids: set[int], sig: int, prog: str) -> str:
 @pytest.fixture(scope="module")
 def fault_design(tmp_path_factory):
     """Two 600-frame geometry-only query tours and a 30-frame mapping tour at 64x48 (fast renderer),
-    and an experiment on them with two workers and three methods (a few seconds a task)."""
+    and an experiment on them with two workers and three methods (a few seconds a task). One chunk a
+    tour: the frames are the same in any chunking, and each chunk is a process that loads the layout
+    (the render tests below set their own chunk_size)."""
     from synth.jobs import load_spec, run_job
 
     root = tmp_path_factory.mktemp("faults")
-    render = {"name": "faults", "out": str(root / "tours"), "renderer": "fast", "size": [64, 48], "chunk_size": 50,
+    render = {"name": "faults", "out": str(root / "tours"), "renderer": "fast", "size": [64, 48], "chunk_size": 600,
               "designs": [{"layouts": ["apt_0", "apt_1"], "path": {"name": "query", "frames": 600}},
                           {"layouts": ["apt_0"], "path": {"name": "mapping", "frames": 30}}]}
     (root / "render.yaml").write_text(yaml.safe_dump(render))
