@@ -14,7 +14,7 @@ from vrformats import camera
 from vrformats.atomic import write_text_atomic
 from vrformats.errors import SceneFormatError, UnknownNameError, UserError
 from vrformats.fields import integer, is_number
-from vrformats.yamlfile import MAX_DEPTH, check_shape, read_text
+from vrformats.yamlfile import MAX_DEPTH, check_shape, read_text, safe_load
 
 from ..resources import paths_dir  # $SYNTH_SCENES_DIR/paths, else scenes/paths
 from .model import FORMAT, CameraPath
@@ -83,7 +83,7 @@ def load_path(name_or_file) -> CameraPath:
     if side.exists():
         text = read_text(side)
         try:
-            doc = yaml.safe_load(text)
+            doc = safe_load(text)
         except yaml.YAMLError as e:
             mark = getattr(e, "problem_mark", None)
             where = f"line {mark.line + 1}" if mark is not None else None

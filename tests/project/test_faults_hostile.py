@@ -299,6 +299,29 @@ def test_readers_bound_size_depth_and_aliases(tmp_path, monkeypatch):
         read_json(nest)
 
 
+def test_the_fast_yaml_parser_reads_what_pyyaml_reads_and_errors_are_pyyamls(monkeypatch):
+    """vrformats.yamlfile.safe_load parses with libyaml where PyYAML has it: every shipped YAML file gives
+    the same values (types included) as yaml.safe_load, and a malformed document the same message."""
+    import yaml
+
+    import vrformats.yamlfile as yf
+
+    repo = Path(__file__).resolve().parents[2]
+    files = sorted(p for d in ("scenes", "render_jobs", "reloc", "synth") for p in (repo / d).rglob("*.yaml")
+                   if p.stat().st_size < 8192 or p.name == "apt_1.yaml")  # the specs, presets and one layout
+    assert len(files) > 20
+    for f in files:
+        text = f.read_text()
+        assert repr(yf.safe_load(text)) == repr(yaml.safe_load(text)), f
+    bad = "name: x\ndesigns: [\n"
+    with pytest.raises(SceneFormatError) as fast:
+        yf.parse_yaml("s.yaml", bad)
+    monkeypatch.setattr(yf, "_FAST_LOADER", None)  # PyYAML without libyaml
+    with pytest.raises(SceneFormatError) as plain:
+        yf.parse_yaml("s.yaml", bad)
+    assert str(fast.value) == str(plain.value) and "malformed YAML" in str(fast.value)
+
+
 # ---------------------------------------------------------------------------------------------
 # numbers from the user: range and finiteness where they are read; resources bounded
 
