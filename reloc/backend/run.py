@@ -379,7 +379,7 @@ def register_cli(subparsers) -> None:
     p.add_argument("--map", required=True, help="map file (videoreloc-boxes/1 JSON)")
     p.add_argument("--tour", required=True, help="rendered tour directory")
     p.add_argument("--out", required=True, help="output directory")
-    p.add_argument("--budget", type=int, default=0, help="also write budget_B.txt: delayed-output replay with B frames")
+    p.add_argument("--budget", type=positive_int, help="also write budget_B.txt: delayed-output replay with B frames")
     p.add_argument("--poses", choices=("odometry", "gt"), default="odometry",
                    help="within-clip poses: RGB-D odometry (default) or ground truth")
     p.add_argument("--frames", type=positive_int, help="only the first N frames")

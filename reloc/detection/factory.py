@@ -86,6 +86,10 @@ def detector_spec_from_args(args) -> DetectorSpec:
     try:
         c = Corruption(miss_rate=args.miss_rate, confusion_rate=args.confusion_rate, mask_px=args.mask_px,
                        spurious_per_frame=args.spurious, seed=args.detector_seed)
-    except ValueError as e:
-        raise UserError(str(e)) from None
+    except ValueError as e:  # named as the options the user typed
+        msg = str(e)
+        for field, option in (("corruption.miss_rate", "--miss-rate"), ("corruption.confusion_rate", "--confusion-rate"),
+                              ("corruption.mask_px", "--mask-px"), ("corruption.spurious_per_frame", "--spurious")):
+            msg = msg.replace(field, option)
+        raise UserError(msg) from None
     return DetectorSpec(kind=args.detector, corruption=c, model=args.model, class_map=args.class_map)

@@ -27,6 +27,10 @@ from ..config import DetectionConfig
 from .base import Detection, FrameData
 
 
+MAX_MASK_PX = 64  # beyond this an eroded mask is gone and a dilated one covers the frame (and the kernel costs minutes)
+MAX_SPURIOUS = 100.0  # invented detections per frame: far past any detector, and each one is a mask to make
+
+
 @dataclass(frozen=True)
 class Corruption:
     """Seeded degradation of oracle detections; all zero = perfect detections."""
@@ -42,8 +46,11 @@ class Corruption:
             v = getattr(self, name)
             if not 0.0 <= v <= 1.0:
                 raise ValueError(f"corruption.{name}: expected a probability in [0, 1], got {v}")
-        if self.mask_px < 0 or self.spurious_per_frame < 0:
-            raise ValueError("corruption.mask_px and corruption.spurious_per_frame must be >= 0")
+        if not (isinstance(self.mask_px, int) and 0 <= self.mask_px <= MAX_MASK_PX):
+            raise ValueError(f"corruption.mask_px: expected whole pixels from 0 to {MAX_MASK_PX}, got {self.mask_px!r}")
+        if not 0.0 <= self.spurious_per_frame <= MAX_SPURIOUS:  # NaN fails too
+            raise ValueError(f"corruption.spurious_per_frame: expected a mean from 0 to {MAX_SPURIOUS:g} detections "
+                             f"per frame, got {self.spurious_per_frame!r}")
 
     @property
     def active(self) -> bool:

@@ -58,6 +58,9 @@ def cmd_train(args) -> int:
     check_output_folder(args.out)
     if not Path(args.data).is_file():
         raise UserError(f"{args.data}: training set not found (make one with reloc detector pack)")
+    from .data import open_pack
+
+    open_pack(args.data)  # another file is one line now, before the output folder is made
     arch, width = args.arch, args.width
     if args.init:  # the network is the model's own
         from .train import onnx_init

@@ -110,12 +110,32 @@ def pack(tour_dirs, out, classes: list[str], every: int = 1, progress: bool = Tr
     return {"frames": len(meta), "bytes": int(Path(out).stat().st_size), "classes": len(classes)}
 
 
+def open_pack(path):
+    """(the open .npz, its header) of a packed training set; a ``UserError`` naming the file when it
+    is not one (another file, another .npz, a damaged one)."""
+    import zipfile
+
+    from vrformats.errors import UserError, one_line
+
+    what = f"{path}: not a training set from reloc detector pack"
+    if not zipfile.is_zipfile(path):
+        raise UserError(f"{what} (not an .npz archive)")
+    try:
+        z = np.load(path)
+        if not isinstance(z, np.lib.npyio.NpzFile) or not {"header", "blob", "sizes"} <= set(z.files):
+            raise UserError(f"{what} (a {PACK_FORMAT} .npz holds header, blob and sizes)")
+        header = json.loads(bytes(z["header"]).decode())
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, UnicodeDecodeError) as e:
+        raise UserError(f"{what} ({one_line(e, 120)})") from None
+    if not isinstance(header, dict) or header.get("format") != PACK_FORMAT:
+        raise UserError(f"{what} (format {header.get('format') if isinstance(header, dict) else None!r}, "
+                        f"expected {PACK_FORMAT})")
+    return z, header
+
+
 def load(path) -> TrainingSet:
     """Decode a packed training set (needs numpy and Pillow only)."""
-    z = np.load(path)
-    header = json.loads(bytes(z["header"]).decode())
-    if header.get("format") != PACK_FORMAT:
-        raise ValueError(f"{path}: not a {PACK_FORMAT} file (format {header.get('format')!r})")
+    z, header = open_pack(path)
     blob, sizes = z["blob"], z["sizes"]
     ends = np.cumsum(sizes)
     starts = ends - sizes

@@ -91,13 +91,19 @@ def cmd_export(args) -> int:
 
 
 def _size(text: str) -> tuple[int, int]:
+    """``--size WIDTHxHEIGHT``, within the bounds a spec's ``size`` has (``vrformats.fields.frame_size``)."""
+    from vrformats.fields import frame_size
+
     try:
         w, h = (int(v) for v in text.lower().split("x"))
         if w <= 0 or h <= 0:
             raise ValueError
-        return w, h
     except ValueError:
-        raise UserError(f"--size must look like 640x480, got {text!r}") from None
+        raise UserError(f"--size must look like 640x480, got {text[:40]!r}") from None
+    try:
+        return frame_size("--size", [w, h], "size")
+    except UserError as e:  # "--size: size: 99999x99999 is too large ...": name the option once
+        raise UserError(str(e).replace("--size: size: ", "--size: ", 1)) from None
 
 
 def register_cli(subparsers) -> None:

@@ -322,3 +322,43 @@ def test_experiment_runs_record_the_spec_detector(world, tmp_path):
     relocalize(t, bmap, tmp_path / "run", detector=det, poses="gt", frames=6, progress=False)
     c = json.loads((tmp_path / "run" / "run.json").read_text())["detector"]["corruption"]
     assert c["miss_rate"] == 0.1 and c["seed"] == 5 and c["active"] is True
+
+
+# ---------------------------------------------------------------------------------------------
+# a fault sweep: the detector commands and reloc run's corruption options
+
+
+def test_detector_eval_on_a_geometry_only_tour_is_one_line(world, capsys):
+    from reloc.resources import SHIPPED_MODEL
+
+    assert reloc_main(["detector", "eval", str(world["tour"]), "--model", str(SHIPPED_MODEL), "--quiet"]) == 2
+    one_line_error(capsys, f"{world['tour']}/meta.json", "geometry-only tour has no RGB frames")
+
+
+def test_detector_train_on_a_file_that_is_no_training_set_is_one_line(tmp_path, capsys):
+    np.save(tmp_path / "a.npy", np.zeros(3))
+    np.savez(tmp_path / "b.npz", x=np.zeros(3))
+    (tmp_path / "c.txt").write_text("not an archive\n")
+    for f, why in (("a.npy", "not an .npz archive"), ("b.npz", "holds header, blob and sizes"),
+                   ("c.txt", "not an .npz archive")):
+        assert reloc_main(["detector", "train", str(tmp_path / f), "--out", str(tmp_path / "run"), "--quiet"]) == 2
+        one_line_error(capsys, tmp_path / f, "not a training set from reloc detector pack", why)
+    assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("option, value, says", [
+    ("--spurious", "1e12", "--spurious: expected a mean from 0 to 100 detections per frame"),
+    ("--spurious", "nan", "--spurious: expected a mean from 0 to 100"),
+    ("--mask-px", "1000000000", "--mask-px: expected whole pixels from 0 to 64"),
+    ("--mask-px", "-1", "--mask-px: expected whole pixels from 0 to 64"),
+    ("--budget", "-1", "argument --budget: expected a positive integer"),
+])
+def test_reloc_run_refuses_corruption_and_budgets_out_of_range(world, tmp_path, capsys, option, value, says):
+    try:
+        rc = reloc_main(["run", "--map", str(world["map"]), "--tour", str(world["tour"]), "--out", str(tmp_path / "r"),
+                         option, value, "--quiet"])
+    except SystemExit as e:  # an option argparse refuses: its one-line error, then exit
+        rc = e.code
+    assert rc == 2
+    one_line_error(capsys, says, prog=("reloc", "reloc run"))
+    assert not (tmp_path / "r").exists()

@@ -282,7 +282,7 @@ def test_cli_bench_frontend_prints_stages(tours, capsys):
     (["units", "--map", "/nonexistent/map.json", "--tour", "TOUR"], "map file not found"),
     (["units", "--map", "MAP", "--tour", "/nonexistent/tour"], "tour directory not found"),
     (["units", "--map", "MAP", "--tour", "TOUR", "--lengths", "1,x"], "--lengths"),
-    (["units", "--map", "MAP", "--tour", "TOUR", "--miss-rate", "2"], "miss_rate"),
+    (["units", "--map", "MAP", "--tour", "TOUR", "--miss-rate", "2"], "--miss-rate: expected a probability"),
     (["units", "--map", "MAP", "--tour", "TOUR", "--config", "CFG"], "registration.center_match: unknown setting"),
     (["units", "--map", "MAP", "--tour", "TOUR", "--detector", "onnx"], "--model"),
 ])

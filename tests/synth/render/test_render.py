@@ -185,6 +185,7 @@ def test_corrupt_exr_is_named(tmp_path):
         (["apt_0", "query", "--frames", "0"], "--frames must be positive"),
         (["apt_0", "query", "--frames", "999999"], "exceeds"),
         (["apt_0", "query", "--size", "640by480"], "--size must look like"),
+        (["apt_0", "query", "--size", "99999x99999"], "--size: 99999x99999 is too large: at most 8192 px a side"),
         (["apt_0", "query", "--renderer", "fast", "--lighting", "day"], "fast renderer makes geometry only"),
     ],
 )
