@@ -52,15 +52,14 @@ def cmd_pack(args) -> int:
 
 
 def cmd_train(args) -> int:
-    _torch()
-    from .train import export_onnx, train
+    from .data import open_pack
 
     check_output_folder(args.out)
     if not Path(args.data).is_file():
         raise UserError(f"{args.data}: training set not found (make one with reloc detector pack)")
-    from .data import open_pack
-
-    open_pack(args.data)  # another file is one line now, before the output folder is made
+    open_pack(args.data)  # another file is one line now, before PyTorch loads and the output folder is made
+    _torch()
+    from .train import export_onnx, train
     arch, width = args.arch, args.width
     if args.init:  # the network is the model's own
         from .train import onnx_init
