@@ -88,8 +88,8 @@ def detector_spec_from_args(args) -> DetectorSpec:
                        spurious_per_frame=args.spurious, seed=args.detector_seed)
     except ValueError as e:  # named as the options the user typed
         msg = str(e)
-        for field, option in (("corruption.miss_rate", "--miss-rate"), ("corruption.confusion_rate", "--confusion-rate"),
+        for name, option in (("corruption.miss_rate", "--miss-rate"), ("corruption.confusion_rate", "--confusion-rate"),
                               ("corruption.mask_px", "--mask-px"), ("corruption.spurious_per_frame", "--spurious")):
-            msg = msg.replace(field, option)
+            msg = msg.replace(name, option)
         raise UserError(msg) from None
     return DetectorSpec(kind=args.detector, corruption=c, model=args.model, class_map=args.class_map)

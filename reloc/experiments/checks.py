@@ -350,7 +350,6 @@ def junit_xml(rows: list[dict], suite: str, results_dir, seconds: float = 0.0) -
     return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(suites, encoding="unicode") + "\n"
 
 
-CHECKS_RECORD = "checks.json"  # the last ``reloc check``'s results, in the results folder; the report shows them
 
 
 def record_checks(rows: list[dict], check_file, results_dir) -> Path | None:
@@ -360,6 +359,8 @@ def record_checks(rows: list[dict], check_file, results_dir) -> Path | None:
     import sys
 
     from vrformats.atomic import write_json_atomic
+
+    from .report import CHECKS_RECORD
 
     results_dir = Path(results_dir)
     try:

@@ -73,6 +73,8 @@ _HEADING = re.compile(r"^(?P<level>#{1,6})\s+(?P<text>.*?)\s*#*\s*$")
 _LIST = re.compile(r"^\s*[-*+]\s+(?P<text>.*)$")
 
 
+CHECKS_RECORD = "checks.json"  # the last ``reloc check``'s results (written by reloc.experiments.checks), shown here
+
 def esc(text) -> str:
     return html.escape(str(text), quote=True)
 
@@ -301,8 +303,6 @@ def _per_tour_section(results: dict) -> list[str]:
 
 def _checks_section(results_dir: Path) -> list[str]:
     """The last ``reloc check``'s results (``checks.json``), or how to add them."""
-    from .checks import CHECKS_RECORD
-
     md = ["## Checks", ""]
     path = results_dir / CHECKS_RECORD
     doc = None
