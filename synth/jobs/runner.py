@@ -206,7 +206,7 @@ def _run_plan(plan: Plan, old: dict | None, backend: str, workers: int, progress
         write_json_atomic(p.out / "meta.json", meta, indent=1)
         if store is not None:
             store.write_bytes(p.out / "meta.json", (p.out / "meta.json").read_bytes())
-        elif spec.previews and meta.get("complete", True):  # the Blender worker previews its RGB frames; the rest here
+        elif spec.previews and spec.renderer == "fast" and meta.get("complete", True):  # nothing else previews them
             from ..tour.show import write_previews
 
             write_previews(p.out)

@@ -55,7 +55,7 @@ def _run(log, argv, cwd, env, timeout=300) -> str:
 
 
 def _copy_sources(dst: Path) -> None:
-    for name in ("pyproject.toml", "README.md"):
+    for name in ("pyproject.toml", "README.md", "LICENSE"):
         shutil.copy2(REPO / name, dst / name)
     for pkg in PACKAGES + tuple(DATA_FOLDERS):
         shutil.copytree(REPO / pkg, dst / pkg, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
