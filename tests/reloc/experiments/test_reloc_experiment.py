@@ -279,7 +279,7 @@ def test_a_bare_name_is_a_shipped_spec_and_a_file_wins(tmp_path, monkeypatch, ca
                                                r"spec of that name; shipped: demo, detector_eval, quickstart, reference"):
         load_experiment(write_experiment_spec(tmp_path, render="nowhere"))
     for argv, shipped in ((["experiment", "nosuch"], "demo_experiment, demo_sensors_experiment, demo_tables, "
-                                                     "reference_experiment"),
+                                                     "quickstart_experiment, reference_experiment"),
                           (["check", "nosuch", str(tmp_path)], "demo_checks, demo_sensor_checks")):
         assert reloc_main(argv) == 2
         err = capsys.readouterr().err.strip()
