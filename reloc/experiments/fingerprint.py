@@ -13,8 +13,6 @@ import ast
 import functools
 import hashlib
 import json
-import platform
-from importlib import metadata
 from pathlib import Path
 
 # ---------------------------------------------------------------------------------------------
@@ -80,13 +78,10 @@ def code_files(root: Path | None = None) -> list[Path]:
 
 
 def library_versions() -> dict[str, str]:
-    out = {"python": platform.python_version()}
-    for dist in LIBRARIES:
-        try:
-            out[dist] = metadata.version(dist)
-        except metadata.PackageNotFoundError:
-            pass
-    return out
+    """Python's and each of ``LIBRARIES``' versions (``vrformats.environment.library_versions``)."""
+    from vrformats.environment import library_versions as versions
+
+    return versions(LIBRARIES)
 
 
 def source_fingerprint(root: Path | None = None, versions: dict | None = None) -> str:
