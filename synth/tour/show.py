@@ -238,19 +238,37 @@ def _picks(tour: Tour, count: int) -> list[int]:
     return [idx[round(k * (len(idx) - 1) / (count - 1))] for k in range(count)] if count > 1 else idx[:1]
 
 
+STILL_FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG"}
+
+
+def still_format(out: Path, what: str) -> str:
+    """Pillow's format for a still picture file, or a one-line error naming the file."""
+    fmt = STILL_FORMATS.get(out.suffix.lower())
+    if fmt is None:
+        raise UserError(f"{out}: a {what} is written as .png or .jpg")
+    return fmt
+
+
+def save_still(img, out: Path, fmt: str) -> Path:
+    """A Pillow image written atomically as PNG (optimised) or JPEG (quality 88)."""
+    import io
+
+    from vrformats.atomic import write_bytes_atomic
+
+    buf = io.BytesIO()
+    img.save(buf, format=fmt, **({"quality": 88} if fmt == "JPEG" else {"optimize": True}))
+    return write_bytes_atomic(out, buf.getvalue())
+
+
 def tour_strip(tour: Tour, out, count: int = 6, scale: int = 2) -> Path:
     """A contact strip of ``count`` frames spread along the tour, one row per frame: RGB | depth |
     instance ids, captioned with the frame, its time and the tour; written atomically (PNG or JPEG)."""
     from PIL import Image
 
-    from vrformats.atomic import write_bytes_atomic
-
     if count < 1:
         raise UserError(f"--count must be at least 1, got {count}")
     out = Path(out)
-    fmt = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG"}.get(out.suffix.lower())
-    if fmt is None:
-        raise UserError(f"{out}: a strip is written as .png or .jpg")
+    fmt = still_format(out, "strip")
     picks = _picks(tour, count)
     exposure, depth_max = _tour_scales(tour, picks)
     rows = []
@@ -268,11 +286,7 @@ def tour_strip(tour: Tour, out, count: int = 6, scale: int = 2) -> Path:
     for r in rows:
         sheet.paste(r, (0, y))
         y += r.height + GAP_PX
-    import io
-
-    buf = io.BytesIO()
-    sheet.save(buf, format=fmt, **({"quality": 88} if fmt == "JPEG" else {"optimize": True}))
-    return write_bytes_atomic(out, buf.getvalue())
+    return save_still(sheet, out, fmt)
 
 
 def tour_video(tour: Tour, out, every: int | None = None, fps: float = 10.0, max_frames: int = 300,

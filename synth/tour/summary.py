@@ -78,18 +78,12 @@ def design_mosaic(root, out, scale: int = 1, path: str | None = None) -> Path:
     """The first frame (with RGB where the tour has any) of every tour (of camera path ``path`` only,
     if given): rows layout x path, columns lighting, each cell RGB | depth | instance ids; written
     atomically (PNG or JPEG)."""
-    import io
-
     from PIL import Image, ImageDraw
 
-    from vrformats.atomic import write_bytes_atomic
-
-    from .show import LABEL_PX, _picks, _tour_scales, frame_row
+    from .show import LABEL_PX, _picks, _tour_scales, frame_row, save_still, still_format
 
     root, out = Path(root), Path(out)
-    fmt = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG"}.get(out.suffix.lower())
-    if fmt is None:
-        raise UserError(f"{out}: a mosaic is written as .png or .jpg")
+    fmt = still_format(out, "mosaic")
     found = list_tours(root)
     if path is not None:
         paths = sorted({m["path"] for m in found.values()})
@@ -124,6 +118,4 @@ def design_mosaic(root, out, scale: int = 1, path: str | None = None) -> Path:
         for k, c in enumerate(cols):
             if ((layout, path), c) in cells:
                 sheet.paste(cells[(layout, path), c], (left + k * (cw + 6), y))
-    buf = io.BytesIO()
-    sheet.save(buf, format=fmt, **({"quality": 88} if fmt == "JPEG" else {"optimize": True}))
-    return write_bytes_atomic(out, buf.getvalue())
+    return save_still(sheet, out, fmt)
