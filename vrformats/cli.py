@@ -41,16 +41,16 @@ def positive_int(text: str) -> int:
 MAX_WORKERS = 256  # processes or threads one option may ask for
 
 
-def bounded_int(hi: int):
-    """argparse ``type``: an integer from 1 to ``hi``, the bound stated in the message."""
+def bounded_int(hi: int, lo: int = 1):
+    """argparse ``type``: an integer from ``lo`` (1) to ``hi``, the bounds stated in the message."""
 
     def parse(text: str) -> int:
         try:
             v = int(text)
         except ValueError:
-            v = 0
-        if not 1 <= v <= hi:
-            raise argparse.ArgumentTypeError(f"expected an integer from 1 to {hi}, got {text[:40]!r}")
+            v = lo - 1
+        if not lo <= v <= hi:
+            raise argparse.ArgumentTypeError(f"expected an integer from {lo} to {hi}, got {text[:40]!r}")
         return v
 
     return parse

@@ -4,7 +4,7 @@ A job is a JSON file (``synth.render.chunks.chunk_job`` writes it)::
 
     {"pass": "geometry" | "rgb", "layout": "<layout file>", "lighting": "<preset name or file>",
      "poses": "<TUM file>", "frames": [i, ...], "intrinsics": {...}, "quality": "preview",
-     "seed": 0, "device": "cpu", "out_dir": "<where frames go>", "geometry_dir": "<geometry cache>",
+     "cycles": null (or settings of the preset replaced), "seed": 0, "device": "cpu", "out_dir": "<where frames go>", "geometry_dir": "<geometry cache>",
      "previews_dir": null, "threads": 0}
 
 The geometry pass writes depth, instance and semantic EXRs into ``out_dir``. The RGB pass renders
@@ -56,7 +56,7 @@ def run(job: dict) -> int:
     from vrformats.camera import Intrinsics, read_tum
     from ..scene.lighting import load_lighting, resolve_lighting
     from ..render.meshes import instance_classes, layout_parts
-    from ..render.settings import quality
+    from ..render.settings import resolve_quality
     from ..scene.model import load_layout
     from . import scene_builder as sb
 
@@ -86,7 +86,7 @@ def run(job: dict) -> int:
         for iid, sid in instance_classes(layout).items():
             lut[iid] = sid
     else:
-        sb.configure_rgb(scene, quality(job.get("quality", "preview")), int(job.get("seed", 0)))
+        sb.configure_rgb(scene, resolve_quality(job.get("quality", "preview"), job.get("cycles")), int(job.get("seed", 0)))
         sb.add_lighting(scene, resolve_lighting(load_lighting(job["lighting"]), layout), emitters)
         geom_dir = Path(job["geometry_dir"])
         previews = Path(job["previews_dir"]) if job.get("previews_dir") else None

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from vrformats.atomic import write_json_atomic
 from vrformats.errors import UserError, check_output_file
-from vrformats.cli import add_quiet, add_workers
+from vrformats.cli import add_quiet, add_workers, bounded_int
 
 from .calibration import estimate, measure_calibration
 from .estimate import fmt_duration
@@ -128,9 +128,38 @@ def _dry_run(args, spec: JobSpec, clusters: list) -> int:
     return 0
 
 
+def with_overrides(spec, args):
+    """``spec`` with the render settings given on the command line (``--seed``, ``--threads``,
+    ``--cycles KEY=VALUE``) in place of its own; the job folder records them (a resume needs the same)."""
+    import dataclasses
+
+    from vrformats.yamlfile import safe_load
+    from ..render.settings import cycles_overrides
+
+    changes = {}
+    if args.seed is not None:
+        changes["seed"] = args.seed
+    if args.threads is not None:
+        changes["threads"] = args.threads
+    if args.cycles:
+        d = dict(spec.cycles or {})
+        for item in args.cycles:
+            key, eq, value = item.partition("=")
+            if not eq or not key:
+                raise UserError(f"--cycles {item}: expected KEY=VALUE (e.g. denoise_prefilter=ACCURATE)")
+            try:
+                d[key] = safe_load(value)  # 16 -> 16, true -> True, ACCURATE -> 'ACCURATE'
+            except Exception:  # noqa: BLE001 - not a YAML scalar: the text itself, refused below if it is wrong
+                d[key] = value
+        if spec.renderer != "blender":
+            raise UserError("--cycles: the fast renderer has no Cycles settings")
+        changes["cycles"] = cycles_overrides("--cycles", d, field=None)
+    return dataclasses.replace(spec, **changes) if changes else spec
+
+
 def cmd_render(args) -> int:
     cluster = _cluster_args(args)  # bad options are refused before anything is read or rendered
-    spec = load_spec(args.spec)
+    spec = with_overrides(load_spec(args.spec), args)
     if args.replicacad_root and spec.replicacad is None:
         raise UserError(f"--replicacad-root: {args.spec} has no replicacad: section (its layouts are not ReplicaCAD scenes)")
     if args.dry_run:
@@ -138,7 +167,7 @@ def cmd_render(args) -> int:
     s = run_job(spec, args.out, workers=args.workers, backend=args.backend,
                 ray_address=args.ray_address, ray_runtime_env=args.ray_runtime_env, resume=args.resume, progress=not args.quiet,
                 allow_clearance_breach=args.allow_clearance_breach, replicacad_root=args.replicacad_root,
-                check_light=True)
+                check_light=True, geometry_from=args.geometry_from)
     failed = (f", {s['frames_failed']} frames failed in {s['chunks_failed']} chunk(s)" if s["chunks_failed"] else "")
     print(f"{s['job']}: {s['tours']} tours, {s['frames_rendered_now']} frames rendered{failed} in {s['wall_time_s']:.1f} s "
           f"({s['frames_per_s']} frames/s), chunks {s['chunks']} -> {s['out']}")
@@ -160,6 +189,13 @@ def register_cli(subparsers) -> None:
                         "and its pip requirements pinned to the driver's versions), code (only the working_dir), none "
                         "(installed on every node); auto: full with --ray-address, else none (docs/cluster.md)")
     a.add_argument("--resume", action="store_true", help="finish a job that was stopped; renders only what is missing")
+    g = a.add_argument_group("render settings in place of the spec's (recorded in the job folder; a --resume needs the same)")
+    g.add_argument("--seed", type=bounded_int(2**31 - 1, lo=0), metavar="N", help="Cycles seed")
+    g.add_argument("--threads", type=bounded_int(256, lo=0), metavar="N", help="Cycles threads per worker (0: all cores)")
+    g.add_argument("--cycles", action="append", metavar="KEY=VALUE",
+                   help="a setting of the quality preset, e.g. denoise_prefilter=ACCURATE or samples=16 (repeat for several)")
+    g.add_argument("--geometry-from", metavar="JOBDIR",
+                   help="hard-link the geometry caches of another job folder of the same design, so that only RGB renders")
     a.add_argument("--dry-run", action="store_true", help="print the plan and an estimate from a short calibration render")
     g = a.add_argument_group("planning at scale (with --dry-run; docs/cluster.md)")
     g.add_argument("--nodes", metavar="N[,N...]", help="estimate the wall time on a Ray cluster of N nodes (a list: one row each)")

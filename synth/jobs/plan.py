@@ -162,6 +162,7 @@ def expand(spec: JobSpec, out: Path | None = None, check_clearance: bool = False
                 ts = TourSpec(layout=layout, path=d.path, out=str(out / name), lighting=lighting, renderer=spec.renderer,
                               quality=spec.quality, width=spec.width, height=spec.height, hfov_deg=spec.hfov_deg,
                               frames=d.frames, seed=spec.seed, device=spec.device, previews=spec.previews,
+                              threads=spec.threads, cycles=spec.cycles,
                               chunk_size=spec.chunk_size, geometry_cache=str(out / "_geometry"),
                               check_clearance=False)  # validate_names did, once per layout + path
                 p = prepare(ts, create=False)

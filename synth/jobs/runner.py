@@ -6,6 +6,7 @@ onto a storage URI (``synth.jobs.storage``), and writes each tour's ``meta.json`
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from pathlib import Path
@@ -16,7 +17,7 @@ from vrformats.errors import UserError, check_output_folder
 from vrformats.lifetime import folder_lock
 
 from ..tour.render import make_output_folder, tour_meta, write_static_files
-from ..render.settings import quality
+from ..render.settings import resolve_quality
 from .plan import Chunk, Plan, expand, out_error
 from .chunk_queue import ProgressBar, run_local
 from .spec import JobSpec, spec_difference, spec_document
@@ -36,7 +37,7 @@ def run_ray(plan: Plan, state: JobState, todo: list[Chunk], bar: ProgressBar, wo
 def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, backend: str = "local",
             ray_address: str | None = None, resume: bool = False, progress: bool = True,
             allow_clearance_breach: bool = False, replicacad_root: str | None = None, check_light: bool = False,
-            ray_runtime_env: str = "auto") -> dict:
+            ray_runtime_env: str = "auto", geometry_from: str | Path | None = None) -> dict:
     """Render everything the spec asks for that is not on disk yet. Returns a summary.
 
     A spec with ``replicacad:`` first imports its scenes and plans its paths into ``OUT/replicacad``
@@ -48,12 +49,17 @@ def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, back
 
     ``out`` (else the spec's ``out``) may be a storage URI (``synth.jobs.storage``): ``file://PATH`` is the
     folder PATH for the local backend; with the Ray backend any fsspec URI (``file://``, ``memory://``,
-    ...) puts the job folder on that file system, written by the driver."""
+    ...) puts the job folder on that file system, written by the driver.
+
+    ``geometry_from``: another job folder of the same design (another seed or Cycles settings, say):
+    its geometry caches are hard-linked (``link_geometry``) so that only the RGB passes render."""
     t0 = time.time()
     if workers <= 0:
         raise UserError(f"--workers must be positive, got {workers}")
     if backend not in ("local", "ray"):
         raise UserError(f"unknown backend '{backend}'; use local or ray")
+    if geometry_from is not None and backend != "local":
+        raise UserError("--geometry-from: the geometry caches are linked into a local job folder; use --backend local")
     from_cli = out is not None
     out, store = job_folder(spec, out, backend)
     from ..sources import spec_source
@@ -70,6 +76,7 @@ def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, back
     staging = None
     session = None
     lock = None
+    links = None
     try:
         if store is None:
             plan = expand(spec, out, check_clearance=not allow_clearance_breach, check_light=check_light)
@@ -79,6 +86,7 @@ def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, back
                 check_output_folder(plan.out)
             except UserError as e:
                 out_error(spec, from_cli, e)
+            links = geometry_links(plan, Path(geometry_from)) if geometry_from is not None else None
             if (plan.out / "results.json").is_file() and not (plan.out / STATE_FILE).is_file():
                 out_error(spec, from_cli, UserError(f"{plan.out} holds an experiment's results (results.json); "
                                                     "render into another folder"))
@@ -115,6 +123,10 @@ def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, back
                                           progress=(lambda m: print(m, file=sys.stderr)) if progress else None)
         if lock is not None and not lock.held:
             lock.acquire()
+        if links is not None:
+            n = link_geometry(links)
+            if progress:
+                print(f"{n} geometry frames linked from {geometry_from}", file=sys.stderr)
         return _run_plan(plan, old, backend, workers, progress, t0, from_cli=from_cli)
     finally:
         if session is not None:
@@ -125,6 +137,48 @@ def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, back
             import shutil
 
             shutil.rmtree(staging, ignore_errors=True)
+
+
+def geometry_links(plan: Plan, source: Path) -> list[tuple[Path, Path]]:
+    """(cache folder in ``source``, the same cache of ``plan``) for each of ``plan``'s geometry caches that
+    the job folder ``source`` holds; refuses (writing nothing) a folder that is no job or holds none. A
+    cache's folder name keys its content (layout, path, size, renderer: ``synth.tour.render``), so a
+    cache of the same name holds the same frames."""
+    if not (source / STATE_FILE).is_file():
+        raise UserError(f"--geometry-from {source}: not a job folder (no {STATE_FILE})")
+    if plan.spec.renderer != "blender":
+        raise UserError("--geometry-from: the fast renderer has no geometry cache to take (it renders geometry only)")
+    caches = sorted({p.geometry_dir for p in plan.tours.values() if p.geometry_dir is not None})
+    found = [(source / "_geometry" / c.name, c) for c in caches if (source / "_geometry" / c.name).is_dir()]
+    if not found:
+        raise UserError(f"--geometry-from {source}: it has none of this design's geometry caches "
+                        f"({', '.join(c.name for c in caches[:3])}{' ...' if len(caches) > 3 else ''})")
+    return found
+
+
+def link_geometry(links: list[tuple[Path, Path]]) -> int:
+    """Hard-link (copy across file systems) the frames of each ``geometry_links`` pair's source cache
+    that its target lacks; returns how many. Only plain files are taken (a link in the source is
+    skipped), each made visible whole (``replacing``)."""
+    import shutil
+
+    from vrformats.atomic import replacing
+
+    n = 0
+    for src, dst_dir in links:
+        dst_dir.mkdir(parents=True, exist_ok=True)
+        for f in sorted(src.iterdir()):
+            dst = dst_dir / f.name
+            if f.is_symlink() or not f.is_file() or f.name.startswith(".") or dst.exists():
+                continue
+            with replacing(dst) as tmp:
+                tmp.unlink()
+                try:
+                    os.link(f, tmp)
+                except OSError:  # another file system: a copy
+                    shutil.copyfile(f, tmp)
+            n += 1
+    return n
 
 
 def job_folder(spec: JobSpec, out, backend: str):
@@ -234,11 +288,16 @@ def job_tour_meta(p, spec: JobSpec, render_devices: dict | None = None) -> dict:
 
     ``render_devices``: pass -> the devices its chunks reported rendering on (``CPU``, ``OPTIX``,
     ``CUDA``...), kept per chunk in ``job_state.json`` so a resumed job writes the same."""
+    settings = {"quality": spec.quality, "quality_settings": resolve_quality(spec.quality, spec.cycles) if p.lighting_name else None,
+                "width": spec.width, "height": spec.height, "hfov_deg": spec.hfov_deg, "device": spec.device,
+                "chunk_size": spec.chunk_size, "previews": spec.previews, "rgb_every": p.extra.get("rgb_every")}
+    if spec.cycles:  # only when set: the meta of a job without them is as before (readers key on its content)
+        settings["cycles"] = spec.cycles
+    if spec.threads:
+        settings["threads"] = spec.threads
     return tour_meta(
         p, renderer=spec.renderer, seed=spec.seed, blender=_blender_version() if spec.renderer == "blender" else None,
-        settings={"quality": spec.quality, "quality_settings": quality(spec.quality) if p.lighting_name else None,
-                  "width": spec.width, "height": spec.height, "hfov_deg": spec.hfov_deg, "device": spec.device,
-                  "chunk_size": spec.chunk_size, "previews": spec.previews, "rgb_every": p.extra.get("rgb_every")},
+        settings=settings,
         geometry_renderer=spec.geometry, job=spec.name, render_devices=render_devices or {},
     )
 

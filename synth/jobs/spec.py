@@ -14,11 +14,11 @@ from vrformats.errors import UserError
 from vrformats.fields import fail, names, positive_int
 from vrformats.yamlfile import read_yaml
 
-from ..render.settings import DEFAULTS, DEVICES, quality
+from ..render.settings import DEFAULTS, DEVICES, cycles_overrides, quality
 
 RETRIES = 2  # a failing chunk is retried this many times before it is reported failed
-SPEC_KEYS = {"name", "description", "out", "renderer", "geometry", "quality", "size", "hfov_deg", "seed", "device",
-             "chunk_size", "retries", "previews", "designs", "replicacad"}
+SPEC_KEYS = {"name", "description", "out", "renderer", "geometry", "quality", "cycles", "size", "hfov_deg", "seed",
+             "device", "threads", "chunk_size", "retries", "previews", "designs", "replicacad"}
 DESIGN_KEYS = {"layouts", "lightings", "path", "rgb_every"}
 PATH_KEYS = {"name", "frames"}
 
@@ -51,6 +51,8 @@ class JobSpec:
     description: str = ""
     source: str = ""
     replicacad: dict | None = None  # layouts are scenes of a ReplicaCAD folder (a scene source: synth.sources)
+    cycles: dict | None = None  # settings of the quality preset replaced for this job (synth.render.settings.cycles_overrides)
+    threads: int = 0  # Cycles threads per Blender worker (0: all the machine's cores)
 
 
 def parse_spec(doc, source: str) -> JobSpec:
@@ -125,7 +127,14 @@ def parse_spec(doc, source: str) -> JobSpec:
         previews=fields.boolean(source, doc.get("previews", DEFAULTS.previews), "previews"),
         description=fields.text(source, doc.get("description", ""), "description"), source=source,
         replicacad=_replicacad_section(doc, source),
+        cycles=_cycles_section(doc, source, renderer), threads=fields.nonneg_int(source, doc.get("threads", 0), "threads"),
     )
+
+
+def _cycles_section(doc: dict, source: str, renderer: str) -> dict | None:
+    if doc.get("cycles") is not None and renderer != "blender":
+        fail(source, "cycles", "the fast renderer has no Cycles settings: leave cycles out")
+    return cycles_overrides(source, doc.get("cycles"))
 
 
 def _replicacad_section(doc: dict, source: str) -> dict | None:
@@ -149,8 +158,9 @@ def load_spec(path) -> JobSpec:
 def spec_document(spec: JobSpec) -> dict:
     d = asdict(spec)
     d.pop("source", None)
-    if d.get("replicacad") is None:  # a spec without it reads as before: jobs started earlier still resume
-        d.pop("replicacad", None)
+    for k, default in (("replicacad", None), ("cycles", None), ("threads", 0)):
+        if d.get(k) == default:  # a spec without it reads as before: jobs started earlier still resume
+            d.pop(k, None)
     return d
 
 

@@ -50,7 +50,8 @@ def chunk_job(p, kind: str, frames: list[int], out_dir: Path | None = None) -> d
            "geometry_dir": str(p.geometry_dir.resolve()) if p.geometry_dir else None}
     if kind in BLENDER_PASSES:
         s = p.spec
-        job.update({"lighting": s.lighting, "quality": s.quality, "seed": s.seed, "device": s.device, "threads": s.threads,
+        job.update({"lighting": s.lighting, "quality": s.quality, "cycles": s.cycles, "seed": s.seed, "device": s.device,
+                    "threads": s.threads,
                     "previews_dir": str((p.out / "previews").resolve()) if s.previews else None})
     return job
 

@@ -46,6 +46,7 @@ QUALITY = {
               "transmission_bounces": 8, "denoise": True, "denoise_prefilter": "ACCURATE"},
 }
 DEVICES = ("auto", "cpu", "gpu")
+DENOISE_PREFILTERS = ("NONE", "FAST", "ACCURATE")  # OpenImageDenoise's prefilter of the albedo and normal passes
 
 
 def quality(name: str) -> dict:
@@ -53,3 +54,36 @@ def quality(name: str) -> dict:
         return dict(QUALITY[name])
     except KeyError:
         raise UnknownNameError(f"unknown quality preset '{name}'; known: {', '.join(QUALITY)}") from None
+
+
+def cycles_overrides(file, v, field: str = "cycles") -> dict | None:
+    """A spec's ``cycles:`` mapping (settings of the quality preset replaced for this job, e.g.
+    ``{denoise_prefilter: ACCURATE}``), checked key by key; None when absent. The one home of that
+    validator: job specs, tours and the stability benchmark's render perturbations use it."""
+    from vrformats import fields
+
+    if v is None:
+        return None
+    d = fields.mapping(file, v, field, allowed=tuple(QUALITY["preview"]), what="a mapping of Cycles settings")
+    out: dict = {}
+    for k, x in d.items():
+        f = f"{field}.{k}" if field else str(k)
+        if k == "samples":
+            out[k] = fields.positive_int(file, x, f)
+        elif k == "adaptive_threshold":
+            out[k] = fields.number(file, x, f, lo=0.0, hi=1.0)
+        elif k.endswith("bounces"):
+            out[k] = fields.integer(file, x, f, lo=0, hi=1024)
+        elif k == "denoise":
+            out[k] = fields.boolean(file, x, f)
+        elif x not in DENOISE_PREFILTERS:  # denoise_prefilter
+            fields.fail(file, f, f"expected one of {', '.join(DENOISE_PREFILTERS)}, got {fields.shown(x)}")
+        else:
+            out[k] = x
+    return out or None
+
+
+def resolve_quality(name: str, overrides: dict | None = None) -> dict:
+    """The Cycles settings a render uses: preset ``name`` with ``overrides`` (checked by
+    ``cycles_overrides``) applied."""
+    return {**quality(name), **(overrides or {})}

@@ -41,7 +41,7 @@ from vrformats.lifetime import folder_lock
 
 from ..version import __version__
 from ..render.chunks import chunk_job, missing_frames, run_chunk_process, split, stopping_workers
-from ..render.settings import DEFAULTS, DEVICES, quality
+from ..render.settings import DEFAULTS, DEVICES, cycles_overrides, quality, resolve_quality
 from ..scene.model import boxes_document, load_layout, resolve_layout_path
 
 
@@ -67,6 +67,7 @@ class TourSpec:
     chunk_size: int = DEFAULTS.chunk_size
     workers: int = 1
     threads: int = 0  # Cycles threads per worker (0 = all)
+    cycles: dict | None = None  # settings of the quality preset replaced (synth.render.settings.cycles_overrides)
     geometry_cache: str | None = None  # default: <out parent>/_geometry
     # refuse a path whose declared clearance the layout breaks (layouts the path was not planned
     # on only; synth.paths.clearance.render_clearance_problem); False: --allow-clearance-breach
@@ -119,6 +120,7 @@ def prepare(spec: TourSpec, create: bool = True) -> Prepared:
     if spec.device not in DEVICES:
         raise UserError(f"unknown device '{spec.device}'; use one of {', '.join(DEVICES)}")
     quality(spec.quality)
+    cycles_overrides("the tour's settings", spec.cycles)
     if spec.width <= 0 or spec.height <= 0:
         raise UserError(f"image size must be positive, got {spec.width}x{spec.height}")
     too_large = size_problem(spec.width, spec.height)
@@ -322,7 +324,7 @@ def _render_prepared(spec: TourSpec, p, progress: bool, t0: float) -> dict:
                 shutil.rmtree(work, ignore_errors=True)
     meta = tour_meta(
         p, renderer=spec.renderer, seed=spec.seed, blender=info.get("blender"),
-        settings={**asdict(spec), "quality_settings": quality(spec.quality) if spec.lighting else None},
+        settings={**asdict(spec), "quality_settings": resolve_quality(spec.quality, spec.cycles) if spec.lighting else None},
         device=info.get("device", "CPU" if spec.renderer == "blender" else None),
         geometry_frames_rendered_now=geometry_rendered, wall_time_s=round(time.time() - t0, 3),
         host={"platform": platform.platform(), "cpus": os.cpu_count()},

@@ -91,6 +91,14 @@ def test_fast_geometry_and_rgb_every_split_chunks(tmp_path):
         ({"geometry": "cycles"}, "geometry: expected blender or fast"),
         ({"designs": [{"layouts": ["apt_0"], "lightings": ["day"], "path": "query", "rgb_every": 0}]}, "designs[0].rgb_every: expected a positive integer"),
         ({"designs": [{"layouts": ["apt_0"], "path": "query", "rgb_every": 2}]}, "designs[0].rgb_every: a geometry-only design renders no RGB"),
+        ({"cycles": {"denoise_prefilter": "BEST"}}, "cycles.denoise_prefilter: expected one of NONE, FAST, ACCURATE"),
+        ({"cycles": {"sample": 4}}, "cycles: unknown key(s) ['sample']"),
+        ({"cycles": {"samples": 0}}, "cycles.samples: expected a positive integer"),
+        ({"cycles": {"denoise": "yes"}}, "cycles.denoise: expected true or false"),
+        ({"cycles": [4]}, "cycles: expected a mapping of Cycles settings"),
+        ({"threads": -1}, "threads: expected a non-negative integer"),
+        ({"renderer": "fast", "cycles": {"samples": 4}, "designs": [{"layouts": ["apt_0"], "path": "query"}]},
+         "cycles: the fast renderer has no Cycles settings"),
     ],
 )
 def test_bad_specs_one_line_exit_2_nothing_written(tmp_path, capsys, changes, message):
@@ -244,3 +252,68 @@ def test_spec_document_of_a_plain_spec_is_unchanged_by_the_replicacad_key():
     assert "replicacad" not in plain
     rc = spec_document(jobs.load_spec(REPO_ROOT / "render_jobs" / "replicacad_apt_6x3.yaml"))
     assert rc["replicacad"] == {"root": None, "allow_unknown": False, "obstacles": "band"}
+
+
+def test_spec_document_leaves_out_unset_cycles_and_threads_and_records_set_ones(tmp_path):
+    """A job started before specs had cycles: and threads: resumes (its state document has neither); a job
+    that sets them records them, so a resume with other settings is refused."""
+    from synth.jobs import spec_document
+
+    plain = spec_document(jobs.load_spec(REPO_ROOT / "render_jobs" / "demo.yaml"))
+    assert "cycles" not in plain and "threads" not in plain
+    spec = jobs.load_spec(write_spec(tmp_path, cycles={"denoise_prefilter": "ACCURATE"}, threads=1))
+    doc = spec_document(spec)
+    assert doc["cycles"] == {"denoise_prefilter": "ACCURATE"} and doc["threads"] == 1
+
+
+@pytest.mark.parametrize("args, says", [
+    (["--seed", "-1"], "--seed: expected an integer from 0 to"),
+    (["--threads", "999"], "--threads: expected an integer from 0 to 256"),
+    (["--cycles", "samples"], "--cycles samples: expected KEY=VALUE"),
+    (["--cycles", "sample=3"], "--cycles: unknown key(s) ['sample']"),
+    (["--cycles", "denoise_prefilter=BEST"], "--cycles: denoise_prefilter: expected one of NONE, FAST, ACCURATE"),
+    (["--geometry-from", "."], "--geometry-from .: not a job folder (no job_state.json)"),
+])
+def test_render_setting_options_are_checked_before_anything_is_written(tmp_path, capsys, args, says):
+    out = tmp_path / "out"
+    try:
+        code = synth_main(["render", str(SMOKE), "--out", str(out), "--quiet", *args])
+    except SystemExit as e:  # argparse's own refusals
+        code = e.code
+    assert code == 2
+    err = capsys.readouterr().err.strip()
+    assert says in err and len(err.splitlines()) == 1, err
+    assert not out.exists()
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_render_settings_from_the_command_line_rerender_only_rgb(tmp_path):
+    """synth render --seed/--cycles/--threads --geometry-from: the same design re-rendered with another Cycles
+    seed and prefilter on one thread; geometry is the first job's (the same files, hard-linked: nothing of it
+    renders), the RGB differs, meta.json and the job state record the settings, and a resume with other
+    settings is refused."""
+    spec = write_spec(tmp_path, geometry="fast", chunk_size=4, designs=[
+        {"layouts": ["apt_0"], "lightings": ["night"], "path": {"name": "query", "frames": 6}, "rgb_every": 3}])
+    a, b = tmp_path / "a", tmp_path / "b"
+    assert synth_main(["render", str(spec), "--out", str(a), "--quiet"]) == 0
+    argv = ["render", str(spec), "--out", str(b), "--quiet", "--seed", "7", "--cycles", "denoise_prefilter=ACCURATE",
+            "--threads", "1", "--geometry-from", str(a)]
+    assert synth_main(argv) == 0
+    geo_a = sorted((a / "_geometry").rglob("*.exr"))
+    geo_b = sorted((b / "_geometry").rglob("*.exr"))
+    assert [f.relative_to(a) for f in geo_a] == [f.relative_to(b) for f in geo_b] and len(geo_a) == 6
+    assert all(os.stat(x).st_ino == os.stat(y).st_ino for x, y in zip(geo_a, geo_b))  # linked, not rendered again
+    meta = json.loads((b / "apt_0__night__query" / "meta.json").read_text())
+    assert meta["seed"] == 7 and meta["settings"]["cycles"] == {"denoise_prefilter": "ACCURATE"}
+    assert meta["settings"]["threads"] == 1 and meta["settings"]["quality_settings"]["denoise_prefilter"] == "ACCURATE"
+    assert "cycles" not in json.loads((a / "apt_0__night__query" / "meta.json").read_text())["settings"]
+    ta, tb = Tour(a / "apt_0__night__query"), Tour(b / "apt_0__night__query")
+    for i in (0, 3):
+        fa, fb = ta.frame(i), tb.frame(i)
+        np.testing.assert_array_equal(fa.depth, fb.depth)
+        assert not np.array_equal(fa.rgb, fb.rgb)  # another seed and prefilter: another image
+    state = json.loads((b / "job_state.json").read_text())
+    assert state["spec"]["seed"] == 7 and state["spec"]["threads"] == 1
+    with pytest.raises(UserError, match="seed: 7 there, 0 in this spec"):
+        jobs.run_job(jobs.load_spec(spec), b, resume=True, progress=False)
