@@ -125,6 +125,13 @@ def _set_parent_death_signal(sig: int) -> bool:
         return False
 
 
+def child_dies_with_parent() -> None:
+    """``preexec_fn`` of a driver started as a child (``reloc bench stability`` runs ``synth render``): the
+    kernel sends the child SIGTERM when this process dies, which it turns into its orderly stop (its
+    own workers with it)."""
+    _set_parent_death_signal(signal.SIGTERM)
+
+
 PARENT_ENV = "VIDEORELOC_PARENT_PID"  # the pid a worker's starter puts in its environment (worker_env)
 
 

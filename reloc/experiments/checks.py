@@ -270,7 +270,7 @@ def run_checks(check_file, results_dir) -> list[dict]:
         field = f"checks[{i}]"
         a, a_iv, a_fig = r.value(c.left, field)
         b, b_iv, b_fig = r.value(c.right, field)
-        interval, on = a_iv or b_iv, None
+        interval, on, margin = a_iv or b_iv, None, None
         if a_fig and b_fig and c.op not in ("==", "!="):  # two figures: their paired difference decides
             interval = r.boot.interval(r.resamples(a_fig) - r.resamples(b_fig))
             on = "difference"
@@ -279,10 +279,15 @@ def run_checks(check_file, results_dir) -> list[dict]:
             else:
                 bound = interval[0] if c.op in (">", ">=") else interval[1]
                 ok = OPS[c.op](bound, 0.0)
+                margin = bound if c.op in (">", ">=") else -bound
         else:
             ok = a is not None and b is not None and OPS[c.op](a, b)
+            if a is not None and b is not None and c.op not in ("==", "!="):
+                margin = (a - b) if c.op in (">", ">=") else (b - a)
+        # margin: how far the deciding quantity (the value, or the difference's interval bound) lies from
+        # where the check would flip, positive on the passing side, in the check's own units
         rows.append({"check": c.name, "expression": c.text, "value": a, "against": b, "interval": interval,
-                     "interval_of": on or ("value" if interval else None), "passed": bool(ok),
+                     "interval_of": on or ("value" if interval else None), "passed": bool(ok), "margin": margin,
                      "why": None if ok else ("no value" if a is None or b is None or (on and interval is None)
                                              else ("the interval of the difference does not exclude it" if on
                                                    else "false"))})

@@ -562,11 +562,12 @@ def test_replicates_and_the_stability_benchmark_with_the_learned_detector(tiny_d
     assert reloc_main(["bench", "stability", str(tiny_design / "exp_rep.yaml"), "--perturbation", "jitter:5",
                        "--out", str(st), "--quiet", "--json"]) == 0
     rep = json.loads(capsys.readouterr().out)
-    assert rep["perturbations"] == {"none": {}, "jitter-5": {"input_jitter": 1, "seed": 5}}
+    assert rep["perturbations"] == {"none": {}, "jitter-5": {"detector": {"input_jitter": 1, "seed": 5}}}
+    assert rep["renders"] == {}  # a detector perturbation renders nothing
     fig = next(f for f in rep["figures"] if f["figure"] == "closure 1 m/10°")
     assert fig["values"]["none"] == vals["values"][0]  # the unperturbed rerun gives the experiment's figure
     assert fig["spread"] == pytest.approx(abs(fig["values"]["none"] - fig["values"]["jitter-5"]))
-    assert len(rep["tours"]) == 2 * len(PAIR) and (st / "stability.md").is_file() and (st / "jitter-5" / "results.json").is_file()
+    assert len(rep["tour_recalls"]) == 2 * len(PAIR) and (st / "stability.md").is_file() and (st / "jitter-5" / "results.json").is_file()
     # the thresholds are fractions 0..1 (issue 43: -1 could never pass); at 0 the run fails exactly when
     # a tour lost something (or a recall moved), as the report says, and passes otherwise
     base = ["bench", "stability", str(tiny_design / "exp_rep.yaml"), "--perturbation", "jitter:5", "--out", str(st), "--quiet"]
