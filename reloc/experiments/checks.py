@@ -358,26 +358,32 @@ def junit_xml(rows: list[dict], suite: str, results_dir, seconds: float = 0.0) -
 
 
 def record_checks(rows: list[dict], check_file, results_dir) -> Path | None:
-    """``RESULTS_DIR/checks.json`` (the check spec and the rows), and the report rewritten with them
-    where the folder has one (``report.write_report``). A folder that cannot be written to is one
-    line on stderr: the checks' own exit status does not change."""
+    """Record the rows in ``RESULTS_DIR/results.json`` (``checks``: the check spec and the rows) and rewrite
+    the report with them where the folder has one (``report.write_report``). A rerun of the experiment
+    writes results.json anew, so checks never outlive the results they judged. A folder that cannot be
+    written to, or whose experiment is running (its lock), is one line on stderr: the checks' own exit
+    status does not change."""
     import sys
 
     from vrformats.atomic import write_json_atomic
-
-    from .report import CHECKS_RECORD
+    from vrformats.lifetime import folder_lock
 
     results_dir = Path(results_dir)
+    target = results_dir / "results.json"
     try:
-        path = write_json_atomic(results_dir / CHECKS_RECORD, {"checks": str(check_file), "rows": rows}, indent=1)
-        if (results_dir / "report.md").is_file():
-            from .report import write_report
+        with folder_lock(results_dir, "reloc check"):
+            results = read_results(results_dir)
+            results["checks"] = {"file": str(check_file), "rows": rows}
+            write_json_atomic(target, results)
+            if (results_dir / "report.md").is_file():
+                from .report import write_report
 
-            write_report(results_dir)
-        return path
-    except OSError as e:
-        print(f"reloc check: {results_dir / CHECKS_RECORD} not written ({e.strerror or e}); the report keeps "
-              f"no record of these checks", file=sys.stderr)
+                write_report(results_dir)
+        return target
+    except (OSError, UserError) as e:
+        why = e.strerror if isinstance(e, OSError) and e.strerror else str(e)
+        print(f"reloc check: the checks were not recorded in {target} ({why}); the report keeps no record of them",
+              file=sys.stderr)
         return None
 
 

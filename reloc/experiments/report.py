@@ -5,8 +5,8 @@
 short, the design (query tours) and methods, the tables that ``reloc/tables.py`` wrote
 (``tables/main.md``, ``factors.md``, ``units.md``, ``ablation.md``: the paper's Tables I-IV, then
 any others), the recall of every method on every tour (with its 95 % interval), the results of
-the last ``reloc check`` on the folder (``checks.json``, which ``reloc check`` writes and after
-which it rewrites the report), the plots that ``reloc/plots.py`` wrote (recall bars, then one
+the last ``reloc check`` on the folder (``results.json``'s ``checks``, which ``reloc check`` writes and
+after which it rewrites the report; a rerun of the experiment drops them with the results they judged), the plots that ``reloc/plots.py`` wrote (recall bars, then one
 figure per tour, each a link to the full-size image), the timings, and what produced the results:
 the code's commit (or the package version when installed), the machine (CPU model, cores) and the
 library versions (``results.json``'s ``environment``, recorded by the run; a folder without it
@@ -73,7 +73,6 @@ _HEADING = re.compile(r"^(?P<level>#{1,6})\s+(?P<text>.*?)\s*#*\s*$")
 _LIST = re.compile(r"^\s*[-*+]\s+(?P<text>.*)$")
 
 
-CHECKS_RECORD = "checks.json"  # the last ``reloc check``'s results (written by reloc.experiments.checks), shown here
 
 def esc(text) -> str:
     return html.escape(str(text), quote=True)
@@ -301,18 +300,10 @@ def _per_tour_section(results: dict) -> list[str]:
             _md_table(["tour", "method", "recall 1 m/10\u00b0", "95 % interval", "coverage", "frames"], body), ""]
 
 
-def _checks_section(results_dir: Path) -> list[str]:
-    """The last ``reloc check``'s results (``checks.json``), or how to add them."""
+def _checks_section(results: dict, results_dir: Path) -> list[str]:
+    """The last ``reloc check``'s results (``results.json``'s ``checks``), or how to add them."""
     md = ["## Checks", ""]
-    path = results_dir / CHECKS_RECORD
-    doc = None
-    if path.is_file():
-        try:
-            import json
-
-            doc = json.loads(path.read_text())
-        except (OSError, ValueError):
-            doc = None
+    doc = results.get("checks")
     rows = doc.get("rows") if isinstance(doc, dict) else None
     if not isinstance(rows, list) or not rows:
         return md + [f"No checks were run on these results: `reloc check CHECKS.yaml {results_dir}` runs them and "
@@ -332,7 +323,7 @@ def _checks_section(results_dir: Path) -> list[str]:
         body.append([r.get("check", ""), f"`{r.get('expression', '')}`", num(r.get("value")), num(r.get("against")),
                      ivs, result])
     n_fail = sum(1 for r in rows if isinstance(r, dict) and not r.get("passed"))
-    return md + [f"`reloc check {doc.get('checks', '?')}`: {len(body) - n_fail} passed, {n_fail} failed.", "",
+    return md + [f"`reloc check {doc.get('file', '?')}`: {len(body) - n_fail} passed, {n_fail} failed.", "",
                  _md_table(["check", "expression", "value", "against", "interval", "result"], body), ""]
 
 
@@ -415,7 +406,7 @@ def build_markdown(results_dir, results: dict) -> str:
         md += [f"### {heading}", "", _demote(path.read_text().strip(), by=3), ""]
 
     md += _per_tour_section(results)
-    md += _checks_section(results_dir)
+    md += _checks_section(results, results_dir)
 
     md += ["## Plots", ""]
     plots = _plot_files(results_dir, results)

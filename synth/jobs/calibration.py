@@ -35,7 +35,7 @@ def measure_calibration(plan: Plan, frames: int = 1) -> dict:
         idx = list(range(min(frames + 1, len(p.frame_ids))))
         write_tum(tmp / "poses.txt", p.poses[idx], fps=p.path_fps)
         base = {"layout": str(p.layout_file.resolve()), "poses": str(tmp / "poses.txt"), "fps": p.path_fps, "frames": idx,
-                "intrinsics": p.intr.to_dict(), "quality": spec.quality, "seed": spec.seed, "device": spec.device,
+                "intrinsics": p.intr.to_dict(), "quality": spec.quality, "cycles": spec.cycles, "seed": spec.seed, "device": spec.device,
                 "geometry_dir": str(tmp / "geom"), "previews_dir": None, "threads": 0}
         geo = "fast" if spec.geometry == "fast" else "geometry"
         kinds = [geo] + (["rgb"] if spec.renderer == "blender" and any(t.lighting_name for t in plan.tours.values()) else [])

@@ -479,7 +479,7 @@ def test_a_sampled_baseline_is_titled_with_its_recall_on_the_frames_it_is_scored
     assert f"{100 * posed / N:.1f}%" in top["VideoReloc, with clip closure"]
 
 
-def test_report_has_per_tour_recall_checks_environment_and_linked_plots(results_dir, tmp_path):
+def test_report_has_per_tour_recall_checks_environment_and_linked_plots(results_dir, tmp_path, capsys):
     """report.html: the per-tour table (recall with its interval), the last `reloc check`'s results,
     the commit/machine/libraries, and every plot a link to its full-size image."""
     from reloc.cli import main as reloc_main
@@ -506,17 +506,29 @@ def test_report_has_per_tour_recall_checks_environment_and_linked_plots(results_
     name = tour_png_name(TOUR)
     assert f'<a href="plots/{name}"><img src="plots/{name}"' in h
 
-    # reloc check records its rows beside the results and rewrites the report with them
+    # reloc check records its rows in results.json and rewrites the report with them
     checks = tmp_path / "c.yaml"
     checks.write_text("checks:\n  - videoreloc.closure.recall_1m_10deg >= 0.5\n"
                       "  - {check: 'appearance.causal.recall_1m_10deg >= 0.5', name: appearance works}\n")
     assert reloc_main(["check", str(checks), str(results_dir)]) == 1
-    rec = json.loads((results_dir / "checks.json").read_text())
-    assert [r["passed"] for r in rec["rows"]] == [True, False] and rec["checks"] == str(checks)
+    rec = json.loads((results_dir / "results.json").read_text())["checks"]
+    assert [r["passed"] for r in rec["rows"]] == [True, False] and rec["file"] == str(checks)
+    assert rec["rows"][1]["margin"] == pytest.approx(-0.5)  # appearance's 0 against 0.5: half a recall short
     md, h = md_path.read_text(), html_path.read_text()
     assert "1 passed, 1 failed" in md and "No checks were run" not in md
     assert "| appearance works | `appearance.causal.recall_1m_10deg >= 0.5` | 0 | 0.5 | \u2014 | **FAIL** (false) |" in md
     assert "<strong>FAIL</strong> (false)" in h
+    # results written anew (a rerun of the experiment) carry no checks: the report does not show stale ones
+    (results_dir / "results.json").write_text(json.dumps(res))
+    assert "No checks were run on these results" in write_report(results_dir)[1].read_text()
+    # while the experiment runs (its lock held) the checks are still printed, but not recorded
+    from vrformats.lifetime import folder_lock
+
+    with folder_lock(results_dir, "reloc experiment"):
+        assert reloc_main(["check", str(checks), str(results_dir)]) == 1
+    io = capsys.readouterr()
+    assert "1 passed, 1 failed" in io.out and "the checks were not recorded" in io.err
+    assert "checks" not in json.loads((results_dir / "results.json").read_text())
 
     # a results folder without a recorded environment: this machine's, said so
     del res["environment"]
