@@ -175,7 +175,7 @@ def rgb_difference(base: Path, other: Path, tours) -> dict:
     psnr = []
     for name in tours:
         t = Tour(Path(base) / name)
-        for i in t.frame_indices[:: t.rgb_every]:
+        for i in (int(i) for i in t.frame_indices if i % t.rgb_every == 0):  # the frames with RGB
             a = fr.read_frame(t.frame_path(i), depth=False, instance=False, semantic=False).rgb
             b = fr.read_frame(Path(other) / name / "frames" / fr.frame_name(int(i)), depth=False, instance=False,
                               semantic=False).rgb
@@ -308,6 +308,8 @@ def format_stability(rep: dict) -> str:
     lines += ["| method | figure | " + " | ".join(names) + " | unperturbed interval | spread | all inside |",
               "|---" * (len(names) + 5) + "|"]
     for f in rep["figures"]:
+        if all(v is None for v in f["values"].values()):
+            continue  # a figure the design cannot have (ΔL without night tours, say)
         iv = "-" if f.get("interval") is None else f"[{pct(f['interval'][0])}, {pct(f['interval'][1])}]"
         inside = {True: "yes", False: "**no**", None: "-"}[f.get("inside")]
         lines.append(f"| {f['method']} | {f['figure']} | " + " | ".join(pct(f["values"][n]) for n in names)

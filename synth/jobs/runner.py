@@ -6,6 +6,7 @@ onto a storage URI (``synth.jobs.storage``), and writes each tour's ``meta.json`
 
 from __future__ import annotations
 
+import json
 import os
 import sys
 import time
@@ -13,6 +14,7 @@ from pathlib import Path
 
 from vrformats.atomic import write_json_atomic
 from vrformats.design import write_design
+from vrformats.environment import cpu_model
 from vrformats.errors import UserError, check_output_folder
 from vrformats.lifetime import folder_lock
 
@@ -270,9 +272,14 @@ def _run_plan(plan: Plan, old: dict | None, backend: str, workers: int, progress
                "frames_missing": sum(missing_after.values()),
                "frames_failed": sum(missing_after.get(cid, 0) for cid in failed_ids), "chunks_failed": len(failed_ids),
                "failed": {cid: state.doc["chunks"][cid]["error"] for cid in failed_ids}}
-    write_json_atomic(plan.out / "job_summary.json", summary, indent=1)
+    # every run's times, the earlier ones first: a resumed job keeps what its first runs cost
+    this_run = {"started": time.strftime("%Y-%m-%dT%H:%M:%S%z", time.localtime(t0)),
+                **{k: summary[k] for k in RUN_KEYS if k in summary}, "cpu_model": cpu_model(), "cpus": os.cpu_count()}
+    summary["runs"] = previous_runs(plan) + [this_run]
+    summary["wall_time_s_all_runs"] = round(sum(r.get("wall_time_s") or 0.0 for r in summary["runs"]), 2)
+    write_json_atomic(plan.out / SUMMARY_FILE, summary, indent=1)
     if store is not None:
-        store.write_bytes(plan.out / "job_summary.json", (plan.out / "job_summary.json").read_bytes())
+        store.write_bytes(plan.out / SUMMARY_FILE, (plan.out / SUMMARY_FILE).read_bytes())
     if not summary["failed"]:
         import shutil
 
@@ -280,6 +287,26 @@ def _run_plan(plan: Plan, old: dict | None, backend: str, workers: int, progress
         if store is not None:
             store.remove_tree(work)  # the logs the driver copied up
     return summary
+
+
+SUMMARY_FILE = "job_summary.json"
+# what job_summary.json keeps of each run (its "runs"), besides when it started and on which CPU
+RUN_KEYS = ("wall_time_s", "frames_rendered_now", "frames_per_s", "backend", "workers", "frames_missing", "chunks_failed")
+
+
+def previous_runs(plan: Plan) -> list[dict]:
+    """The earlier runs recorded in the job folder's job_summary.json (a summary written before runs
+    were kept counts as one run); none when it is missing or unreadable."""
+    try:
+        text = plan.store.read_text(SUMMARY_FILE) if plan.store is not None else (plan.out / SUMMARY_FILE).read_text()
+        old = json.loads(text)
+    except (OSError, ValueError, UnicodeDecodeError):
+        return []
+    if not isinstance(old, dict):
+        return []
+    if isinstance(old.get("runs"), list):
+        return [r for r in old["runs"] if isinstance(r, dict)]
+    return [{k: old[k] for k in RUN_KEYS if k in old}]
 
 
 def job_tour_meta(p, spec: JobSpec, render_devices: dict | None = None) -> dict:

@@ -317,3 +317,25 @@ def test_render_settings_from_the_command_line_rerender_only_rgb(tmp_path):
     assert state["spec"]["seed"] == 7 and state["spec"]["threads"] == 1
     with pytest.raises(UserError, match="seed: 7 there, 0 in this spec"):
         jobs.run_job(jobs.load_spec(spec), b, resume=True, progress=False)
+
+
+def test_job_summary_keeps_every_runs_times(tmp_path):
+    """A resumed job keeps what its earlier runs cost: job_summary.json's runs, oldest first, and their sum;
+    a summary written before runs were kept counts as one run."""
+    spec = write_spec(tmp_path, renderer="fast", chunk_size=5,
+                      designs=[{"layouts": ["apt_0"], "path": {"name": "query", "frames": 10}}])
+    out = tmp_path / "o"
+    first = jobs.run_job(jobs.load_spec(spec), out, progress=False)
+    assert first["frames_rendered_now"] == 10 and len(first["runs"]) == 1
+    (out / "apt_0__geometry__query" / "frames" / "000007.exr").unlink()
+    second = jobs.run_job(jobs.load_spec(spec), out, resume=True, progress=False)
+    doc = json.loads((out / "job_summary.json").read_text())
+    assert doc == second
+    assert [r["frames_rendered_now"] for r in doc["runs"]] == [10, 1]
+    assert doc["runs"][0] == first["runs"][0] and doc["runs"][1]["wall_time_s"] == doc["wall_time_s"]
+    assert doc["wall_time_s_all_runs"] == pytest.approx(sum(r["wall_time_s"] for r in doc["runs"]), abs=0.02)
+    assert all(r["cpus"] == os.cpu_count() and r["started"][:2] == "20" for r in doc["runs"])
+    legacy = {k: v for k, v in doc.items() if k not in ("runs", "wall_time_s_all_runs")}
+    (out / "job_summary.json").write_text(json.dumps(legacy))
+    third = jobs.run_job(jobs.load_spec(spec), out, resume=True, progress=False)
+    assert [r["frames_rendered_now"] for r in third["runs"]] == [1, 0]
