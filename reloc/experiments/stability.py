@@ -282,10 +282,15 @@ def stability(spec, out: Path, perturbations: dict, methods: tuple = ("videorelo
         rep["checks"] = []
         for k, r0 in enumerate(rows["none"]):
             margins = {n: rs[k]["margin"] for n, rs in rows.items()}
-            moves = [abs(v - margins["none"]) for v in margins.values() if v is not None and margins["none"] is not None]
+            m0 = margins["none"]
+            moves = [v - m0 for v in margins.values() if v is not None and m0 is not None]
+            complete = len(moves) == len(margins)
+            # largest_move: the largest change either way (another machine may move it the other way);
+            # toward_bound: the largest loss of margin, what a perturbation did to bring the check nearer failing
             rep["checks"].append({"check": r0["check"], "expression": r0["expression"], "margins": margins,
                                   "passed": {n: rs[k]["passed"] for n, rs in rows.items()},
-                                  "largest_move": max(moves) if len(moves) == len(margins) else None})
+                                  "largest_move": max(abs(x) for x in moves) if complete else None,
+                                  "toward_bound": max(0.0, -min(moves)) if complete else None})
         rep["checks_failed"] = sorted({n for n, rs in rows.items() for r in rs if not r["passed"]})
     write_json_atomic(out / "stability.json", rep)
     write_text_atomic(out / "stability.md", format_stability(rep) + "\n")
@@ -327,12 +332,13 @@ def format_stability(rep: dict) -> str:
         lines += ["", f"Checks of {rep['checks_file']}: the margin to the bound (positive: passing; the deciding "
                   "quantity's distance from where the check flips, in its own units: fractions for figures, boxes "
                   "or bytes for the map), unperturbed and under each perturbation, beside the largest move:", "",
-                  "| check | " + " | ".join(names) + " | largest move | margin >= move |", "|---" * (len(names) + 3) + "|"]
+                  "| check | " + " | ".join(names) + " | largest move | toward the bound | margin >= largest move |",
+                  "|---" * (len(names) + 4) + "|"]
         for c in rep["checks"]:
             cells = [num(c["margins"][n]) + ("" if c["passed"][n] else " **FAIL**") for n in names]
             m0, mv = c["margins"]["none"], c["largest_move"]
             holds = "-" if m0 is None or mv is None else ("yes" if m0 >= mv else "**no**")
-            lines.append(f"| {c['check']} | " + " | ".join(cells) + f" | {num(mv)} | {holds} |")
+            lines.append(f"| {c['check']} | " + " | ".join(cells) + f" | {num(mv)} | {num(c['toward_bound'])} | {holds} |")
         failed = rep.get("checks_failed") or []
         lines += ["", "Every check passes under every perturbation." if not failed
                   else f"Checks fail under: {', '.join(failed)}."]

@@ -75,8 +75,9 @@ def test_render_perturbation_rerenders_rgb_reruns_and_reports_check_margins(one_
     mc = next(c for c in rep["checks"] if c["expression"] == "map.matched >= 1")
     assert mc["margins"] == {n: matched[n] - 1 for n in matched}
     assert mc["largest_move"] == abs(matched["render-seed-3"] - matched["none"])
+    assert mc["toward_bound"] == max(0, matched["none"] - matched["render-seed-3"])
     md = (st / "stability.md").read_text()
-    assert "Render perturbations" in md and "| render-seed-3 | 17 |" in md and "margin >= move" in md
+    assert "Render perturbations" in md and "| render-seed-3 | 17 |" in md and "margin >= largest move" in md
 
     # a rerun renders nothing and computes nothing: the render job and the experiments resume
     assert reloc_main(argv) == 0
