@@ -5,6 +5,7 @@ other chunks go on."""
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 from vrformats.fields import terminal_safe
@@ -15,19 +16,57 @@ from .state import DONE, FAILED, PENDING, RUNNING, JobState
 
 
 class ProgressBar:
-    def __init__(self, total: int, done: int, enabled: bool, desc: str):
+    """The job's progress bar. With ``eta`` (``synth.jobs.estimate.LiveEta``, the local backend) it shows
+    the time left from what each pass kind's frames cost so far, not tqdm's frames-per-second average
+    (an RGB frame costs about 100 geometry frames, so that average is wrong by hours)."""
+
+    def __init__(self, total: int, done: int, enabled: bool, desc: str, eta=None):
         from tqdm import tqdm
 
+        fmt = "{l_bar}{bar}| {n_fmt}/{total_fmt} [{elapsed}{postfix}]" if eta is not None else None
         self.bar = tqdm(total=total, initial=done, desc=terminal_safe(desc), unit="frame", disable=not enabled, dynamic_ncols=True,
-                        smoothing=0.1)
+                        smoothing=0.1, bar_format=fmt)
+        self.eta = eta
         self.failures = 0
+        self._shown = 0.0
 
-    def update(self, n=1):
+    def update(self, n=1, kind: str | None = None, seconds: float | None = None):
+        if self.eta is not None and kind is not None:
+            self.eta.frame(kind, seconds)
+            self._postfix()
         self.bar.update(n)
+
+    def chunk_started(self, kind: str) -> None:
+        if self.eta is not None:
+            self.eta.chunk_started(kind)
+
+    def chunk_finished(self, kind: str, wall_s: float, frame_s: float) -> None:
+        if self.eta is not None:
+            self.eta.chunk_finished(kind, wall_s, frame_s)
+
+    def _postfix(self, force: bool = False) -> None:
+        import time
+
+        now = time.monotonic()
+        if not force and now - self._shown < 1.0:
+            return
+        self._shown = now
+        from .estimate import fmt_duration
+
+        left, untimed = self.eta.seconds(), self.eta.untimed
+        parts = ["ETA " + ("..." if left is None else fmt_duration(left))
+                 + (f" + {', '.join(untimed)} frames not timed yet" if untimed and left is not None else "")]
+        if self.failures:
+            parts.append(f"failures={self.failures}")
+        self.bar.set_postfix_str(", ".join(parts), refresh=False)
 
     def fail(self):
         self.failures += 1
-        self.bar.set_postfix(failures=self.failures, refresh=True)
+        if self.eta is not None:
+            self._postfix(force=True)
+            self.bar.refresh()
+        else:
+            self.bar.set_postfix(failures=self.failures, refresh=True)
 
     def close(self):
         self.bar.close()
@@ -56,6 +95,7 @@ class ChunkQueue:
             if c.needs is None or c.needs in self.done:
                 self.pending.remove(c)
                 self.state.set(c.id, RUNNING, attempt=True)
+                self.bar.chunk_started(c.kind)
                 out.append(c)
         return out
 
@@ -94,23 +134,32 @@ def run_local(plan: Plan, state: JobState, todo: list[Chunk], workers: int, bar:
     lock = threading.Lock()
     q = ChunkQueue(plan, state, todo, bar)
 
-    def on_frame(_ev):
-        with lock:
-            bar.update()
+    frame_s: dict[str, float] = {}  # chunk id -> its frames' own seconds so far
+
+    def on_frame_of(c: Chunk):
+        def on_frame(ev):
+            s = ev.get("seconds") if isinstance(ev.get("seconds"), (int, float)) else None
+            with lock:
+                frame_s[c.id] = frame_s.get(c.id, 0.0) + (s or 0.0)
+                bar.update(kind=c.kind, seconds=s)
+        return on_frame
 
     with ThreadPoolExecutor(max_workers=workers) as pool, stopping_workers(pool):
         running = {}
         while True:
             for c in q.take_ready(workers - len(running)):
                 jf, log = chunk_files(work, c)
-                running[pool.submit(run_chunk_process, c.kind, c.job, jf, log, on_frame)] = (c, log)
+                frame_s[c.id] = 0.0
+                running[pool.submit(run_chunk_process, c.kind, c.job, jf, log, on_frame_of(c))] = (c, log, time.monotonic())
             if not running:
                 break
             finished, _ = wait(running, return_when=FIRST_COMPLETED)
             for fut in finished:
-                c, log = running.pop(fut)
+                c, log, t0 = running.pop(fut)
                 rc, err, inf = fut.result()
                 info.update(inf)
+                with lock:
+                    bar.chunk_finished(c.kind, time.monotonic() - t0, frame_s.pop(c.id, 0.0))
                 q.finished(c, rc, err, log, device=inf.get("device"))
     return info
 

@@ -22,6 +22,7 @@ from ..tour.render import make_output_folder, tour_meta, write_static_files
 from ..render.settings import resolve_quality
 from .plan import Chunk, Plan, expand, out_error
 from .chunk_queue import ProgressBar, run_local
+from .estimate import LiveEta
 from .spec import JobSpec, spec_difference, spec_document
 from .state import DONE, FAILED, STATE_FILE, JobState, load_stored_state
 
@@ -230,15 +231,21 @@ def _run_plan(plan: Plan, old: dict | None, backend: str, workers: int, progress
     if store is not None:  # the static files and the design, before any frame
         store.push_tree(plan.out)
     todo, missing_before = [], 0
+    frames_left: dict[str, int] = {}
+    chunks_left: dict[str, int] = {}
     for c in plan.chunks:
         if m := c.missing():
             todo.append(c)
             missing_before += len(m)
+            frames_left[c.kind] = frames_left.get(c.kind, 0) + len(m)
+            chunks_left[c.kind] = chunks_left.get(c.kind, 0) + 1
         else:
             state.doc["chunks"][c.id]["state"] = DONE
     state.save()
     done_frames = plan.frames_total - missing_before
-    bar = ProgressBar(plan.frames_total, done_frames, progress, f"{spec.name}")
+    # the local backend knows its slots: its bar shows the time left per pass kind (LiveEta)
+    eta = LiveEta(frames_left, chunks_left, workers) if backend == "local" else None
+    bar = ProgressBar(plan.frames_total, done_frames, progress, f"{spec.name}", eta=eta)
     work = plan.out / ".work"
     work.mkdir(parents=True, exist_ok=True)
     try:

@@ -339,3 +339,31 @@ def test_job_summary_keeps_every_runs_times(tmp_path):
     (out / "job_summary.json").write_text(json.dumps(legacy))
     third = jobs.run_job(jobs.load_spec(spec), out, resume=True, progress=False)
     assert [r["frames_rendered_now"] for r in third["runs"]] == [1, 0]
+
+
+def test_live_eta_prices_each_pass_kind_by_its_own_frames():
+    """The time left is frames left x seconds per frame of their own kind, plus the start-up of chunks
+    not started, over the slots; a kind not timed yet is named, not guessed."""
+    from synth.jobs.estimate import SETUP_S, LiveEta
+
+    eta = LiveEta({"geometry": 100, "rgb": 20}, {"geometry": 2, "rgb": 2}, slots=2)
+    assert eta.seconds() is None and eta.untimed == ["geometry", "rgb"]
+    eta.chunk_started("geometry")
+    for _ in range(10):
+        eta.frame("geometry", 0.5)
+    # 90 geometry frames at 0.5 s; one geometry and two rgb chunks still to start
+    assert eta.seconds() == pytest.approx((90 * 0.5 + SETUP_S["geometry"] + 2 * SETUP_S["rgb"]) / 2)
+    assert eta.untimed == ["rgb"]
+    eta.chunk_finished("geometry", wall_s=9.0, frame_s=5.0)  # 4 s of start-up, measured
+    eta.chunk_started("rgb")
+    eta.frame("rgb", 30.0)  # an RGB frame costs 60 geometry frames here: priced as measured
+    assert eta.untimed == []
+    assert eta.seconds() == pytest.approx((90 * 0.5 + 19 * 30.0 + 4.0 + SETUP_S["rgb"]) / 2)
+
+
+def test_progress_bar_shows_the_time_left(tmp_path, capsys):
+    spec = write_spec(tmp_path, renderer="fast", chunk_size=5,
+                      designs=[{"layouts": ["apt_0"], "path": {"name": "query", "frames": 20}}])
+    jobs.run_job(jobs.load_spec(spec), tmp_path / "o", progress=True)
+    err = capsys.readouterr().err
+    assert "ETA " in err and "20/20" in err, err[-500:]
