@@ -21,3 +21,11 @@ def nothing_left(folder, keep=()) -> None:
     """No output and no temporary file appeared in ``folder`` (besides ``keep``)."""
     left = sorted(p.name for p in folder.iterdir() if p.name not in keep)
     assert left == [], left
+
+
+def exit_code(main, argv) -> int:
+    """The exit status of ``main(argv)``, argparse's own refusals (its SystemExit) included."""
+    try:
+        return main(argv)
+    except SystemExit as e:
+        return e.code

@@ -11,6 +11,7 @@ from pathlib import Path
 from vrformats.fields import terminal_safe
 
 from ..render.chunks import run_chunk_process, stopping_workers
+from .estimate import fmt_duration
 from .plan import Chunk, Plan
 from .state import DONE, FAILED, PENDING, RUNNING, JobState
 
@@ -45,14 +46,10 @@ class ProgressBar:
             self.eta.chunk_finished(kind, wall_s, frame_s)
 
     def _postfix(self, force: bool = False) -> None:
-        import time
-
         now = time.monotonic()
-        if not force and now - self._shown < 1.0:
+        if not force and now - self._shown < 1.0:  # at most once a second: this runs on every frame
             return
         self._shown = now
-        from .estimate import fmt_duration
-
         left, untimed = self.eta.seconds(), self.eta.untimed
         parts = ["ETA " + ("..." if left is None else fmt_duration(left))
                  + (f" + {', '.join(untimed)} frames not timed yet" if untimed and left is not None else "")]

@@ -15,6 +15,7 @@ import yaml
 from vrformats.atomic import replacing, temp_name, write_json_atomic, write_nofollow
 from vrformats.errors import UserError
 from vrformats.lifetime import FolderLock
+from cli_errors import exit_code
 
 
 # ---------------------------------------------------------------------------------------------
@@ -327,10 +328,7 @@ def test_the_fast_yaml_parser_reads_what_pyyaml_reads_and_errors_are_pyyamls(mon
 
 
 def _exit_code(argv) -> int:
-    try:
-        return _run(argv)
-    except SystemExit as e:  # argparse's own refusals
-        return e.code
+    return exit_code(_run, argv)
 
 
 @pytest.mark.parametrize("args, says", [

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cli_errors import exit_code
 from jobspecs import write_spec
 
 from vrformats.tour import Tour
@@ -276,11 +277,7 @@ def test_spec_document_leaves_out_unset_cycles_and_threads_and_records_set_ones(
 ])
 def test_render_setting_options_are_checked_before_anything_is_written(tmp_path, capsys, args, says):
     out = tmp_path / "out"
-    try:
-        code = synth_main(["render", str(SMOKE), "--out", str(out), "--quiet", *args])
-    except SystemExit as e:  # argparse's own refusals
-        code = e.code
-    assert code == 2
+    assert exit_code(synth_main, ["render", str(SMOKE), "--out", str(out), "--quiet", *args]) == 2
     err = capsys.readouterr().err.strip()
     assert says in err and len(err.splitlines()) == 1, err
     assert not out.exists()
