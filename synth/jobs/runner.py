@@ -144,7 +144,8 @@ def run_job(spec: JobSpec, out: Path | str | None = None, workers: int = 1, back
 
 def geometry_links(plan: Plan, source: Path) -> list[tuple[Path, Path]]:
     """(cache folder in ``source``, the same cache of ``plan``) for each of ``plan``'s geometry caches that
-    the job folder ``source`` holds; refuses (writing nothing) a folder that is no job or holds none. A
+    the job folder ``source`` holds (as a folder, not a link; its frame files that are links are skipped
+    by ``link_geometry``); refuses (writing nothing) a folder that is no job or holds none. A
     cache's folder name keys its content (layout, path, size, renderer: ``synth.tour.render``), so a
     cache of the same name holds the same frames."""
     if not (source / STATE_FILE).is_file():
@@ -152,7 +153,10 @@ def geometry_links(plan: Plan, source: Path) -> list[tuple[Path, Path]]:
     if plan.spec.renderer != "blender":
         raise UserError("--geometry-from: the fast renderer has no geometry cache to take (it renders geometry only)")
     caches = sorted({p.geometry_dir for p in plan.tours.values() if p.geometry_dir is not None})
-    found = [(source / "_geometry" / c.name, c) for c in caches if (source / "_geometry" / c.name).is_dir()]
+    # a cache folder (or _geometry) that is a link may lead anywhere: only real folders of the job are taken
+    found = [(source / "_geometry" / c.name, c) for c in caches
+             if not (source / "_geometry").is_symlink() and not (source / "_geometry" / c.name).is_symlink()
+             and (source / "_geometry" / c.name).is_dir()]
     if not found:
         raise UserError(f"--geometry-from {source}: it has none of this design's geometry caches "
                         f"({', '.join(c.name for c in caches[:3])}{' ...' if len(caches) > 3 else ''})")

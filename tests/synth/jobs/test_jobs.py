@@ -315,6 +315,16 @@ def test_render_settings_from_the_command_line_rerender_only_rgb(tmp_path):
     with pytest.raises(UserError, match="seed: 7 there, 0 in this spec"):
         jobs.run_job(jobs.load_spec(spec), b, resume=True, progress=False)
 
+    # a job folder whose caches are links (to frames elsewhere, or a folder outside it) gives nothing of them
+    c, evil = tmp_path / "c", tmp_path / "evil"
+    (evil / "_geometry").mkdir(parents=True)
+    (evil / "job_state.json").write_text("{}")
+    for cache in (a / "_geometry").iterdir():
+        (evil / "_geometry" / cache.name).symlink_to(cache, target_is_directory=True)
+    with pytest.raises(UserError, match="it has none of this design's geometry caches"):
+        jobs.run_job(jobs.load_spec(spec), c, progress=False, geometry_from=evil)
+    assert not c.exists()
+
 
 def test_job_summary_keeps_every_runs_times(tmp_path):
     """A resumed job keeps what its earlier runs cost: job_summary.json's runs, oldest first, and their sum;
