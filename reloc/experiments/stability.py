@@ -174,11 +174,10 @@ def rgb_difference(base: Path, other: Path, tours) -> dict:
     px = 0.0
     psnr = []
     for name in tours:
-        t = Tour(Path(base) / name)
+        t, o = Tour(Path(base) / name), Tour(Path(other) / name)
         for i in (int(i) for i in t.frame_indices if i % t.rgb_every == 0):  # the frames with RGB
             a = fr.read_frame(t.frame_path(i), depth=False, instance=False, semantic=False).rgb
-            b = fr.read_frame(Path(other) / name / "frames" / fr.frame_name(int(i)), depth=False, instance=False,
-                              semantic=False).rgb
+            b = fr.read_frame(o.frame_path(i), depth=False, instance=False, semantic=False).rgb
             if a is None or b is None:
                 continue
             a8, b8 = srgb8(a).astype(np.int32), srgb8(b).astype(np.int32)
