@@ -20,6 +20,14 @@ import pytest
 from jobspecs import SMOKE
 
 
+def pytest_configure(config):
+    """The render cache (``synth.render.cache``) of this test process: a fresh folder, never the user's."""
+    import os
+    import tempfile
+
+    os.environ["SYNTH_CACHE_DIR"] = tempfile.mkdtemp(prefix="synth_cache_tests_")
+
+
 def make_tour(root, poses, frames=None, *, intrinsics, fps=30.0, frame_ids=None, objects=None, **meta) -> Path:
     """A tour folder at ``root`` (made with its parents): ``poses`` camera-to-world, ``frames`` frame id ->
     channels (``rgb``, ``depth``, ``instance``, ``semantic``; None: poses only), ``meta`` over the

@@ -41,6 +41,8 @@ Mesh assets (ReplicaCAD) are drawn with their own glTF materials: ``material == 
 
 from __future__ import annotations
 
+import json
+
 import functools
 import math
 from dataclasses import dataclass
@@ -388,22 +390,36 @@ def _mesh_stage_parts(layout: Layout) -> list[RenderPart]:
     frames = [_triangle_frames(m, T) for m in prims]
     centroids = np.concatenate([c for c, _ in frames])
     normals = np.concatenate([n for _, n in frames])
-    ids = np.asarray(face_ids(st, centroids, normals), dtype=np.int64).reshape(-1)
-    if len(ids) != len(centroids):
-        raise ValueError(f"face_ids gave {len(ids)} ids for {len(centroids)} stage triangles")
-    free = ids == 0
-    if free.any():
-        ids[free] = nearest_structure_ids(st, centroids[free])
+
+    def compute() -> np.ndarray:
+        ids = np.asarray(face_ids(st, centroids, normals), dtype=np.int64).reshape(-1)
+        if len(ids) != len(centroids):
+            raise ValueError(f"face_ids gave {len(ids)} ids for {len(centroids)} stage triangles")
+        free = ids == 0
+        if free.any():
+            ids[free] = nearest_structure_ids(st, centroids[free])
+        return ids
+
+    # the same in every chunk of a job, and about 20 s for a ReplicaCAD apartment: cached (synth.render.cache)
+    from ..scene.model import layout_to_dict
+    from .cache import cached_array, code_digest, digest_of_file
+
+    key = [digest_of_file(_asset_file(layout, st.asset, GLB_PREFIX, "GLB")),
+           json.dumps(layout_to_dict(layout)["stage"], sort_keys=True, default=str),
+           code_digest("synth.mesh.stage_structure", "synth.render.meshes", "synth.mesh.gltf", "synth.scene.model")]
+    ids = np.array(cached_array("stage_face_ids", key, compute,
+                                validate=lambda a: a.dtype == np.int64 and a.shape == (len(centroids),)))
     parts: list[RenderPart] = []
     off = 0
     for j, m in enumerate(prims):
         mine = ids[off: off + len(m.faces)]
         off += len(m.faces)
-        for iid in np.unique(mine):
+        uniq = np.unique(mine)  # once per primitive (not once per id: 7 s of sorting for a ReplicaCAD stage)
+        for iid in uniq:
             base = int(iid) // 1000 * 1000
             if base not in sem:
                 raise ValueError(f"face_ids gave {int(iid)}, not a wall, floor or ceiling id")
-            sub = m if len(np.unique(mine)) == 1 else submesh(m, np.flatnonzero(mine == iid))
+            sub = m if len(uniq) == 1 else submesh(m, np.flatnonzero(mine == iid))
             parts.append(_gltf_part(layout, f"stage/{j}/{int(iid)}", int(iid), sem[base], sub, T))
     return parts
 
