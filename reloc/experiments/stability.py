@@ -167,6 +167,7 @@ def rgb_difference(base: Path, other: Path, tours) -> dict:
     and the appearance baseline see): frames compared, frames with any pixel changed, the share of pixels
     changed, and the median PSNR (dB) of the changed frames against the unperturbed ones."""
     from vrformats import frames as fr
+    from vrformats import image_quality
     from vrformats.color import srgb8
     from vrformats.tour import Tour
 
@@ -180,14 +181,13 @@ def rgb_difference(base: Path, other: Path, tours) -> dict:
             b = fr.read_frame(o.frame_path(i), depth=False, instance=False, semantic=False).rgb
             if a is None or b is None:
                 continue
-            a8, b8 = srgb8(a).astype(np.int32), srgb8(b).astype(np.int32)
+            a8, b8 = srgb8(a), srgb8(b)
             n += 1
             diff = a8 != b8
             if diff.any():
                 changed += 1
                 px += float(diff.any(axis=-1).mean())
-                mse = float(np.mean((a8 - b8) ** 2))
-                psnr.append(10.0 * np.log10(255.0**2 / mse))
+                psnr.append(image_quality.psnr(a8, b8))
     return {"frames": n, "frames_changed": changed, "pixels_changed": (px / n) if n else None,
             "psnr_db_median": float(np.median(psnr)) if psnr else None}
 
