@@ -49,7 +49,7 @@ def bench_fast(layout, poses, intr: Intrinsics) -> dict:
 
 
 def bench_blender(layout_file: Path, pass_: str, poses, intr: Intrinsics, quality: str, work: Path, lighting="day",
-                  threads: int = 0) -> dict:
+                  threads: int = 0, device: str = "cpu") -> dict:
     """Run one worker process over the frames; per-frame seconds come from the worker's own events."""
     poses_file = work / f"poses_{intr.width}.txt"
     write_tum(poses_file, poses)
@@ -57,7 +57,7 @@ def bench_blender(layout_file: Path, pass_: str, poses, intr: Intrinsics, qualit
     out = work / f"{pass_}_{quality}_{intr.width}"
     job = {"pass": pass_, "layout": str(layout_file), "lighting": lighting, "poses": str(poses_file), "fps": 30.0,
            "frames": list(range(len(poses))), "intrinsics": intr.to_dict(), "quality": quality, "seed": 0,
-           "device": "cpu", "out_dir": str(gdir if pass_ == "geometry" else out), "geometry_dir": str(gdir),
+           "device": device, "out_dir": str(gdir if pass_ == "geometry" else out), "geometry_dir": str(gdir),
            "previews_dir": None, "threads": threads}
     jf = work / f"job_{pass_}_{quality}_{intr.width}.json"
     write_nofollow(jf, json.dumps(job))
@@ -135,10 +135,14 @@ def cmd_bench(args) -> int:
 
 def register_cli(subparsers) -> None:
     """Add the ``bench`` group (one subcommand per benchmark; the renderers' is the only one) to ``synth``."""
-    p = subparsers.add_parser("bench", help="benchmarks that print figures (renderers' seconds per frame)")
+    p = subparsers.add_parser("bench", help="benchmarks that print figures (renderers' seconds per frame; "
+                                            "each quality setting's PSNR against a reference)")
     sub = p.add_subparsers(dest="cmd", required=True)
     a = sub.add_parser("render", help="seconds per frame of each renderer and quality on this machine")
     a.add_argument("--frames", type=positive_int, default=5, help="frames per measurement (median reported)")
     a.add_argument("--quality", action="append", choices=list(QUALITY), help="RGB presets to time (default: all)")
     add_json(a)
     a.set_defaults(fn=cmd_bench)
+    from .quality import register_cli as register_quality
+
+    register_quality(sub)

@@ -1,0 +1,352 @@
+"""``synth bench quality``: what each Cycles setting buys, against a reference image, beside its time.
+
+For each view (one frame of a design's first tour, per lighting: the frame the calibration renders
+is at the start of the path, this one in its middle), one Blender process
+(``synth.blender.quality_worker``) builds the scene once and renders:
+
+- the **reference**: the paper preset's scene at ``REFERENCE`` (many samples, twice the paper
+  preset's bounces, no denoiser, which would bias it), twice, with seeds other than the settings'
+  (the same seed would share the first samples' noise and flatter them). The two are averaged. Half
+  of the squared difference of the two is the noise of one, a quarter is that of their average: it is
+  taken out of each setting's squared error (the errors of independent renders add), which gives the
+  PSNR against the converged image, ``psnr_db``; ``psnr_raw_db`` is against the average as it is
+  (a lower bound). The reference's own PSNR against the converged image is reported too;
+- the **presets** (``synth.render.settings.QUALITY``);
+- the **sweep**: settings on top of the paper preset (samples, denoiser, adaptive threshold,
+  bounces, light tree, clamping, caustics).
+
+Each row gives the seconds of one render (wall and CPU, the kernels already loaded and the BVH
+built), the PSNR and SSIM against the first reference (8-bit sRGB, ``vrformats.image_quality``),
+and the time over a one-sample geometry frame of the same view (``synth bench render``'s
+``geometry`` pass, timed in the same run). Nothing here imports Blender.
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from vrformats import image_quality
+from vrformats.atomic import write_nofollow
+from vrformats.errors import UserError
+
+from .settings import QUALITY, cycles_overrides
+
+# The reference: the paper preset's scene converged further. Twice its bounces; no denoiser; adaptive
+# sampling stops only where a pixel is well converged.
+REFERENCE = {"samples": 2048, "adaptive_threshold": 0.002, "denoise": False, "max_bounces": 16, "diffuse_bounces": 8,
+             "glossy_bounces": 8, "transmission_bounces": 16}
+PAPER_DB = 35.0  # paper quality: at least this PSNR against the reference (issue 47)
+
+# The sweep, each on top of the paper preset; "extra" are scene.cycles attributes no preset sets.
+SWEEP = (
+    [{"cycles": {"samples": n}} for n in (1, 2, 4, 8, 16, 32, 64, 128, 256)]
+    + [{"cycles": {"samples": n, "denoise": False}} for n in (16, 128)]
+    + [{"cycles": {"samples": 16, "denoise_prefilter": "FAST"}}, {"cycles": {"samples": 16, "adaptive_threshold": 0.05}},
+       {"cycles": {"samples": 128, "adaptive_threshold": 0.05}},
+       {"cycles": {"samples": 16, "max_bounces": 4, "diffuse_bounces": 2, "glossy_bounces": 2, "transmission_bounces": 4}},
+       {"cycles": {"samples": 16, "max_bounces": 2, "diffuse_bounces": 1, "glossy_bounces": 1, "transmission_bounces": 2}},
+       {"cycles": {"samples": 16}, "extra": {"use_light_tree": False}},
+       {"cycles": {"samples": 16}, "extra": {"sample_clamp_indirect": 1.0}},
+       {"cycles": {"samples": 16}, "extra": {"sample_clamp_indirect": 0.0}},
+       {"cycles": {"samples": 16}, "extra": {"caustics_reflective": False, "caustics_refractive": False}}]
+)
+
+
+def setting_name(s: dict) -> str:
+    parts = [f"{k}={v}" for k, v in (s.get("cycles") or {}).items()] + [f"{k}={v}" for k, v in (s.get("extra") or {}).items()]
+    return "paper, " + ", ".join(parts) if parts else "paper"
+
+
+def settings_list(quick: bool = False, reference_samples: int | None = None) -> list[dict]:
+    """Reference (two seeds), the presets, then the sweep (``quick``: the samples ladder only)."""
+    ref = {**REFERENCE, **({"samples": reference_samples} if reference_samples else {})}
+    out = [{"name": "reference (seed + 1)", "role": "reference", "cycles": dict(ref), "seed_offset": 1},
+           {"name": "reference (seed + 2)", "role": "reference", "cycles": dict(ref), "seed_offset": 2}]
+    out += [{"name": f"preset {p}", "role": "preset", "preset": p, "cycles": dict(QUALITY[p])} for p in QUALITY]
+    sweep = [s for s in SWEEP if not quick or (set(s["cycles"]) == {"samples"} and not s.get("extra"))]
+    out += [{"name": setting_name(s), "role": "sweep", **s} for s in sweep]
+    for s in out:
+        cycles_overrides("synth bench quality", s["cycles"], "cycles")  # the settings' one validator
+    return out
+
+
+# ------------------------------------------------------------------------------------------- views
+
+
+def design_views(spec_name: str, work: Path, replicacad_root: str | None = None, lightings=None,
+                 size: tuple[int, int] | None = None, progress=None) -> list[dict]:
+    """One view per lighting of the spec's first tour: its layout file, the pose in the middle of
+    its path, the intrinsics (the spec's, or ``size``), the seed."""
+    from ..jobs.plan import expand
+    from ..jobs.spec import load_spec
+    from ..sources import spec_source
+
+    spec = load_spec(spec_name)
+    if replicacad_root and spec.replicacad is None:
+        raise UserError(f"--replicacad-root: {spec_name} has no replicacad: section (its layouts are not ReplicaCAD scenes)")
+    src = spec_source(spec)
+    if src is not None:
+        spec = src.prepare(spec, work / "scene", replicacad_root, progress=progress or (lambda m: None))
+    plan = expand(spec, work / "job")
+    tour_name, first = next(iter(plan.tours.items()))
+    tours = {p.lighting_name: p for p in plan.tours.values()
+             if p.layout_file == first.layout_file and p.path_name == first.path_name and p.lighting_name}
+    if not tours:
+        raise UserError(f"{spec_name}: its first tour's layout and path are rendered in no lighting (geometry only)")
+    if lightings:
+        unknown = [lt for lt in lightings if lt not in tours]
+        if unknown:
+            raise UserError(f"--lighting {unknown[0]}: not a lighting of {spec_name}'s first layout and path; "
+                            f"its lightings: {', '.join(tours)}")
+    intr = first.intr.scaled(*size) if size else first.intr
+    i = len(first.frame_ids) // 2
+    views = []
+    for lt, p in tours.items():
+        if lightings and lt not in lightings:
+            continue
+        views.append({"name": f"{first.layout_name} {lt}", "spec": spec.name, "layout": str(p.layout_file.resolve()),
+                      "lighting": p.spec.lighting, "lighting_name": lt, "pose": p.poses[i].tolist(), "path": p.path_name,
+                      "frame": int(first.frame_ids[i]), "intrinsics": intr.to_dict(), "seed": spec.seed,
+                      "poses_around": p.poses[max(0, i - 2): i + 3].tolist(), "fps": p.path_fps})
+    return views
+
+
+# ------------------------------------------------------------------------------------------ measure
+
+
+def run_view(view: dict, settings: list[dict], work: Path, device: str = "cpu", threads: int = 0, progress=None) -> dict:
+    """Render one view under every setting (one worker process per seed) and measure each image
+    against the reference. Returns {"view", "device", "setup_s", "geometry_s", "rows"}."""
+    out = work / "images"
+    work.mkdir(parents=True, exist_ok=True)
+    by_seed: dict[int, list[int]] = {}
+    for k, s in enumerate(settings):
+        by_seed.setdefault(int(s.get("seed_offset", 0)), []).append(k)
+    seconds: dict[int, tuple[float, float]] = {}
+    info: dict = {}
+    for off, ks in sorted(by_seed.items()):
+        job = {"layout": view["layout"], "lighting": view["lighting"], "pose": view["pose"], "intrinsics": view["intrinsics"],
+               "seed": int(view["seed"]) + off, "device": device, "threads": threads, "out_dir": str(out / f"seed{off}"),
+               "base": dict(QUALITY["paper"]),
+               "settings": [{"cycles": settings[k]["cycles"], "extra": settings[k].get("extra") or {}} for k in ks]}
+        jf = work / f"quality_job_seed{off}.json"
+        write_nofollow(jf, json.dumps(job))
+        proc = subprocess.Popen([sys.executable, "-m", "synth.blender.quality_worker", str(jf)], stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True)
+        for line in proc.stdout:
+            if not line.startswith("{"):
+                continue
+            ev = json.loads(line)
+            if ev.get("event") == "ready":
+                info.setdefault("setup_s", ev.get("setup_s"))
+                info["device"] = ev.get("device")
+            elif ev.get("event") == "setting":
+                k = ks[ev["k"]]
+                seconds[k] = (ev["seconds"], ev.get("cpu"))
+                if progress:
+                    progress(f"  {view['name']}: {settings[k]['name']}: {ev['seconds']:.2f} s")
+            elif ev.get("event") == "error":
+                info["error"] = ev.get("error")
+        err = proc.stderr.read()
+        if proc.wait() != 0:
+            raise UserError(f"quality render of {view['name']} failed: {info.get('error') or err.strip()[-500:]}")
+    geometry_s = geometry_seconds(view, work, device, threads)
+    images = {}
+    for off, ks in by_seed.items():
+        for j, k in enumerate(ks):
+            images[k] = np.load(out / f"seed{off}" / f"{j}.npy")
+    refs = [k for k, s in enumerate(settings) if s["role"] == "reference"]
+    a8, b8 = (image_quality.as_srgb8(images[k]) for k in refs)
+    avg = image_quality.as_srgb8((images[refs[0]] + images[refs[1]]) / 2.0)
+    ref_noise = image_quality.mse(a8, b8) / 4.0  # the noise of the average of two (each: half of their squared difference)
+    rows = []
+    for k, s in enumerate(settings):
+        sec, cpu = seconds.get(k, (None, None))
+        row = {"setting": s["name"], "role": s["role"], "cycles": s["cycles"], "extra": s.get("extra") or {},
+               "seconds": sec, "cpu_seconds": cpu, "over_geometry": round(sec / geometry_s, 1) if sec and geometry_s else None}
+        if k not in refs:
+            m = image_quality.mse(image_quality.as_srgb8(images[k]), avg)
+            row["psnr_raw_db"] = round(image_quality.db(m), 2)
+            row["psnr_db"] = round(image_quality.db(m - ref_noise), 2) if m > 2 * ref_noise else None  # None: within the reference's noise
+            row["ssim"] = round(image_quality.ssim(images[k], avg), 4)
+        rows.append(row)
+    reference = {"cycles": settings[refs[0]]["cycles"], "seconds": [seconds.get(k, (None,))[0] for k in refs],
+                 "psnr_db": round(image_quality.db(ref_noise), 2), "psnr_one_against_other_db": round(image_quality.db(4 * ref_noise), 2)}
+    return {"view": {k: v for k, v in view.items() if k not in ("poses_around",)}, "device": info.get("device"),
+            "setup_s": info.get("setup_s"), "geometry_s": geometry_s, "reference": reference, "rows": rows}
+
+
+def geometry_seconds(view: dict, work: Path, device: str, threads: int) -> float | None:
+    """Median seconds of a one-sample geometry frame (depth and ids) around the view: the unit the
+    issue's goal is stated in (paper-quality RGB at most 60 such frames)."""
+    from vrformats.camera import Intrinsics
+
+    from .bench import bench_blender
+
+    poses = np.asarray(view["poses_around"], dtype=np.float64)
+    r = bench_blender(Path(view["layout"]), "geometry", poses, Intrinsics.from_dict(view["intrinsics"]), "preview",
+                      work, threads=threads, device=device)
+    steady = r["per_frame_s"][1:] or r["per_frame_s"]
+    return round(statistics.median(steady), 4) if steady else None
+
+
+# ------------------------------------------------------------------------------------------ report
+
+
+def passes(r: dict, reference_db: float, target_db: float = PAPER_DB) -> bool | None:
+    """Whether a row reaches ``target_db`` against the converged image; None when it cannot be told (its
+    error is within the reference's noise, and that noise is itself above the target)."""
+    if r["psnr_db"] is not None:
+        return r["psnr_db"] >= target_db
+    return True if reference_db >= target_db else None
+
+
+def cheapest(view: dict, target_db: float = PAPER_DB) -> dict | None:
+    """The fastest setting known to reach ``target_db`` against the converged image."""
+    ok = [r for r in view["rows"] if r["role"] != "reference" and passes(r, view["reference"]["psnr_db"], target_db)]
+    return min(ok, key=lambda r: r["seconds"]) if ok else None
+
+
+def format_report(views: list[dict], target_db: float = PAPER_DB) -> str:
+    lines = []
+    for v in views:
+        w, h = v["view"]["intrinsics"]["width"], v["view"]["intrinsics"]["height"]
+        lines.append(f"## {v['view']['name']} ({v['view']['spec']}, frame {v['view']['frame']} of the {v['view']['path']} path, "
+                     f"{w}x{h}, {v['device']}); one-sample geometry frame {v['geometry_s']} s")
+        ref = v["reference"]
+        lines.append(f"reference: the average of two renders of {ref['cycles']['samples']} samples ("
+                     f"{' s, '.join(f'{x:.1f}' for x in ref['seconds'])} s); one lies at {ref['psnr_one_against_other_db']} dB "
+                     f"from the other, so the average is at about {ref['psnr_db']} dB from the converged image")
+        lines.append("| setting | s/frame | x geometry | PSNR dB (reference noise out) | PSNR dB (raw) | SSIM |")
+        lines.append("|---|---:|---:|---:|---:|---:|")
+        for r in v["rows"]:
+            if r["role"] == "reference":
+                continue
+            p = f"{r['psnr_db']:.2f}" if r["psnr_db"] is not None else f">{ref['psnr_db']:.0f} (within the reference's noise)"
+            lines.append(f"| {r['setting']} | {r['seconds']:.3f} | {r['over_geometry']} | {p} | {r['psnr_raw_db']:.2f} | {r['ssim']:.4f} |")
+        c = cheapest(v, target_db)
+        lines.append(f"fastest at >= {target_db:g} dB: " + (f"{c['setting']} ({c['seconds']:.3f} s, {c['over_geometry']}x geometry, "
+                                                            f"{c['psnr_db'] or 'within the reference noise'} dB)" if c
+                                                           else "none known (none measured above it, or the reference is too noisy to tell)"))
+        lines.append("")
+    return "\n".join(lines)
+
+
+def _db(r: dict) -> float:
+    """The row's PSNR against the converged image, else (within the reference's noise) the raw one."""
+    return r["psnr_db"] if r["psnr_db"] is not None else r["psnr_raw_db"]
+
+
+def plot(views: list[dict], file, target_db: float = PAPER_DB) -> None:
+    """PSNR against seconds per frame, one panel per view: the samples ladder as a line, the presets
+    and the other settings as points, the paper-quality line."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = len(views)
+    cols = min(3, n)
+    rows_ = (n + cols - 1) // cols
+    fig, axes = plt.subplots(rows_, cols, figsize=(4.6 * cols, 3.6 * rows_), squeeze=False)
+    for ax, v in zip(axes.flat, views):
+        ladder = sorted((r for r in v["rows"] if r["role"] == "sweep" and set(r["cycles"]) == {"samples"} and not r["extra"]),
+                        key=lambda r: r["seconds"])
+        ax.plot([r["seconds"] for r in ladder], [_db(r) for r in ladder], "o-", color="0.4", ms=3,
+                label="paper, samples 1..256")
+        for r in ladder:
+            ax.annotate(str(r["cycles"]["samples"]), (r["seconds"], _db(r)), fontsize=6, color="0.4",
+                        xytext=(2, -8), textcoords="offset points")
+        for r in v["rows"]:
+            if r["role"] == "preset":
+                ax.plot(r["seconds"], _db(r), "s", ms=7, label=r["setting"])
+            elif r["role"] == "sweep" and r not in ladder:
+                ax.plot(r["seconds"], _db(r), "x", color="0.6", ms=4)
+        ax.axhline(target_db, color="tab:red", lw=0.8, ls="--")
+        ax.axhline(v["reference"]["psnr_db"], color="0.7", lw=0.8, ls=":")
+        ax.set_xscale("log")
+        ax.set_xlabel(f"seconds per RGB frame ({v['device']})")
+        ax.set_ylabel("PSNR against the reference (dB)")  # dotted: the reference's own
+        ax.set_title(v["view"]["name"], fontsize=9)
+        ax.grid(alpha=0.3)
+    for ax in list(axes.flat)[n:]:
+        ax.axis("off")
+    axes.flat[0].legend(fontsize=6, loc="lower right")
+    fig.tight_layout()
+    fig.savefig(file, dpi=110)
+    plt.close(fig)
+
+
+# --------------------------------------------------------------------------------------------- CLI
+
+
+def cmd_quality(args) -> int:
+    import tempfile
+
+    from vrformats.atomic import write_json_atomic
+
+    size = None
+    if args.size:
+        try:
+            size = tuple(int(x) for x in args.size.lower().split("x"))
+            assert len(size) == 2 and min(size) > 0
+        except (ValueError, AssertionError):
+            raise UserError(f"--size {args.size}: expected WIDTHxHEIGHT, e.g. 160x120") from None
+    if args.json_out:
+        from vrformats.errors import check_output_file
+
+        check_output_file(args.json_out)
+    settings = settings_list(quick=args.quick, reference_samples=args.reference_samples)
+    say = (lambda m: print(m, file=sys.stderr, flush=True)) if not args.json else (lambda m: None)
+    results = []
+    with tempfile.TemporaryDirectory(prefix="synth_quality_") as tmp:
+        tmp = Path(tmp)
+        views = design_views(args.spec, tmp, args.replicacad_root, args.lighting, size, progress=say)
+        t0 = time.time()
+        for i, v in enumerate(views):
+            say(f"{v['name']} ({i + 1}/{len(views)}): {len(settings)} renders ...")
+            results.append(run_view(v, settings, tmp / f"view{i}", device=args.device, threads=args.threads, progress=say))
+            if args.json_out:
+                write_json_atomic(args.json_out, {"views": results, "reference": settings[0]["cycles"], "target_db": PAPER_DB},
+                                  indent=1)
+    doc = {"views": results, "reference": settings[0]["cycles"], "target_db": PAPER_DB, "wall_s": round(time.time() - t0, 1)}
+    if args.plot:
+        plot(results, args.plot)
+    if args.json:
+        print(json.dumps(doc, indent=1))
+    else:
+        print(format_report(results))
+        if args.plot:
+            print(f"plot: {args.plot}")
+    return 0
+
+
+def register_cli(sub) -> None:
+    from vrformats.cli import add_json, bounded_int, positive_int
+
+    from .settings import DEVICES
+
+    a = sub.add_parser("quality", help="PSNR and SSIM of each quality preset and Cycles setting against a reference, "
+                                       "beside its time")
+    a.add_argument("--spec", default="replicacad_6x3",
+                   help="the design whose first tour gives the views (a shipped spec name or a file; default: the paper's "
+                        "design on the built-in apartment)")
+    a.add_argument("--replicacad-root", help="the ReplicaCAD folder, for a spec with a replicacad: section")
+    a.add_argument("--lighting", action="append", help="lightings to measure (default: every one of the design)")
+    a.add_argument("--size", help="WIDTHxHEIGHT in place of the spec's (the same view, e.g. 160x120 on a small machine)")
+    a.add_argument("--device", choices=list(DEVICES), default="cpu")
+    a.add_argument("--threads", type=bounded_int(256, lo=0), default=0, metavar="N", help="Cycles threads (0: every core)")
+    a.add_argument("--reference-samples", type=positive_int, metavar="N",
+                   help=f"samples of the reference (default {REFERENCE['samples']})")
+    a.add_argument("--quick", action="store_true", help="the presets and the samples ladder only")
+    a.add_argument("--plot", metavar="PNG", help="write the quality-versus-time plot here")
+    a.add_argument("--json-out", metavar="FILE", help="write the rows here, after every view (a long run keeps what it measured)")
+    add_json(a)
+    a.set_defaults(fn=cmd_quality)
