@@ -51,7 +51,16 @@ def read_blender_exr(path: str) -> dict[str, np.ndarray]:
 
 
 def run(job: dict) -> int:
+    t_import = time.time()
     import bpy
+
+    stages = {"import_bpy": time.time() - t_import}  # the chunk's start-up, by stage (the ready event reports it)
+    clock = [time.time()]
+
+    def lap(name: str) -> None:
+        now = time.time()
+        stages[name] = stages.get(name, 0.0) + now - clock[0]
+        clock[0] = now
 
     from vrformats.camera import Intrinsics, read_tum
     from ..scene.lighting import load_lighting, resolve_lighting
@@ -60,6 +69,7 @@ def run(job: dict) -> int:
     from ..scene.model import load_layout
     from . import scene_builder as sb
 
+    lap("import_toolkit")
     mode = job["pass"]
     layout = load_layout(job["layout"])
     intr = Intrinsics.from_dict(job["intrinsics"])
@@ -70,10 +80,13 @@ def run(job: dict) -> int:
     emit(event="start", blender=bpy.app.version_string, pass_=mode, frames=len(job["frames"]), todo=len(todo))
     if not todo:
         return 0
+    lap("read_layout")
 
     scene = sb.reset_scene()
     parts = layout_parts(layout)
+    lap("layout_meshes")
     emitters = sb.add_parts(scene, parts, with_materials=(mode == "rgb"))
+    lap("blender_scene")
     cam = sb.set_camera(scene, intr)
     device = sb.choose_device(scene, job.get("device", "cpu"))
     threads = int(job.get("threads") or 0)
@@ -90,7 +103,8 @@ def run(job: dict) -> int:
         sb.add_lighting(scene, resolve_lighting(load_lighting(job["lighting"]), layout), emitters)
         geom_dir = Path(job["geometry_dir"])
         previews = Path(job["previews_dir"]) if job.get("previews_dir") else None
-    emit(event="ready", device=device, parts=len(parts))
+    lap("device_and_lighting")
+    emit(event="ready", device=device, parts=len(parts), setup={k: round(v, 3) for k, v in stages.items()})
 
     tmpdir = tempfile.mkdtemp(prefix="synth_render_")  # removed when the chunk ends (a SIGKILL leaves it to the OS)
     tmp_exr = os.path.join(tmpdir, "render.exr")
@@ -100,6 +114,7 @@ def run(job: dict) -> int:
             t0, c0 = time.time(), time.process_time()
             sb.place_camera(cam, pose_of[i])
             bpy.ops.render.render(write_still=True)
+            t_render = time.time() - t0
             p = read_blender_exr(tmp_exr)
             target = out_dir / fr.frame_name(i)
             if mode == "geometry":
@@ -122,7 +137,8 @@ def run(job: dict) -> int:
                     with replacing(previews / f"{i:06d}.png") as tmp:
                         tmp.write_bytes(png.tobytes())
                 fr.write_frame(target, rgb=rgb, depth=g.depth, instance=g.instance, semantic=g.semantic)
-            emit(event="frame", frame=i, seconds=round(time.time() - t0, 4), cpu=round(time.process_time() - c0, 4))
+            emit(event="frame", frame=i, seconds=round(time.time() - t0, 4), cpu=round(time.process_time() - c0, 4),
+                 render_s=round(t_render, 4))
     finally:
         shutil.rmtree(tmpdir, ignore_errors=True)
     return 0

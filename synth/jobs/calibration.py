@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import os
+import time
 from pathlib import Path
 
 from vrformats import frames as fr
@@ -28,7 +29,7 @@ def measure_calibration(plan: Plan, frames: int = 1) -> dict:
 
     spec = plan.spec
     name, p = next(iter(plan.tours.items()))
-    per, cpu, size, devices = {}, {}, {}, {}
+    per, cpu, size, devices, startup = {}, {}, {}, {}, {}
     load = [round(x, 2) for x in os.getloadavg()] if hasattr(os, "getloadavg") else None
     with tempfile.TemporaryDirectory(prefix="synth_calib_") as tmp:
         tmp = Path(tmp)
@@ -44,12 +45,16 @@ def measure_calibration(plan: Plan, frames: int = 1) -> dict:
             job = {**base, "pass": kind, "out_dir": str(out_dir),
                    "lighting": next((t.spec.lighting for t in plan.tours.values() if t.lighting_name), None)}
             events = []
+            t0 = time.monotonic()
             rc, err, inf = run_chunk_process(kind, job, str(tmp / f"{kind}.json"), str(tmp / f"{kind}.log"),
                                              on_frame=events.append)
+            wall = time.monotonic() - t0
             if rc != 0:
                 raise UserError(f"calibration render ({kind}) failed: {err}")
             steady = events[1:] or events  # the first frame pays for kernel loading
             per[kind] = sum(ev["seconds"] for ev in steady) / len(steady)
+            # the chunk's start-up: its wall time less its frames at the steady rate (process, scene, kernels)
+            startup[kind] = round(max(0.0, wall - per[kind] * len(events)), 3)
             if all("cpu" in ev for ev in steady):
                 cpu[kind] = sum(ev["cpu"] for ev in steady) / len(steady)
             files = [out_dir / fr.frame_name(i) for i in idx if (out_dir / fr.frame_name(i)).exists()]
@@ -60,7 +65,7 @@ def measure_calibration(plan: Plan, frames: int = 1) -> dict:
         load = [round(max(a, b), 2) for a, b in zip(load, os.getloadavg())]
     env = measure_environment()
     return {"format": CALIBRATION_FORMAT, "version": CALIBRATION_VERSION, "seconds_per_frame": per,
-            "cpu_seconds_per_frame": cpu, "bytes_per_frame": size, "devices": devices,
+            "cpu_seconds_per_frame": cpu, "startup_s": startup, "bytes_per_frame": size, "devices": devices,
             "device": next((d for d in devices.values() if is_gpu(d)), "CPU"),
             "frames_measured": len(idx) - 1 if len(idx) > 1 else len(idx), "tour": name,
             "spec": {"name": spec.name, "source": spec.source, "renderer": spec.renderer, "geometry": spec.geometry,
@@ -73,15 +78,16 @@ def calibrate(plan: Plan, frames: int = 1) -> dict:
     return measure_calibration(plan, frames)["seconds_per_frame"]
 
 
-def estimate(plan: Plan, per_frame: dict, workers: int) -> float:
+def estimate(plan: Plan, per_frame: dict, workers: int, setup: dict | None = None) -> float:
     """Seconds on this machine. The calibration ran one process using every core, so running more
     local workers hides per-chunk start-up (about 3-4 s each) rather than dividing the frame time.
     (A Ray cluster: ``synth.jobs.estimate``.)"""
     from .estimate import SETUP_S
 
+    setup = SETUP_S if setup is None else setup
     work = 0.0
     for c in plan.chunks:
         if c.kind in per_frame:
             work += per_frame[c.kind] * len(c.missing())
-    work += sum(SETUP_S.get(c.kind, 0.0) for c in plan.chunks if c.missing()) / max(1, min(workers, os.cpu_count() or 1))
+    work += sum(setup.get(c.kind, 0.0) for c in plan.chunks if c.missing()) / max(1, min(workers, os.cpu_count() or 1))
     return work

@@ -113,7 +113,7 @@ def _dry_run(args, spec: JobSpec, clusters: list) -> int:
         # a calibration from a file is one process on its machine's cores: scaled to this machine's
         # cores (rendering scales about linearly with them), and said so
         scale = 1.0 if where == "measured here" else float(cal.get("cpu_count") or here) / here
-        eta = estimate(plan, {k: v * scale for k, v in per.items()}, args.workers)
+        eta = estimate(plan, {k: v * scale for k, v in per.items()}, args.workers, setup=ce.setup_seconds(cal))
         how = "" if scale == 1.0 else f", the file's {cal.get('cpu_count')}-CPU figures x {scale:g} for {here} CPUs"
         print(f"  estimate with {args.workers} worker(s): {fmt_duration(eta)} on this machine "
               f"({here} CPUs{how}); on a Ray cluster: --nodes N --cpus-per-node C")

@@ -22,8 +22,9 @@ The model (every assumption is printed with the estimate, ``describe_estimate``)
   takes the calibration's time per frame as it is: each GPU of the cluster is assumed to be as fast
   as the calibration's. There is no CPU-to-GPU factor: a GPU estimate needs a GPU calibration.
   Kinds calibrated on the CPU (the fast renderer) get ``C / G`` cores each, as on a CPU node.
-- **Start-up**: each chunk pays a fixed start-up (``SETUP_S``: a fresh Blender or Python process, the
-  scene built), not scaled with cores.
+- **Start-up**: each chunk pays a fixed start-up (a fresh Blender or Python process, the scene built,
+  the first frame's kernel loading), not scaled with cores: the calibration's ``startup_s``, measured
+  on its chunk (its wall time less its frames at the steady rate), else ``SETUP_S``.
 - **Scheduling**: list scheduling of the chunks on the ``N * K`` (``N * G``) slots: whenever a slot
   is free it takes the ready chunk of highest priority; an ``rgb`` chunk is ready once its
   ``geometry`` chunk has finished. Priority ``longest``: the longest path to the end of the job
@@ -165,6 +166,14 @@ def validate_calibration(doc, source: str) -> dict:
     for k in devs:
         if k not in spf:
             fields.fail(source, f"devices.{k}", "a pass kind without seconds_per_frame")
+    su = doc.get("startup_s", {})
+    if not isinstance(su, dict):
+        fields.fail(source, "startup_s", f"expected a mapping of pass kind to seconds, got {su!r}")
+    for k, v in su.items():
+        if k not in spf:
+            fields.fail(source, f"startup_s.{k}", "a pass kind without seconds_per_frame")
+        if not fields.is_number(v) or v < 0:
+            fields.fail(source, f"startup_s.{k}", f"expected a non-negative number of seconds, got {v!r}")
     spec = doc.get("spec")
     if not isinstance(spec, dict):
         fields.fail(source, "spec", f"expected a mapping (quality, width, height, ...), got {spec!r}")
@@ -225,7 +234,7 @@ def has_gpu_kinds(cal: dict) -> bool:
 
 def chunk_seconds(w: Work, cal: dict, cluster: Cluster, setup: dict | None = None) -> float:
     """Seconds one chunk takes on one slot of a node of ``cluster`` (start-up included)."""
-    setup = SETUP_S if setup is None else setup
+    setup = setup_seconds(cal) if setup is None else setup
     return setup.get(w.kind, 0.0) + frame_seconds(w.kind, cal, cluster) * w.frames
 
 
@@ -378,10 +387,16 @@ def describe_calibration(cal: dict, where: str) -> str:
             f"{s['quality']}, {s['width']}x{s['height']}{', tour ' + cal['tour'] if cal.get('tour') else ''})")
 
 
+def setup_seconds(cal: dict) -> dict:
+    """Start-up per chunk kind: the calibration's measured ``startup_s`` where it has one, else ``SETUP_S``."""
+    return {**SETUP_S, **(cal.get("startup_s") or {})}
+
+
 def describe_estimate(results: list[dict], cal: dict, where: str, setup: dict | None = None,
                       plan_order: list[dict] | None = None) -> str:
     """The assumptions, then a table: one row per cluster shape."""
-    setup = SETUP_S if setup is None else setup
+    measured = set(cal.get("startup_s") or {}) if setup is None else set()
+    setup = setup_seconds(cal) if setup is None else setup
     r0 = results[0]
     gpu = r0["gpus_per_node"] > 0
     k = r0["chunks_per_node"]
@@ -408,8 +423,9 @@ def describe_estimate(results: list[dict], cal: dict, where: str, setup: dict | 
                 src = f"{per:.3f} s/frame x {cal['cpu_count']} CPUs = {core:.3f} core-seconds/frame (no CPU time recorded)"
             lines.append(f"  - {kind}: {src} / {c / slots:g} cores = {core / (c / slots):.3f} s/frame per chunk "
                          f"(rendering scales linearly with cores: optimistic)")
-    lines.append("  - start-up per chunk (a fresh process, the scene built; not scaled): "
-                 + ", ".join(f"{kk} {v:g} s" for kk, v in setup.items()))
+    lines.append("  - start-up per chunk (a fresh process, the scene built, the kernels loaded; not scaled): "
+                 + ", ".join(f"{kk} {v:g} s" + (" (measured by the calibration)" if kk in measured else "")
+                             for kk, v in setup.items()))
     lines.append("  - list scheduling, longest path first (an rgb chunk starts once its geometry chunk has finished); "
                  "'driver order' is the same in the plan's order, what the Ray driver does today")
     if r0["copy_frames"]:

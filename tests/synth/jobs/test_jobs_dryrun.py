@@ -69,6 +69,17 @@ def test_busiest_node_utilisation_and_setup():
     assert r["makespan_s"] == pytest.approx(10.0 + ce.SETUP_S["fast"])
 
 
+def test_measured_startup_replaces_the_constant():
+    """A calibration's measured start-up (startup_s) is what each chunk pays; the assumptions say so."""
+    c = cal({"fast": 1.0})
+    c["startup_s"] = {"fast": 7.5}
+    r = ce.estimate_cluster(fast_chunks([10]), c, ce.Cluster(1, 4))
+    assert r["makespan_s"] == pytest.approx(10.0 + 7.5)
+    assert ce.setup_seconds(c) == {**ce.SETUP_S, "fast": 7.5}
+    text = ce.describe_estimate([r], c, "from <test>")
+    assert "fast 7.5 s (measured by the calibration)" in text and "geometry 3 s," in text
+
+
 def test_plan_order_is_what_the_driver_does():
     """In the plan's order (shortest first here) on 2 nodes: A 3, B 4; A@3 takes 5 (->8); B@4 takes 6
     (->10); A@8 takes 8 (->16); B@10 takes 10 (->20)."""
@@ -265,6 +276,7 @@ def test_cli_save_then_use_a_calibration(tmp_path, capsys):
     assert doc["spec"]["quality"] == "preview" and (doc["spec"]["width"], doc["spec"]["height"]) == (64, 48)
     assert doc["seconds_per_frame"]["fast"] > 0 and doc["bytes_per_frame"]["fast"] > 0
     assert doc["cpu_seconds_per_frame"]["fast"] > 0  # the worker's CPU time over its threads
+    assert doc["startup_s"]["fast"] >= 0  # its chunk's wall time less its frames at the steady rate
     assert doc["date"] and doc["toolkit_version"].startswith("0.")
     rc, out2, err = run_cli(["render", str(spec), "--out", str(tmp_path / "o"), "--dry-run", "--calibration", str(saved),
                              "--nodes", "2", "--cpus-per-node", "16"], capsys)
@@ -320,6 +332,9 @@ def test_cluster_options_need_a_dry_run(tmp_path, capsys):
     (lambda d: d["spec"].pop("width"), "spec.width"),
     (lambda d: d["spec"].update(quality="paper"), "spec.quality"),  # valid, but not the spec's quality
     (lambda d: d.update(seconds_per_frame={"rgb": 1.0}), "seconds_per_frame.fast"),  # the plan's kind is missing
+    (lambda d: d.update(startup_s={"fast": -1}), "startup_s.fast"),
+    (lambda d: d.update(startup_s={"rgb": 1.0}), "startup_s.rgb"),
+    (lambda d: d.update(startup_s=[1.0]), "startup_s"),
 ])
 def test_malformed_calibration_names_file_and_field(tmp_path, capsys, edit, field):
     f = cal_file(tmp_path, _bad(edit))
