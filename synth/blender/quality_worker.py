@@ -9,7 +9,8 @@ A job is a JSON file::
      "settings": [{"name": "...", "cycles": {<preset keys replaced>}, "extra": {<scene.cycles attributes>}}, ...]}
 
 The scene is built once; a one-sample render first loads the kernels and builds the BVH (not
-timed). Then each setting is rendered and written to ``out_dir/<k>.npy`` (linear RGB, float32), with an
+timed). Then each setting is rendered, fewest samples first (so that each image is the one a fresh
+process would render: see ``run``), and written to ``out_dir/<k>.npy`` (linear RGB, float32), with an
 event ``{"event": "setting", "k": k, "seconds": s, "cpu": c}``. Settings whose image exists are
 skipped, so a killed run resumes where it stopped.
 """
@@ -85,7 +86,10 @@ def run(job: dict) -> int:
     try:
         render({"samples": 1, "denoise": False}, {})  # kernels and BVH: not timed
         emit(event="ready", device=device, setup_s=round(time.time() - t0, 3))
-        for k in todo:
+        # fewest samples first: with persistent data Cycles keeps the sampling pattern sized for the most
+        # samples rendered so far, so a setting rendered after a larger one would get other (equally
+        # valid) noise than in a fresh process; in this order each image is the one a fresh render gives
+        for k in sorted(todo, key=lambda k: int({**base, **(job["settings"][k].get("cycles") or {})}["samples"])):
             s = job["settings"][k]
             img, sec, cpu = render(s.get("cycles") or {}, s.get("extra") or {})
             with replacing(out / f"{k}.npy") as tmp:

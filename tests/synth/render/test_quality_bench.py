@@ -76,3 +76,29 @@ def test_bad_input_is_one_line(argv, names, capsys, tmp_path):
     assert rc != 0
     one_line_error(capsys, *names)
     assert not (tmp_path / "q.json").exists()
+
+
+def test_each_setting_renders_as_in_a_fresh_process(tmp_path, run):
+    """With persistent data Cycles keeps the sampling pattern of the most samples rendered so far: the
+    worker renders fewest samples first, so a 16-sample image after a 128-sample one (in the list) is
+    the one a fresh process renders."""
+    import subprocess
+
+    import numpy as np
+
+    from synth.render.settings import QUALITY
+
+    v = run[1]["views"][0]["view"]
+
+    def render(settings, out):
+        job = {"layout": v["layout"], "lighting": v["lighting"], "pose": v["pose"], "intrinsics": v["intrinsics"], "seed": 0,
+               "device": "cpu", "threads": 0, "out_dir": str(out), "base": dict(QUALITY["paper"]), "settings": settings}
+        jf = tmp_path / f"{out.name}.json"
+        jf.write_text(json.dumps(job))
+        p = subprocess.run([sys.executable, "-m", "synth.blender.quality_worker", str(jf)], capture_output=True, text=True)
+        assert p.returncode == 0, p.stderr[-1500:]
+        return [np.load(out / f"{k}.npy") for k in range(len(settings))]
+
+    both = render([{"cycles": {"samples": 128}}, {"cycles": {"samples": 16}}], tmp_path / "both")
+    alone = render([{"cycles": {"samples": 16}}], tmp_path / "alone")
+    assert np.array_equal(both[1], alone[0]) and not np.array_equal(both[0], both[1])
