@@ -239,14 +239,16 @@ def format_report(views: list[dict], target_db: float = PAPER_DB) -> str:
     return "\n".join(lines)
 
 
-def _db(r: dict) -> float:
-    """The row's PSNR against the converged image, else (within the reference's noise) the raw one."""
-    return r["psnr_db"] if r["psnr_db"] is not None else r["psnr_raw_db"]
+def _db(r: dict, reference_db: float) -> tuple[float, bool]:
+    """The row's PSNR against the converged image and whether it is only a bound: a row within the
+    reference's noise is at least about as close as the reference itself."""
+    return (r["psnr_db"], False) if r["psnr_db"] is not None else (reference_db, True)
 
 
 def plot(views: list[dict], file, target_db: float = PAPER_DB) -> None:
     """PSNR against seconds per frame, one panel per view: the samples ladder as a line, the presets
-    and the other settings as points, the paper-quality line."""
+    and the other settings as points (a triangle: within the reference's noise, at least that close),
+    the paper-quality line and the reference's own PSNR."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -255,36 +257,37 @@ def plot(views: list[dict], file, target_db: float = PAPER_DB) -> None:
     n = len(views)
     cols = min(3, n)
     rows_ = (n + cols - 1) // cols
-    fig, axes = plt.subplots(rows_, cols, figsize=(4.6 * cols, 3.6 * rows_), squeeze=False)
+    fig, axes = plt.subplots(rows_, cols, figsize=(4.8 * cols, 3.8 * rows_), squeeze=False)
     for ax, v in zip(axes.flat, views):
+        ref_db = v["reference"]["psnr_db"]
         ladder = sorted((r for r in v["rows"] if r["role"] == "sweep" and set(r["cycles"]) == {"samples"} and not r["extra"]),
                         key=lambda r: r["seconds"])
-        ax.plot([r["seconds"] for r in ladder], [_db(r) for r in ladder], "o-", color="0.4", ms=3,
-                label="paper, samples 1..256")
-        for r in ladder:
-            ax.annotate(str(r["cycles"]["samples"]), (r["seconds"], _db(r)), fontsize=6, color="0.4",
-                        xytext=(2, -8), textcoords="offset points")
+        pts = [(r["seconds"], *_db(r, ref_db)) for r in ladder]
+        ax.plot([p[0] for p in pts], [p[1] for p in pts], "-", color="0.5", lw=1, label="paper preset, 1..256 samples")
+        for r, (x, y, bound) in zip(ladder, pts):
+            ax.plot(x, y, "^" if bound else "o", color="0.4", ms=4)
+            ax.annotate(str(r["cycles"]["samples"]), (x, y), fontsize=6, color="0.3", xytext=(3, -9), textcoords="offset points")
         for r in v["rows"]:
+            y, bound = _db(r, ref_db) if r["role"] != "reference" else (None, False)
             if r["role"] == "preset":
-                ax.plot(r["seconds"], _db(r), "s", ms=7, label=r["setting"])
+                ax.plot(r["seconds"], y, "^" if bound else "s", ms=8, label=r["setting"])
             elif r["role"] == "sweep" and r not in ladder:
-                ax.plot(r["seconds"], _db(r), "x", color="0.6", ms=4)
-        ax.axhline(target_db, color="tab:red", lw=0.8, ls="--")
-        ax.axhline(v["reference"]["psnr_db"], color="0.7", lw=0.8, ls=":")
+                ax.plot(r["seconds"], y, "x", color="0.6", ms=4)
+        ax.axhline(target_db, color="tab:red", lw=0.8, ls="--", label=f"paper quality ({target_db:g} dB)")
+        ax.axhline(ref_db, color="0.6", lw=0.8, ls=":", label="the reference's own")
         ax.set_xscale("log")
-        ax.set_xlabel(f"seconds per RGB frame ({v['device']})")
-        ax.set_ylabel("PSNR against the reference (dB)")  # dotted: the reference's own
-        ax.set_title(v["view"]["name"], fontsize=9)
+        ax.set_xlabel(f"seconds per RGB frame ({v['device']}, {v['view']['intrinsics']['width']}x{v['view']['intrinsics']['height']})")
+        ax.set_ylabel("PSNR against the converged image (dB)")
+        ax.set_title(v["view"]["name"] + (f" ({v['view']['spec']})" if v["view"].get("spec") else ""), fontsize=9)
         ax.grid(alpha=0.3)
     for ax in list(axes.flat)[n:]:
         ax.axis("off")
     axes.flat[0].legend(fontsize=6, loc="lower right")
-    fig.tight_layout()
+    fig.text(0.01, 0.005, "x: other settings (docs/rendering.md); triangle: within the reference's noise (at least that close)",
+             fontsize=6, color="0.4")
+    fig.tight_layout(rect=(0, 0.02, 1, 1))
     fig.savefig(file, dpi=110)
     plt.close(fig)
-
-
-# --------------------------------------------------------------------------------------------- CLI
 
 
 def cmd_quality(args) -> int:
