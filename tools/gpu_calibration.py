@@ -166,7 +166,8 @@ def cmd_run(args) -> int:
         row = {"ok": proc.returncode == 0 and len(frames) == len(job["frames"]), "apartment": apt, "preset": preset,
                "lighting": lt, "kind": job["pass"], "device": ready.get("device"), "wall_s": round(wall, 3),
                "frame_s": [round(s, 4) for s in secs], "median_s_per_frame": round(statistics.median(steady), 4) if steady else None,
-               "startup_s": round(wall - sum(steady) - (secs[0] - statistics.median(steady) if len(secs) > 1 else 0), 3) if secs else None,
+               # start-up: the chunk's wall time less its frames at the steady rate (as synth.jobs.calibration)
+               "startup_s": round(wall - statistics.median(steady) * len(secs), 3) if secs else None,
                "first_frame_extra_s": round(secs[0] - statistics.median(steady), 3) if len(secs) > 1 else None,
                "setup": ready.get("setup"), "render_s": [e.get("render_s") for e in frames]}
         if not row["ok"]:
