@@ -18,6 +18,7 @@ def build_parser() -> argparse.ArgumentParser:
     # one module per command group, imported when the parser is built
     from .trainset import trainset
     from .jobs import cli as jobs
+    from .jobs import quality_bench
     from .paths import cli as paths_cli
     from .render import bench
     from .layout import cli as scene_cli
@@ -34,7 +35,8 @@ def build_parser() -> argparse.ArgumentParser:
     paths_cli.register_cli(sub)  # synth path plan|show|check|preview|generate
     jobs.register_cli(sub)  # synth render SPEC.yaml
     trainset.register_cli(sub)  # synth trainset render SPEC.yaml (detector training data)
-    bench.register_cli(sub)  # synth bench render
+    bench_cmds = bench.register_cli(sub)  # synth bench render
+    quality_bench.register_cli(bench_cmds)  # synth bench quality
     tour_cli.register_old_names(sub)  # synth dataset check|show|export: old names of synth tour ..., warn
     return p
 

@@ -133,8 +133,9 @@ def cmd_bench(args) -> int:
     return 0
 
 
-def register_cli(subparsers) -> None:
-    """Add the ``bench`` group (one subcommand per benchmark; the renderers' is the only one) to ``synth``."""
+def register_cli(subparsers):
+    """Add the ``bench`` group to ``synth`` with the renderers' benchmark; returns its subcommands, to
+    which ``synth.jobs.quality_bench`` adds ``quality``."""
     p = subparsers.add_parser("bench", help="benchmarks that print figures (renderers' seconds per frame; "
                                             "each quality setting's PSNR against a reference)")
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -143,6 +144,4 @@ def register_cli(subparsers) -> None:
     a.add_argument("--quality", action="append", choices=list(QUALITY), help="RGB presets to time (default: all)")
     add_json(a)
     a.set_defaults(fn=cmd_bench)
-    from .quality import register_cli as register_quality
-
-    register_quality(sub)
+    return sub
