@@ -366,6 +366,9 @@ def check_command(cmd: Command) -> list[str]:
         if "argparse" not in f.read_text():
             return problems + [f"{rel(f)} has no argparse --help to check its options against"]
         text = help_text(*argv)
+        sub = args[0] if args and not args[0].startswith("-") else None
+        if sub and re.search(r"\{[\w,-]*\b" + re.escape(sub) + r"\b[\w,-]*\}", text):  # a subcommand: its own options
+            text = help_text(*argv, sub)
         for o in options_of(args):
             if not re.search(rf"(?<![\w-]){re.escape(o)}(?![\w-])", text):
                 problems.append(f"{' '.join(argv)} has no option {o}")
