@@ -28,7 +28,7 @@ def design_views(spec_name: str, work: Path, replicacad_root: str | None = None,
     if src is not None:
         spec = src.prepare(spec, work / "scene", replicacad_root, progress=progress or (lambda m: None))
     plan = expand(spec, work / "job")
-    tour_name, first = next(iter(plan.tours.items()))
+    first = next(iter(plan.tours.values()))
     tours = {p.lighting_name: p for p in plan.tours.values()
              if p.layout_file == first.layout_file and p.path_name == first.path_name and p.lighting_name}
     if not tours:
@@ -60,9 +60,10 @@ def cmd_quality(args) -> int:
     if args.size:
         try:
             size = tuple(int(x) for x in args.size.lower().split("x"))
-            assert len(size) == 2 and min(size) > 0
-        except (ValueError, AssertionError):
-            raise UserError(f"--size {args.size}: expected WIDTHxHEIGHT, e.g. 160x120") from None
+        except ValueError:
+            size = ()
+        if len(size) != 2 or min(size) <= 0:
+            raise UserError(f"--size {args.size}: expected WIDTHxHEIGHT, e.g. 160x120")
     if args.json_out:
         from vrformats.errors import check_output_file
 
