@@ -37,7 +37,7 @@ DEFAULTS = RenderDefaults()
 # one sample through each pixel centre. Picked on the quality-versus-time curve of ``synth bench
 # quality`` (docs/rendering.md#quality-against-time: PSNR against a 2x2048-sample, 16-bounce
 # reference, 160x120, built-in apartment by day and night, ReplicaCAD apt_0 by night): bounces buy
-# more than samples (at 16 samples, 4 bounces lose 1.5-5 dB to 8), and past 64 samples a doubling
+# more than samples (at 16 samples, 4 bounces lose 2.6-5.5 dB to 8), and past 64 samples a doubling
 # buys under 1.2 dB.
 QUALITY = {
     # 3 samples, 2 bounces + OpenImageDenoise (fast prefilter): the demo's; 22-28 dB, well below
