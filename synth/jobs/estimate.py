@@ -125,6 +125,19 @@ def parse_nodes(text) -> list[int]:
 # the calibration document
 
 
+def _seconds_by_kind(source: str, doc: dict, field: str, spf: dict, what: str, zero_ok: bool) -> None:
+    """An optional mapping of pass kind (one of ``seconds_per_frame``'s) to seconds (positive, or with
+    ``zero_ok`` non-negative)."""
+    d = doc.get(field, {})
+    if not isinstance(d, dict):
+        fields.fail(source, field, f"expected a mapping of pass kind to {what}, got {d!r}")
+    for k, v in d.items():
+        if k not in spf:
+            fields.fail(source, f"{field}.{k}", "a pass kind without seconds_per_frame")
+        if not fields.is_number(v) or (v < 0 if zero_ok else v <= 0):
+            fields.fail(source, f"{field}.{k}", f"expected a {'non-negative' if zero_ok else 'positive'} number of seconds, got {v!r}")
+
+
 def validate_calibration(doc, source: str) -> dict:
     """Check a calibration document (``--calibration FILE``); a SceneFormatError (a UserError) names the
     file and the field."""
@@ -142,14 +155,7 @@ def validate_calibration(doc, source: str) -> dict:
             fields.fail(source, f"seconds_per_frame.{k}", f"unknown pass kind; known: {', '.join(RENDER_KINDS)}")
         if not fields.is_number(v) or v <= 0:
             fields.fail(source, f"seconds_per_frame.{k}", f"expected a positive number of seconds, got {v!r}")
-    cps = doc.get("cpu_seconds_per_frame", {})
-    if not isinstance(cps, dict):
-        fields.fail(source, "cpu_seconds_per_frame", f"expected a mapping of pass kind to CPU seconds, got {cps!r}")
-    for k, v in cps.items():
-        if k not in spf:
-            fields.fail(source, f"cpu_seconds_per_frame.{k}", "a pass kind without seconds_per_frame")
-        if not fields.is_number(v) or v <= 0:
-            fields.fail(source, f"cpu_seconds_per_frame.{k}", f"expected a positive number of seconds, got {v!r}")
+    _seconds_by_kind(source, doc, "cpu_seconds_per_frame", spf, "CPU seconds", zero_ok=False)
     bpf = doc.get("bytes_per_frame", {})
     if not isinstance(bpf, dict):
         fields.fail(source, "bytes_per_frame", f"expected a mapping of pass kind to bytes, got {bpf!r}")
@@ -166,14 +172,7 @@ def validate_calibration(doc, source: str) -> dict:
     for k in devs:
         if k not in spf:
             fields.fail(source, f"devices.{k}", "a pass kind without seconds_per_frame")
-    su = doc.get("startup_s", {})
-    if not isinstance(su, dict):
-        fields.fail(source, "startup_s", f"expected a mapping of pass kind to seconds, got {su!r}")
-    for k, v in su.items():
-        if k not in spf:
-            fields.fail(source, f"startup_s.{k}", "a pass kind without seconds_per_frame")
-        if not fields.is_number(v) or v < 0:
-            fields.fail(source, f"startup_s.{k}", f"expected a non-negative number of seconds, got {v!r}")
+    _seconds_by_kind(source, doc, "startup_s", spf, "seconds", zero_ok=True)
     spec = doc.get("spec")
     if not isinstance(spec, dict):
         fields.fail(source, "spec", f"expected a mapping (quality, width, height, ...), got {spec!r}")
