@@ -11,7 +11,8 @@ A job is a JSON file::
 The scene is built once; a one-sample render first loads the kernels and builds the BVH (not
 timed). Then each setting is rendered, fewest samples first (so that each image is the one a fresh
 process would render: see ``run``), and written to ``out_dir/<k>.npy`` (linear RGB, float32), with an
-event ``{"event": "setting", "k": k, "seconds": s, "cpu": c}``. Settings whose image exists are
+event ``{"event": "frame", "frame": k, "seconds": s, "cpu": c}`` (as a render chunk's, so that
+``synth.render.chunks.run_chunk_process`` runs it). Settings whose image exists are
 skipped, so a killed run resumes where it stopped.
 """
 
@@ -85,7 +86,7 @@ def run(job: dict) -> int:
 
     try:
         render({"samples": 1, "denoise": False}, {})  # kernels and BVH: not timed
-        emit(event="ready", device=device, setup_s=round(time.time() - t0, 3))
+        emit(event="ready", device=device, setup={"scene_and_kernels": round(time.time() - t0, 3)})
         # fewest samples first: with persistent data Cycles keeps the sampling pattern sized for the most
         # samples rendered so far, so a setting rendered after a larger one would get other (equally
         # valid) noise than in a fresh process; in this order each image is the one a fresh render gives
@@ -95,7 +96,7 @@ def run(job: dict) -> int:
             with replacing(out / f"{k}.npy") as tmp:
                 with open(tmp, "wb") as f:
                     np.save(f, img)
-            emit(event="setting", k=k, seconds=round(sec, 4), cpu=round(cpu, 4))
+            emit(event="frame", frame=k, seconds=round(sec, 4), cpu=round(cpu, 4))  # one image: setting k
     finally:
         shutil.rmtree(tmpdir, ignore_errors=True)
     return 0

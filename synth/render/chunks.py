@@ -57,13 +57,14 @@ def chunk_job(p, kind: str, frames: list[int], out_dir: Path | None = None) -> d
 
 
 def run_chunk_process(chunk_kind: str, job: dict, job_file: str, log_file: str, on_frame=None,
-                      env: dict | None = None) -> tuple[int, str | None, dict]:
+                      env: dict | None = None, worker: str | None = None) -> tuple[int, str | None, dict]:
     """Run one chunk in a fresh process; returns (exit status, error, info). Used by every runner.
 
     ``env``: the worker's environment (default: this process's); the Ray backend points
-    ``SYNTH_SCENES_DIR`` at the scene files it shipped with the chunk."""
+    ``SYNTH_SCENES_DIR`` at the scene files it shipped with the chunk. ``worker``: the worker module
+    in place of the chunk kind's (the quality benchmark's, ``synth.blender.quality_worker``)."""
     write_nofollow(job_file, json.dumps(job))
-    worker = "synth.blender.worker" if chunk_kind in BLENDER_PASSES else "synth.render.chunk_worker"
+    worker = worker or ("synth.blender.worker" if chunk_kind in BLENDER_PASSES else "synth.render.chunk_worker")
     info: dict = {}
     err = None
     with open(log_file, "w", opener=nofollow_opener) as log:
@@ -132,6 +133,7 @@ def _follow(proc, log, on_frame, info: dict) -> tuple[int, str | None]:
                 info["blender"] = ev.get("blender")
             elif e == "ready":
                 info["device"] = ev.get("device")
+                info["setup"] = ev.get("setup")  # the worker's start-up by stage
             elif e == "error":
                 err = ev.get("error")
     finally:

@@ -24,18 +24,15 @@ the command are ``synth.jobs.quality_bench``'s.
 
 from __future__ import annotations
 
-import json
 import statistics
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 
 from vrformats import image_quality
-from vrformats.atomic import write_nofollow
 from vrformats.errors import UserError
 
+from .chunks import run_chunk_process
 from .settings import QUALITY, cycles_overrides
 
 # The reference: the paper preset's scene converged further. Twice its bounces; no denoiser; adaptive
@@ -95,27 +92,20 @@ def run_view(view: dict, settings: list[dict], work: Path, device: str = "cpu", 
                "seed": int(view["seed"]) + off, "device": device, "threads": threads, "out_dir": str(out / f"seed{off}"),
                "base": dict(QUALITY["paper"]),
                "settings": [{"cycles": settings[k]["cycles"], "extra": settings[k].get("extra") or {}} for k in ks]}
-        jf = work / f"quality_job_seed{off}.json"
-        write_nofollow(jf, json.dumps(job))
-        proc = subprocess.Popen([sys.executable, "-m", "synth.blender.quality_worker", str(jf)], stdout=subprocess.PIPE,
-                                stderr=subprocess.PIPE, text=True)
-        for line in proc.stdout:
-            if not line.startswith("{"):
-                continue
-            ev = json.loads(line)
-            if ev.get("event") == "ready":
-                info.setdefault("setup_s", ev.get("setup_s"))
-                info["device"] = ev.get("device")
-            elif ev.get("event") == "setting":
-                k = ks[ev["k"]]
-                seconds[k] = (ev["seconds"], ev.get("cpu"))
-                if progress:
-                    progress(f"  {view['name']}: {settings[k]['name']}: {ev['seconds']:.2f} s")
-            elif ev.get("event") == "error":
-                info["error"] = ev.get("error")
-        err = proc.stderr.read()
-        if proc.wait() != 0:
-            raise UserError(f"quality render of {view['name']} failed: {info.get('error') or err.strip()[-500:]}")
+
+        def on_frame(ev, ks=ks):
+            k = ks[ev["frame"]]
+            seconds[k] = (ev["seconds"], ev.get("cpu"))
+            if progress:
+                progress(f"  {view['name']}: {settings[k]['name']}: {ev['seconds']:.2f} s")
+
+        log = work / f"quality_job_seed{off}.log"
+        rc, err, inf = run_chunk_process("rgb", job, str(work / f"quality_job_seed{off}.json"), str(log), on_frame=on_frame,
+                                         worker="synth.blender.quality_worker")
+        if rc != 0:
+            raise UserError(f"quality render of {view['name']} failed: {err}")
+        info.setdefault("setup_s", sum((inf.get("setup") or {}).values()))
+        info["device"] = inf.get("device")
     geometry_s = geometry_seconds(view, work, device, threads)
     images = {}
     for off, ks in by_seed.items():
