@@ -27,7 +27,6 @@ from __future__ import annotations
 import argparse
 import fnmatch
 import json
-import os
 import shutil
 import statistics
 import subprocess
@@ -100,14 +99,22 @@ def cmd_prepare(args) -> int:
 
 
 def _dataset_files(layout: Path, root: str) -> list[str]:
-    """The dataset files (relative to the root) that a layout file names."""
-    root = str(Path(root).resolve())
-    text = layout.read_text()
-    out = set()
-    import re
+    """The dataset files (relative to the root) a layout's meshes come from: its stage's and objects'
+    GLBs (``replicacad:``) and, for an articulated object (``replicacad-urdf:``), its URDF's folder
+    (the meshes it names lie beside it), plus the scene dataset config that marks the root and the
+    dataset's licence."""
+    from synth.mesh.roots import dataset_config_path
+    from synth.scene.model import GLB_ASSET_PREFIX, URDF_ASSET_PREFIX, load_layout
 
-    for m in re.finditer(r"(?:'|\"|\s)(" + re.escape(root) + r"/[^'\"\s]+)", text):
-        out.add(os.path.relpath(m.group(1), root))
+    root = Path(root).resolve()
+    lay = load_layout(layout)
+    out = {dataset_config_path(root).name} | {f.name for f in root.glob("LICENSE*") if f.is_file()}  # its licence travels too
+    for a in [lay.stage.asset] + [o.asset for o in lay.objects]:
+        if a and a.startswith(GLB_ASSET_PREFIX):
+            out.add(a[len(GLB_ASSET_PREFIX):])
+        elif a and a.startswith(URDF_ASSET_PREFIX):
+            folder = (root / a[len(URDF_ASSET_PREFIX):]).parent
+            out.update(str(f.relative_to(root)) for f in folder.iterdir() if f.is_file())
     return sorted(out)
 
 
