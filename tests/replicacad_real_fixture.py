@@ -10,8 +10,9 @@ the ``empty_stage`` and ``apt_0..apt_5`` navmeshes), plus
   real files through ``synth.mesh.gltf.glb_geometry``; the three GLBs the public copy lacks have the
   bounds of their collision asset, or of a sibling: see the table's ``source``). Each box has a
   base colour factor; the first ``TEXTURED`` of them also a 4 x 4 base-colour texture with UVs.
-* the stand-in stage ``stages/frl_apartment_stage.glb``, built by ``tools/replicacad_standin.py`` itself
-  (``standin_tool()._fill``) the way it builds the real data's: from the vendored empty-stage navmesh,
+* the stand-in stage ``stages/frl_apartment_stage.glb`` (and its stage card), built by
+  ``synth.sources.replicacad.stages.fill`` under the ``standin`` variant, the way
+  ``tools/replicacad_standin.py`` builds the real data's: from the vendored empty-stage navmesh,
   the floor at z 0 (the median bottom of the scenes' objects, here the box GLBs), the floor holding
   the box of every object of apt_0..apt_5 (+2 cm, to the cell for those hung on walls or standing on
   furniture; all but one apt_2 shoe that stands outside), each added cell on the level the object
@@ -122,7 +123,7 @@ def standin_tool():
 
 def write_real_fixture(root) -> Path:
     """Write the fixture dataset root at ``root`` (created; existing files are overwritten)."""
-    from synth.sources.replicacad.navmesh import StandinSpec
+    from synth.sources.replicacad.stages import fill, load_stage_variant
 
     root = Path(root)
     root.mkdir(parents=True, exist_ok=True)
@@ -133,7 +134,7 @@ def write_real_fixture(root) -> Path:
     for k, (rel, b) in enumerate(sorted(bounds_table().items())):
         box_glb(root / rel, b["min"], b["max"], _colour(rel), textured=k < TEXTURED)
     # the stand-in stage, as the tool builds the real data's (its object GLBs are all there: it adds none)
-    rows = standin_tool()._fill(root, StandinSpec())
+    rows = fill(root, load_stage_variant("standin"), structure_report=False)
     built = [r for r in rows if r.get("file") == STAGE_GLB]
     if len(built) != 1 or built[0].get("floor_z") != STAGE_FLOOR_Z or any(r["kind"] == "object" for r in rows):
         raise RuntimeError(f"fixture stand-in stage: unexpected build rows {rows}")

@@ -430,7 +430,9 @@ STANDIN_KEEP_MARGIN = 0.02  # m: the floor holds every object's footprint with t
 STANDIN_KEEP_MAX = 1.2  # m: footprints farther out of the navmesh footprint are not held (reported)
 STANDIN_KEEP_STAND = 0.1  # m: an object whose bottom is this close to a level it touches stands on it (else: hangs)
 STANDIN_COLOURS = {"floor": (0.55, 0.45, 0.35, 1.0), "walls": (0.85, 0.84, 0.80, 1.0), "ceiling": (0.95, 0.95, 0.95, 1.0),
-                   "steps": (0.50, 0.42, 0.34, 1.0)}
+                   "steps": (0.50, 0.42, 0.34, 1.0), "trim": (0.92, 0.91, 0.88, 1.0)}
+BASEBOARD_HEIGHT = 0.08  # m: a baseboard (StandinSpec.baseboards) is a band this high, one cell deep, along the walls
+FRAME_WIDTH = 0.05  # m: a window frame's (StandinSpec.window_frames) sill and head bands are this high; jambs one cell wide
 
 
 @dataclass
@@ -452,7 +454,13 @@ class StandinSpec:
     level, among those whose footprint the object's touches, whose height there is nearest the
     object's bottom (a bike beside the stairs stays on the floor, a plant on the landing is raised
     to it); a cell held by several objects, to the one with the lowest bottom (what stands on the
-    floor, not what stands on it). Empty: to the level whose walkable cells are nearest."""
+    floor, not what stands on it). Empty: to the level whose walkable cells are nearest.
+    ``baseboards``: a band ``BASEBOARD_HEIGHT`` high and one cell deep on the floor along the inside
+    of every wall (not on the steps). ``window_frames``: around each window opening, on both sides of
+    the wall, a frame protruding one cell: a sill and a head band ``FRAME_WIDTH`` high and a jamb one
+    cell wide at either end. Both are the part ``trim``. ``window_jog``: an exterior wall run that
+    jogs sideways by at most this many cells (and is broken by at most as many) is still one straight
+    run for the windows (``_wall_runs``): a stage built on a grid rotated off its walls."""
 
     floor_z: float | None = None
     ceiling: float = STANDIN_CEILING
@@ -464,13 +472,16 @@ class StandinSpec:
     keep_margin: float = STANDIN_KEEP_MARGIN
     keep_max: float = STANDIN_KEEP_MAX
     window_clear: float = WINDOW_CLEAR
+    baseboards: bool = False
+    window_frames: bool = False
+    window_jog: int = 0  # cells: a straight wall run may jog sideways this much (a grid rotated off the walls)
 
 
 @dataclass
 class Standin:
     """The stand-in's meshes (our frame, Z up) by part, and its figures."""
 
-    parts: dict  # name -> trimesh.Trimesh (floor, walls, ceiling, steps)
+    parts: dict  # name -> trimesh.Trimesh (floor, walls, ceiling, steps, trim)
     floor_z: float
     ceiling_z: float
     stair_ceiling_z: float | None
@@ -487,19 +498,53 @@ def _rects(mask: np.ndarray) -> list[tuple[int, int, int, int]]:
     runs along j in each column i, merged over consecutive columns with the same run."""
     out = []
     open_: dict[tuple[int, int], int] = {}
-    W = mask.shape[0]
-    for i in range(W + 1):
-        runs = set()
-        if i < W:
-            col = mask[i]
-            d = np.diff(np.concatenate(([0], col.astype(np.int8), [0])))
-            runs = set(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist()))
+    m = np.asarray(mask, bool)
+    d = np.diff(np.pad(m.astype(np.int8), ((0, 0), (1, 1))), axis=1)
+    si, sj = np.nonzero(d == 1)  # run starts and ends, column by column (row-major: in order within a column)
+    _, ej = np.nonzero(d == -1)
+    by_col: dict[int, set] = {}
+    for i, a, b in zip(si.tolist(), sj.tolist(), ej.tolist()):
+        by_col.setdefault(i, set()).add((a, b))
+    # only columns with runs, and the one after each, can open or close a rectangle
+    for i in sorted(set(by_col) | {c + 1 for c in by_col}):
+        runs = by_col.get(i, set())
         for r in list(open_):
             if r not in runs:
                 out.append((open_.pop(r), i, r[0], r[1]))
         for r in runs:
             if r not in open_:
                 open_[r] = i
+    out.sort()
+    return out
+
+
+def _wall_runs(ext: np.ndarray, thick: int, jog: int = 0) -> list[tuple[int, int, int, int]]:
+    """Straight runs of the exterior wall cells ``ext``: its rectangles (``_rects``) at most
+    ``thick`` cells thick. With ``jog`` > 0, runs that continue one another along their length
+    (overlapping by at most ``jog`` cells, or after a gap of at most ``thick`` where the band turns)
+    shifted sideways by at most ``jog`` cells (the staircase of a wall that runs off the grid's
+    axes) are one run: their bounding rectangle."""
+    rects = [r for r in _rects(ext) if min(r[1] - r[0], r[3] - r[2]) <= thick]
+    if jog <= 0:
+        return rects
+    out = [r for r in rects if r[1] - r[0] == r[3] - r[2]]
+    for along in (0, 1):
+        lng = sorted((r for r in rects if (r[1] - r[0] > r[3] - r[2]) == (along == 0) and r[1] - r[0] != r[3] - r[2]),
+                     key=lambda r: (r[2 * along], r[2 * (1 - along)]))
+        chains: list[list] = []
+        for r in lng:
+            a0, a1, c0, c1 = (r[0], r[1], r[2], r[3]) if along == 0 else (r[2], r[3], r[0], r[1])
+            for ch in chains:
+                b0, b1, d0, d1 = ch[-1]
+                if -jog <= a0 - b1 <= thick and abs(c0 - d0) <= jog and abs(c1 - d1) <= jog:
+                    ch.append((a0, a1, c0, c1))
+                    break
+            else:
+                chains.append([(a0, a1, c0, c1)])
+        for ch in chains:
+            a0, a1 = ch[0][0], ch[-1][1]
+            c0, c1 = min(x[2] for x in ch), max(x[3] for x in ch)
+            out.append((a0, a1, c0, c1) if along == 0 else (c0, c1, a0, a1))
     out.sort()
     return out
 
@@ -518,7 +563,7 @@ def _boxes(g: Grid, mask: np.ndarray, z0: float, z1: float) -> list:
     return [_box((o[0] + i0 * c, o[1] + j0 * c, z0), (o[0] + i1 * c, o[1] + j1 * c, z1)) for i0, i1, j0, j1 in _rects(mask)]
 
 
-PARTS = ("floor", "steps", "walls", "ceiling")
+PARTS = ("floor", "steps", "walls", "ceiling", "trim")
 
 
 def _solid_surface(g: Grid, solids) -> tuple[dict, dict]:
@@ -756,6 +801,7 @@ def standin_stage(nav: NavMesh, spec: StandinSpec | None = None) -> Standin:
     solid = wall.copy()
     win_cells = np.zeros(shape, bool)
     busy = np.zeros(shape, bool)
+    frames = []  # (along axis, along cells [a0, a1), across cells [c0, c1)) of each window hole, for its frame
     if spec.windows:
         ext = wall & ndimage.binary_dilation(outer, structure=np.ones((3, 3), bool)) & ~near_stair
         if (U != nav_fp).any():  # straight runs from the navmesh's own walls (not broken by the moves around objects)
@@ -770,10 +816,8 @@ def standin_stage(nav: NavMesh, spec: StandinSpec | None = None) -> Standin:
             busy = ndimage.binary_dilation(objects, structure=(xx * xx + yy * yy) <= r * r)
         ext &= ~busy
         x = t + int(math.ceil(STANDIN_KEEP_MAX / 4 / cell)) if (U != nav_fp).any() else t  # a hole reaches a moved wall too
-        for i0, i1, j0, j1 in _rects(ext):
+        for i0, i1, j0, j1 in _wall_runs(ext, 2 * t, spec.window_jog):
             wi, wj = i1 - i0, j1 - j0
-            if min(wi, wj) > 2 * t:
-                continue
             along = 0 if wi > wj else 1
             n_cells = wi if along == 0 else wj
             L = n_cells * cell
@@ -799,6 +843,11 @@ def standin_stage(nav: NavMesh, spec: StandinSpec | None = None) -> Standin:
                 if len(across):
                     base_ = (j0 if along == 0 else i0) - (min(j0, x) if along == 0 else min(i0, x))
                     at = (lo[1 - along] + (base_ + across[0]) * cell, lo[1 - along] + (base_ + across[-1] + 1) * cell)
+                    if spec.window_frames:
+                        ins = np.flatnonzero(hole.any(axis=1 - along))  # cells along the wall
+                        a0_, a1_ = (sl[along].start + ins[0], sl[along].start + ins[-1] + 1)
+                        c0_, c1_ = base_ + across[0], base_ + across[-1] + 1
+                        frames.append((along, a0_, a1_, c0_, c1_))
                 windows.append({"axis": "xy"[along], "wall_line": [round(float(v), 3) for v in at],
                                 "from": round(float(span[0]), 3), "to": round(float(span[1]), 3),
                                 "bottom": WINDOW_SILL, "top": WINDOW_HEAD})
@@ -808,6 +857,28 @@ def standin_stage(nav: NavMesh, spec: StandinSpec | None = None) -> Standin:
         solids.append(("walls", near_stair, floor_z, stair_z))
     solids.append(("walls", win_cells, floor_z, floor_z + WINDOW_SILL))
     solids.append(("walls", win_cells, floor_z + WINDOW_HEAD, ceil_z))
+    if spec.baseboards:  # along the inside of every wall, on the main floor (not on the steps)
+        board = U & ~raised & ndimage.binary_dilation(wall, structure=np.ones((3, 3), bool))
+        solids.append(("trim", board, floor_z, floor_z + BASEBOARD_HEIGHT))
+    else:
+        board = np.zeros(shape, bool)
+    if frames:
+        band, jamb = np.zeros(shape, bool), np.zeros(shape, bool)
+        for along, a0_, a1_, c0_, c1_ in frames:
+            for c in (c0_ - 1, c1_):  # one cell in front of either face of the wall
+                if not 0 <= c < shape[1 - along]:
+                    continue
+                a_lo, a_hi = max(a0_ - 1, 0), min(a1_ + 1, shape[along])
+                sl_b = (slice(a_lo, a_hi), c) if along == 0 else (c, slice(a_lo, a_hi))
+                band[sl_b] = True
+                for a in (a0_ - 1, a1_):
+                    if 0 <= a < shape[along]:
+                        jamb[(a, c) if along == 0 else (c, a)] = True
+        band &= ~wall
+        jamb &= ~wall
+        solids.append(("trim", band, floor_z + WINDOW_SILL - FRAME_WIDTH, floor_z + WINDOW_SILL))
+        solids.append(("trim", band, floor_z + WINDOW_HEAD, floor_z + WINDOW_HEAD + FRAME_WIDTH))
+        solids.append(("trim", jamb, floor_z + WINDOW_SILL - FRAME_WIDTH, floor_z + WINDOW_HEAD + FRAME_WIDTH))
     if stair_z is None:
         solids.append(("ceiling", shell, ceil_z, ceil_z + STANDIN_SLAB))
     else:
@@ -822,15 +893,22 @@ def standin_stage(nav: NavMesh, spec: StandinSpec | None = None) -> Standin:
               "raised_m2": round(float(raised.sum()) * cell * cell, 3),
               "floating_m2": round(float(floating.sum()) * cell * cell, 3), "levels": info, "keep": keep_info,
               "quads": nfaces}
+    if spec.baseboards or spec.window_frames:  # (absent otherwise: the default stand-in's report is unchanged)
+        report["baseboards_m2"] = round(float(board.sum()) * cell * cell, 3)
+        report["window_frames"] = len(frames)
     return Standin(parts, floor_z, ceil_z, stair_z, g, main_fp, Grid(wall, lo, cell), windows, info, report)
 
 
-def write_standin_glb(standin: Standin, path) -> Path:
+def write_standin_glb(standin: Standin, path, visuals: dict | None = None) -> Path:
     """Write the stand-in's parts as a GLB in habitat's Y-up glTF frame (vertices ``C^T v``), one
-    node and one plain PBR material (base colour factor) per part."""
+    node and one PBR material per part: plain (base colour factor ``STANDIN_COLOURS``), or the
+    part's entry in ``visuals`` (a ``trimesh.visual.TextureVisuals`` matching the part's vertices:
+    UVs and a material with a base colour texture, ``synth.sources.replicacad.stages``)."""
     import trimesh
     from trimesh.visual import TextureVisuals
     from trimesh.visual.material import PBRMaterial
+
+    from vrformats.atomic import write_bytes_atomic
 
     path = Path(path)
     scene = trimesh.Scene()
@@ -839,11 +917,12 @@ def write_standin_glb(standin: Standin, path) -> Path:
     for name, mesh in standin.parts.items():
         m = mesh.copy()
         m.apply_transform(T)
-        m.visual = TextureVisuals(material=PBRMaterial(name=f"standin_{name}", baseColorFactor=list(STANDIN_COLOURS[name]),
-                                                       metallicFactor=0.0, roughnessFactor=0.9))
+        if visuals and name in visuals:
+            m.visual = visuals[name]
+        else:
+            m.visual = TextureVisuals(material=PBRMaterial(name=f"standin_{name}", baseColorFactor=list(STANDIN_COLOURS[name]),
+                                                           metallicFactor=0.0, roughnessFactor=0.9))
         scene.add_geometry(m, node_name=name, geom_name=name)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(trimesh.exchange.gltf.export_glb(scene))
-    tmp.replace(path)
+    write_bytes_atomic(path, trimesh.exchange.gltf.export_glb(scene))
     return path

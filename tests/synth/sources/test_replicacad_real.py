@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from replicacad_real_fixture import DATA, FILES, STAGE_GLB, bounds_table, manifest, sha256, standin_tool, write_real_fixture
+from replicacad_real_fixture import DATA, FILES, STAGE_GLB, bounds_table, manifest, sha256, write_real_fixture
 
 C = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 
@@ -108,7 +108,7 @@ def test_standin_stage_floor_is_the_navmesh_footprint_and_the_objects(root, plai
     assert (stood & fpm).sum() / fp.mask.sum() > 0.98
     assert m.bounds[0][2] == pytest.approx(-0.1, abs=1e-4)
 
-    tool = standin_tool()
+    from synth.sources.replicacad import stages as tool
     keep, _, _, who = tool.object_footprints(root, tool.stage_scenes(root)["frl_apartment_stage"], 0.0, StandinSpec.ceiling)
     assert len(keep) > 600  # the objects of apt_0..apt_5 (walls' and floor's, not those above the ceiling)
     ii, jj = np.nonzero(np.ones(fpm.shape, bool))
@@ -154,7 +154,7 @@ def test_floor_standing_objects_are_held_at_the_floor(root, plain_footprint):
     floor = rasterise((m.triangles[up][:, :, :2] - origin) / cell, fpm.shape)
     ii, jj = np.nonzero(np.ones(fpm.shape, bool))
     centres = origin + (np.stack([ii, jj], axis=1) + 0.5) * cell
-    tool = standin_tool()
+    from synth.sources.replicacad import stages as tool
     bad = []
     for p, doc in tool.stage_scenes(root)["frl_apartment_stage"]:
         for o in tool.scene_objects(root, p, doc):
