@@ -9,7 +9,9 @@ For each closed clip, in order:
 2. *Run-level decision*: a run is a maximal sequence of clips connected by unbroken boundary
    odometry (one odometry chain); ``C_c`` maps clip c into the run frame (the chain pose of its
    first frame). Each placement proposes ``G_c = S_c C_c^-1``; every G is scored over all clips
-   of the run by the per-instance test of Eq. 2; the best G* seeds the trusted set; other
+   of the run by the per-instance test of Eq. 2, together with the gravity/wall-derived variants
+   and the per-frame localizations made at the run's start (the evidence causal output uses there:
+   an output with clip closure must not ignore it); the best G* seeds the trusted set; other
    placement-consistent sub-runs keep their placements only when their own support exceeds the
    support of propagation from the nearest trusted sub-run, else they (and unplaced clips) get the
    propagated placement, box-refined under a 0.5 m / 5 deg prior. A retained sub-run is not trusted
@@ -72,6 +74,18 @@ class Backend:
         self.cfg = cfg or Config()
         self.clips: list[ClipState] = []
         self.runs: dict[int, list[ClipState]] = {}
+        # run -> run-to-map hypotheses G from per-frame localization at the run's start (what the
+        # causal output already uses there); the run-level decision scores them with the rest
+        self.frame_hypotheses: dict[int, list[np.ndarray]] = {}
+
+    def add_frame_hypothesis(self, chain: int, G: np.ndarray) -> None:
+        """A per-frame localization of run ``chain`` (Sec. IV-A: causal evaluation at run starts)
+        proposes ``G``: it becomes one more run-level hypothesis, so that an output with clip closure
+        never ignores evidence the causal output used (near-duplicates are kept once)."""
+        hs = self.frame_hypotheses.setdefault(chain, [])
+        b = self.cfg.backend
+        if not any(_close(G, H, b.subrun_translation_m, b.subrun_rotation_deg) for H in hs):
+            hs.append(np.asarray(G, float).copy())
 
     # -- tracking hook for the front-end ---------------------------------------------------------
 
@@ -162,6 +176,8 @@ class Backend:
         for k, c in enumerate(placed):
             for S in self._cue_variants(c):
                 offer(S @ inv_T(c.C), None)
+        for G in self.frame_hypotheses.get(run[0].run, []):  # per-frame localizations at the run's start
+            offer(G, None)
         scores = self._support_many(run, [G for G, _ in hyps])
         h_best = int(np.argmax(scores))
         G_star, best = hyps[h_best]

@@ -107,6 +107,7 @@ class Relocalizer:
         p = localize_clip(nodes, {i: obs}, {i: np.eye(4)}, self.map, self.cfg, clip_rng(self.seed + 1, i), anchors=False)
         if p.S is not None and p.kappa >= self.cfg.backend.track_min_kappa:
             self._frame_fix[chain] = p.S @ inv_T(chain_pose)
+            self.backend.add_frame_hypothesis(chain, self._frame_fix[chain])
 
     def _estimate(self, i: int) -> tuple[np.ndarray, str] | None:
         """The best pose of frame i from the evidence processed so far."""
