@@ -3,6 +3,7 @@ calibration render and the estimates, locally or on a Ray cluster of a given sha
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import sys
 from pathlib import Path
@@ -162,6 +163,10 @@ def cmd_render(args) -> int:
     spec = with_overrides(load_spec(args.spec), args)
     if args.replicacad_root and spec.replicacad is None:
         raise UserError(f"--replicacad-root: {args.spec} has no replicacad: section (its layouts are not ReplicaCAD scenes)")
+    if args.paths_from:
+        if spec.replicacad is None:
+            raise UserError(f"--paths-from: {args.spec} has no replicacad: section (its paths are not planned by the job)")
+        spec = dataclasses.replace(spec, replicacad={**spec.replicacad, "paths_from": args.paths_from})
     if args.dry_run:
         return _dry_run(args, spec, cluster)
     s = run_job(spec, args.out, workers=args.workers, backend=args.backend,
@@ -214,5 +219,8 @@ def register_cli(subparsers) -> None:
                         "(checked for layouts the path was not planned on)")
     a.add_argument("--replicacad-root", metavar="DIR",
                    help="ReplicaCAD folder for a spec with a replicacad: section (default: its root, else $REPLICACAD_ROOT)")
+    a.add_argument("--paths-from", metavar="OUT",
+                   help="for a spec with a replicacad: section: reuse the camera paths another job planned (its output "
+                        "folder) instead of planning them, e.g. the same path on another stage variant")
     add_quiet(a)
     a.set_defaults(fn=cmd_render)

@@ -24,7 +24,10 @@ spec's seed. The spec is then rewritten to those files and runs like any other; 
 
 What is done is not redone: a layout file is rewritten only when the import gives other bytes, and
 a path is replanned only when its inputs (kind, frames, seed, the layout files' content hashes,
-recorded in ``OUT/replicacad/prepared.json``) changed. Files appear atomically. A dry run prepares
+recorded in ``OUT/replicacad/prepared.json``) changed. ``paths_from: DIR`` (or ``synth render
+--paths-from DIR``) takes the paths planned by another job (its output folder) instead of planning:
+the same camera path on another stage variant of the flat, so that the stage is the only factor that
+changes; such a path was not planned on these layouts, so the render checks its clearance in them. Files appear atomically. A dry run prepares
 into a temporary folder and leaves nothing behind.
 """
 
@@ -42,7 +45,7 @@ from vrformats.fields import boolean
 from ...paths.model import DEFAULTS
 
 ENV_ROOT = "REPLICACAD_ROOT"
-KEYS = {"root", "allow_unknown", "obstacles"}
+KEYS = {"root", "allow_unknown", "obstacles", "paths_from"}
 OBSTACLES = ("all", "band")  # synth.paths: what the planned paths keep their clearance from
 PATH_KINDS = {"query": DEFAULTS.query_frames, "mapping": DEFAULTS.mapping_frames}  # default frames (the paper's tours)
 PREPARED = "prepared.json"
@@ -64,7 +67,21 @@ def parse_section(doc, source: str) -> dict:
     obstacles = doc.get("obstacles", "all")
     if obstacles not in OBSTACLES:
         raise SceneFormatError(source, "replicacad.obstacles", f"expected one of {', '.join(OBSTACLES)}, got {obstacles!r}")
-    return {"root": root, "allow_unknown": allow, "obstacles": obstacles}
+    paths_from = doc.get("paths_from")
+    if paths_from is not None and (not isinstance(paths_from, str) or not paths_from):
+        raise SceneFormatError(source, "replicacad.paths_from", f"expected a folder or null, got {paths_from!r}")
+    return {"root": root, "allow_unknown": allow, "obstacles": obstacles, "paths_from": paths_from}
+
+
+def reused_path_file(paths_from: str, name: str, source: str) -> Path:
+    """The planned ``name`` path of another job (``paths_from``: its output folder, or a folder of path
+    files): the same camera path on another stage variant, the stage then being the only factor."""
+    d = Path(os.path.expandvars(paths_from)).expanduser()
+    for cand in (d / "replicacad" / "paths" / f"{name}.txt", d / f"{name}.txt"):
+        if cand.is_file() and cand.with_suffix(".yaml").is_file():
+            return cand.resolve()
+    raise SceneFormatError(source, "replicacad.paths_from", f"no planned '{name}' path in {d} (looked for "
+                                                            f"replicacad/paths/{name}.txt and {name}.txt, each with its .yaml)")
 
 
 def resolve_root(section: dict, source: str, cli_root: str | None = None) -> Path:
@@ -147,18 +164,32 @@ def prepare(spec, out: Path, cli_root: str | None = None, progress=print):
         key = {"kind": name, "frames": w["frames"], "seed": spec.seed,
                "layouts": {n: _sha(files[n]) for n in w["layouts"]},
                **({"obstacles": obstacles} if obstacles != "all" else {})}
+        reuse = reused_path_file(section["paths_from"], name, src) if section.get("paths_from") else None
+        if reuse is not None:  # another job's path: not planned here, so the render checks its clearance in these layouts
+            key = {"kind": name, "frames": w["frames"], "from": str(reuse), "sha": _sha(reuse)}
         txt = prep / "paths" / f"{name}.txt"
         if state["paths"].get(name) == key and txt.exists() and txt.with_suffix(".yaml").exists():
             path_files[name] = txt
             continue
-        progress(f"planning the {name} path ({w['frames']} frames) on {', '.join(w['layouts'])} ...")
-        try:
-            path = plan_path(name, [load_layout(files[n]) for n in w["layouts"]], w["frames"], seed=spec.seed, name=name,
-                             obstacles=obstacles)
-        except UserError as e:
-            raise SceneFormatError(src, w["field"], f"cannot plan a {name} path on {', '.join(w['layouts'])}: {e}") from None
-        # the layouts by file: an imported apt_0 is not the built-in apt_0 (synth path check reads these)
-        path.meta["layouts"] = [str(files[n].resolve()) for n in w["layouts"]]
+        if reuse is not None:
+            try:
+                path = load_path(reuse)
+            except UserError as e:
+                raise SceneFormatError(src, "replicacad.paths_from", str(e)) from None
+            if len(path) < w["frames"]:
+                raise SceneFormatError(src, w["field"], f"the reused {name} path {reuse} has {len(path)} frames, "
+                                                        f"fewer than the {w['frames']} asked")
+            progress(f"reusing the {name} path of {reuse} (planned on {', '.join(map(str, path.meta.get('layouts') or []))})")
+            # meta['layouts'] keeps naming the layouts it was planned on: these are not among them
+        else:
+            progress(f"planning the {name} path ({w['frames']} frames) on {', '.join(w['layouts'])} ...")
+            try:
+                path = plan_path(name, [load_layout(files[n]) for n in w["layouts"]], w["frames"], seed=spec.seed, name=name,
+                                 obstacles=obstacles)
+            except UserError as e:
+                raise SceneFormatError(src, w["field"], f"cannot plan a {name} path on {', '.join(w['layouts'])}: {e}") from None
+            # the layouts by file: an imported apt_0 is not the built-in apt_0 (synth path check reads these)
+            path.meta["layouts"] = [str(files[n].resolve()) for n in w["layouts"]]
         tmp = prep / "paths" / ".tmp" / f"{name}.txt"  # same names, then moved: the sidecar names its poses file
         tmp.parent.mkdir(exist_ok=True)
         try:

@@ -13,6 +13,7 @@ import math
 import os
 import shutil
 from pathlib import Path
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -29,6 +30,7 @@ from synth.jobs import load_spec
 from synth.sources.replicacad.importer import load_replicacad
 from synth.sources.replicacad.job import prepare
 from synth.scene.model import load_layout, object_box, structure_boxes
+from vrformats.errors import SceneFormatError
 
 
 @pytest.fixture(scope="module")
@@ -407,3 +409,56 @@ def test_pipeline_render_map_run_eval_on_the_fixture(root, tmp_path, capsys):
         assert ev["frames"] == 300 and ev["closure"]["coverage"] == 1.0, layout
     # oracle detections on the layout the map was built from: VideoReloc places the whole tour
     assert recall["apt_0"]["closure"]["recall_1m_10deg"] >= 0.8
+
+
+def test_paths_from_another_job_reuse_its_paths_and_are_checked_in_these_layouts(root, tmp_path, capsys):
+    """Issue 55: the same camera path on another stage variant (here: the same dataset prepared twice,
+    then a copy whose stage has a wall where the path runs). The reused path is not replanned, it keeps
+    naming the layouts it was planned on, and the render's clearance check tests it in these layouts."""
+    from synth.paths.files import load_path
+
+    spec_file = tmp_path / "spec.yaml"
+    spec_file.write_text(SPEC % ("null", tmp_path / "a"))
+    spec = load_spec(spec_file)
+    prepare(spec, tmp_path / "a", cli_root=str(root), progress=lambda m: None)
+    first = load_path(tmp_path / "a" / "replicacad" / "paths" / "query.txt")
+    spec_b = replace(spec, replicacad={**spec.replicacad, "paths_from": str(tmp_path / "a")})
+    msgs = []
+    ready = prepare(spec_b, tmp_path / "b", cli_root=str(root), progress=msgs.append)
+    assert any(m.startswith("reusing the query path of") for m in msgs) and not any("planning" in m for m in msgs)
+    reused = load_path(ready.designs[0].path)
+    assert np.array_equal(reused.poses, first.poses)
+    assert reused.meta["layouts"] == first.meta["layouts"]  # planned on job a's layouts, not on b's
+    # the same stage: the clearance check passes; from the command line too
+    assert synth_main(["render", str(spec_file), "--out", str(tmp_path / "c"), "--dry-run", "--replicacad-root", str(root),
+                       "--paths-from", str(tmp_path / "a")]) == 0
+    capsys.readouterr()
+    # a folder without the path: one line naming the field
+    bad = replace(spec, replicacad={**spec.replicacad, "paths_from": str(tmp_path / "nothing")})
+    with pytest.raises(SceneFormatError) as e:
+        prepare(bad, tmp_path / "d", cli_root=str(root), progress=lambda m: None)
+    assert "replicacad.paths_from" in str(e.value) and "no planned 'query' path" in str(e.value)
+    assert synth_main(["render", str(Path(__file__).resolve().parents[3] / "render_jobs" / "smoke.yaml"), "--dry-run",
+                       "--paths-from", str(tmp_path / "a")]) == 2
+    assert "--paths-from" in capsys.readouterr().err
+
+
+def test_a_stage_that_cannot_hold_a_reused_path_is_refused_in_one_line(root, tmp_path, capsys):
+    """A path reused from another stage variant that runs through this stage's wall: the render's
+    clearance check names the path, the layout, the frame and the remedy; nothing is rendered."""
+    from synth.paths.files import load_path, save_path
+
+    spec_file = tmp_path / "spec.yaml"
+    spec_file.write_text(SPEC % ("null", tmp_path / "a"))
+    prepare(load_spec(spec_file), tmp_path / "a", cli_root=str(root), progress=lambda m: None)
+    q = tmp_path / "a" / "replicacad" / "paths" / "query.txt"
+    p = load_path(q)
+    p.poses[:, 0, 3] += 50.0  # 50 m east: outside every room of the flat
+    save_path(p, q)
+    assert synth_main(["render", str(spec_file), "--out", str(tmp_path / "b"), "--dry-run", "--replicacad-root", str(root),
+                       "--paths-from", str(tmp_path / "a")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()  # progress lines (import, reuse), then the error
+    errors = [x for x in lines if x.startswith("synth: error:")]
+    assert len(errors) == 1 and errors[0] == lines[-1], lines
+    assert "camera path 'query' was planned on" in errors[0] and "--allow-clearance-breach" in errors[0]
+    assert not (tmp_path / "b").exists()
