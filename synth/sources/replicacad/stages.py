@@ -48,7 +48,10 @@ The rules (:class:`StageRules`; named variants are YAML files in ``scenes/stages
 :func:`load_stage_variant`)
     ``footprint``: ``objects`` (the navmesh footprint, walls moved out to hold the box of every object
     of the stage's scenes that stands in the storey, see ``StandinSpec.keep``) or ``navmesh`` (the
-    navmesh footprint alone, walls just outside it). ``ceiling``: m above the floor. ``stairs``:
+    navmesh footprint alone, walls just outside it) or ``furnished`` (the union of the walkable areas of
+    the navmeshes each scene has of its own, built with its furniture (``navmeshes/<scene>.navmesh``;
+    scenes without one add nothing; the stage's navmesh when no scene has one), walls just outside it: the floor under furniture that
+    stands in every scene is not floor, so walls cut into it and narrow passages split rooms). ``ceiling``: m above the floor. ``stairs``:
     False builds the main level only (no steps, no raised level; where the stairs were is floor only
     where it is the main level's footprint, and objects standing on the other levels are not held).
     ``windows``, ``window_frames`` (a frame protruding one cell around each opening, both sides),
@@ -107,7 +110,7 @@ CARD_SUFFIX = ".stage_card.json"
 NOTES = "STANDIN.md"
 BOX_COLOUR = (0.6, 0.6, 0.6, 1.0)
 DEFAULT_VARIANT = "standin"  # the stand-in as the tool always built it
-FOOTPRINTS = ("objects", "navmesh")
+FOOTPRINTS = ("objects", "navmesh", "furnished")
 MATERIALS = ("plain", "painted", "tiled", "textured")
 SURFACES = ("walls", "floor", "ceiling")
 CEILING_RANGE = (1.5, 10.0)  # m: StageRules.ceiling (and the command line's --ceiling)
@@ -487,7 +490,7 @@ def make_stage(nav: NavMesh, floor_z: float, rules: StageRules, name: str, keep=
     keep, tops, bottoms = list(keep), list(tops), list(bottoms)
     index = list(range(len(keep)))  # keep[k] is the caller's keep[index[k]]
     applied: dict = {"footprint": rules.footprint}
-    if rules.footprint == "navmesh":
+    if rules.footprint in ("navmesh", "furnished"):
         keep, tops, bottoms, index = [], [], [], []
     levels = nav.levels()
     if not rules.stairs and len(levels) > 1:
@@ -915,6 +918,10 @@ def fill(out: Path, variant: StageVariant | StageRules | None = None, structure_
             f = navmesh_for_scene(out, doc, p)
             if f is not None and f not in files:
                 files.append(f)
+        if rules.footprint == "furnished":  # the scenes' own navmeshes, built with their furniture, where they have them
+            own = [out / "navmeshes" / (p.name[: -len(SCENE_SUFFIX)] + ".navmesh") for p, doc in users
+                   if doc.get("object_instances")]  # a scene without furniture (empty_stage) adds the empty floor
+            files = [f for f in own if f.is_file()] or files
         if not files:
             rows.append({"file": str(glb.relative_to(out)), "kind": "stage", "built": "NO: no navmesh names this stage"})
             continue
