@@ -29,6 +29,7 @@ def build_parser() -> argparse.ArgumentParser:
     localization_units.register_cli(sub)
     run.register_cli(sub)
     eval_cli.register_cli(sub)
+    eval_cli.register_stages_cli(sub)
     bench.register_cli(sub)
     runner.register_cli(sub)
     checks.register_cli(sub)

@@ -166,3 +166,29 @@ def register_cli(subparsers) -> None:
     p.add_argument("--plot", metavar="FILE.png", help="also draw the trajectories over the map against the ground truth")
     p.add_argument("--map", metavar="MAP.json", help="with --plot: the map to draw (default: none)")
     p.set_defaults(fn=cmd_eval)
+
+
+def cmd_stages(args) -> int:
+    """``reloc stages``: one design's figures on several stage variants, side by side (issue 55)."""
+    from .stages import format_stage_table, stage_dirs, stage_table
+
+    rows = stage_table(stage_dirs(args.results))
+    if args.json:
+        print(json.dumps(rows, indent=1))
+    else:
+        print(format_stage_table(rows))
+    if args.save:
+        write_json_atomic(Path(args.save), {"format": "videoreloc-stages/1", "results": [str(Path(a.partition("=")[2] or a))
+                                                                                          for a in args.results], "rows": rows},
+                          indent=1)
+    return 0
+
+
+def register_stages_cli(subparsers) -> None:
+    p = subparsers.add_parser("stages", help="one design's figures on several stage variants (results folders), "
+                                             "with intervals, spread and whether each holds across stages")
+    p.add_argument("results", nargs="+", metavar="[NAME=]RESULTS_DIR",
+                   help="reloc experiment results of the same design on each stage variant")
+    add_json(p)
+    p.add_argument("--save", metavar="FILE.json", help="also write the rows as JSON here")
+    p.set_defaults(fn=cmd_stages)
