@@ -1125,3 +1125,42 @@ def test_a_sensor_sweep_end_to_end_with_its_table_plot_and_check(tiny_design, ti
     checks = tiny_design / "sweep_checks.yaml"
     checks.write_text(yaml.safe_dump({"checks": ["videoreloc.breaking_point.sensor >= 0", "videoreloc.sweep.0 >= 0"]}))
     assert reloc_main(["check", str(checks), str(exp)]) == 0
+
+
+@pytest.mark.slow
+def test_reloc_stages_puts_stage_variants_side_by_side(tiny_design, tiny_pair, tmp_path, capsys):
+    """reloc stages (issue 55): two results folders of one design. The same results twice: every figure
+    holds, spread 0. A copy whose VideoReloc closure recall is moved outside the first one's interval:
+    that figure moves with the stage, by the difference; one line for bad input."""
+    import shutil
+
+    spec = yaml.safe_load((tiny_design / "exp.yaml").read_text())
+    spec.update({"out": str(tmp_path / "a" / "experiment"), "methods": ["videoreloc"], "tours": str(tiny_pair),
+                 "render": str(tiny_design / "render.yaml")})
+    (tmp_path / "exp.yaml").write_text(yaml.safe_dump(spec))
+    assert reloc_main(["experiment", str(tmp_path / "exp.yaml"), "--quiet", "--no-plots"]) == 0
+    a = tmp_path / "a" / "experiment"
+    shutil.copytree(a, tmp_path / "b" / "experiment")
+    capsys.readouterr()
+    assert reloc_main(["stages", str(a), str(tmp_path / "b" / "experiment"), "--json"]) == 0
+    rows = {r["figure"]: r for r in json.loads(capsys.readouterr().out)}
+    r = rows["videoreloc.closure.recall_1m_10deg"]
+    assert set(r["stages"]) == {"a", "b"} and r["spread"] == 0 and r["holds"] is True
+    lo, hi = r["stages"]["a"]["interval"]
+    assert lo <= r["stages"]["a"]["value"] <= hi
+    # stage b's recall moved below a's interval
+    res_b = json.loads((tmp_path / "b" / "experiment" / "results.json").read_text())
+    moved = max(0.0, lo - 0.2)
+    res_b["methods"]["videoreloc"]["modes"]["closure"]["all"]["recall_1m_10deg"] = moved
+    (tmp_path / "b" / "experiment" / "results.json").write_text(json.dumps(res_b))
+    assert reloc_main(["stages", f"plain={a}", f"scan={tmp_path / 'b' / 'experiment'}", "--save", str(tmp_path / "s.json")]) == 0
+    out = capsys.readouterr().out
+    line = next(x for x in out.splitlines() if x.startswith("| VideoReloc, with clip closure |"))
+    assert line.endswith("| moves |") and "| plain | scan |" in out
+    saved = {r["figure"]: r for r in json.loads((tmp_path / "s.json").read_text())["rows"]}
+    assert saved["videoreloc.closure.recall_1m_10deg"]["spread"] == pytest.approx(r["stages"]["a"]["value"] - moved)
+    # bad input: one line, exit 2
+    assert reloc_main(["stages", str(a)]) == 2
+    assert "at least two stage variants" in capsys.readouterr().err
+    assert reloc_main(["stages", str(a), str(tmp_path / "nothing")]) == 2
+    assert "no results.json" in capsys.readouterr().err
