@@ -95,9 +95,11 @@ def _cell(name: str, v) -> str:
         return "-"
     if name.startswith("map."):
         return f"{x:.0f}"
-    pct = "%" if name.endswith(".kept") else ""
+    if name.endswith(".kept"):  # as Table II prints it
+        s = f"{100 * x:.0f} %"
+        return s if iv is None else f"{s} [{100 * iv[0]:.0f}, {100 * iv[1]:.0f}]"
     sign = "+" if name.rsplit(".", 1)[-1] in SIGNED else ""
-    s = f"{100 * x:{sign}.1f}{pct}"
+    s = f"{100 * x:{sign}.1f}"
     return s if iv is None else f"{s} [{100 * iv[0]:{sign}.1f}, {100 * iv[1]:{sign}.1f}]"
 
 
