@@ -42,7 +42,9 @@ interval; ``NAME.lo`` and ``NAME.hi`` are its bounds, so that a check can ask fo
 figures (``videoreloc.closure.recall_1m_10deg > appearance.causal.recall_1m_10deg``) is decided on
 the interval of their paired difference (the same resampled path segments): ``A > B`` passes when
 the difference's lower bound is above 0, ``A >= B`` when it is not below 0, ``A < B`` and ``A <= B``
-likewise on the upper bound; ``==`` and ``!=`` compare the point values. A plain ``NAME`` against a
+likewise on the upper bound; ``==`` and ``!=`` compare the point values. ``A >= B - 0.10`` (an offset
+after the second metric) moves that 0: the difference's lower bound must not be below -0.10 (A at
+most 10 points under B, decided on the paired difference). A plain ``NAME`` against a
 number is its point value.
 
 Prints a table; exit status 0 when every check passes, 1 when any fails (a metric without a value,
@@ -67,7 +69,8 @@ from vrformats.cli import add_json
 from .tables import FACTOR_KEYS, METRICS, interval_figures, read_results
 
 OPS = {">=": operator.ge, "<=": operator.le, ">": operator.gt, "<": operator.lt, "==": operator.eq, "!=": operator.ne}
-_EXPR = re.compile(r"^\s*([A-Za-z0-9_.@\-]+)\s*(>=|<=|==|!=|>|<)\s*([A-Za-z0-9_.@\-+eE]+)\s*$")
+_EXPR = re.compile(r"^\s*([A-Za-z0-9_.@\-]+)\s*(>=|<=|==|!=|>|<)\s*([A-Za-z0-9_.@\-+eE]+?)"
+                   r"(?:\s+([+-])\s*([0-9.]+(?:[eE][+-]?[0-9]+)?))?\s*$")
 
 
 @dataclass
@@ -77,6 +80,7 @@ class Check:
     left: str
     op: str
     right: str  # a number or a metric name
+    offset: float = 0.0  # 'A >= B - 0.10': B's value plus this (for two figures: the bound their difference is compared to)
 
 
 CHECK_SPEC_KEYS = {"checks", "description"}
@@ -121,7 +125,15 @@ def parse_checks(path) -> list[Check]:
             raise SceneFormatError(p, field, f"{shown(it)}: the bound must be a finite number, got {m.group(3)}")
         if name is not None and not isinstance(name, str):
             raise SceneFormatError(p, f"{field}.name", f"expected text, got {shown(name)}")
-        out.append(Check(it.strip(), clean_name(str(name or it.strip()), p, f"{field}.name"), m.group(1), m.group(2), m.group(3)))
+        offset = 0.0
+        if m.group(4):
+            if bound is not None:
+                raise SceneFormatError(p, field, f"{shown(it)}: an offset ('- 0.10') follows a metric, not a number")
+            offset = float(m.group(5)) * (-1.0 if m.group(4) == "-" else 1.0)
+            if not math.isfinite(offset):
+                raise SceneFormatError(p, field, f"{shown(it)}: the offset must be a finite number")
+        out.append(Check(it.strip(), clean_name(str(name or it.strip()), p, f"{field}.name"), m.group(1), m.group(2), m.group(3),
+                         offset))
     return out
 
 
@@ -270,6 +282,8 @@ def run_checks(check_file, results_dir) -> list[dict]:
         field = f"checks[{i}]"
         a, a_iv, a_fig = r.value(c.left, field)
         b, b_iv, b_fig = r.value(c.right, field)
+        if b is not None:
+            b = b + c.offset
         interval, on, margin = a_iv or b_iv, None, None
         if a_fig and b_fig and c.op not in ("==", "!="):  # two figures: their paired difference decides
             interval = r.boot.interval(r.resamples(a_fig) - r.resamples(b_fig))
@@ -278,8 +292,8 @@ def run_checks(check_file, results_dir) -> list[dict]:
                 ok = False
             else:
                 bound = interval[0] if c.op in (">", ">=") else interval[1]
-                ok = OPS[c.op](bound, 0.0)
-                margin = bound if c.op in (">", ">=") else -bound
+                ok = OPS[c.op](bound, c.offset)
+                margin = bound - c.offset if c.op in (">", ">=") else c.offset - bound
         else:
             ok = a is not None and b is not None and OPS[c.op](a, b)
             if a is not None and b is not None and c.op not in ("==", "!="):

@@ -1164,3 +1164,20 @@ def test_reloc_stages_puts_stage_variants_side_by_side(tiny_design, tiny_pair, t
     assert "at least two stage variants" in capsys.readouterr().err
     assert reloc_main(["stages", str(a), str(tmp_path / "nothing")]) == 2
     assert "no results.json" in capsys.readouterr().err
+
+
+def test_a_check_may_compare_with_another_metric_plus_an_offset(tmp_path, capsys):
+    """'A >= B - 0.10' (issue 55: the learned detector within 10 points of oracle detections): B's value
+    plus the offset; on figures with intervals the paired difference's bound is compared to the offset."""
+    res = _results(tmp_path)
+    checks = _write_checks(tmp_path, ["videoreloc.closure.recall_1m_10deg >= appearance.causal.recall_1m_10deg + 0.3",
+                                      "videoreloc.closure.recall_1m_10deg >= appearance.causal.recall_1m_10deg + 0.5",
+                                      "appearance.causal.recall_1m_10deg >= videoreloc.closure.recall_1m_10deg - 0.45"])
+    assert reloc_main(["check", str(checks), str(res), "--json"]) == 1
+    rows = json.loads(capsys.readouterr().out)
+    assert [r["passed"] for r in rows] == [True, False, True]
+    assert rows[0]["against"] == pytest.approx(0.8) and rows[0]["margin"] == pytest.approx(0.1)
+    assert rows[2]["margin"] == pytest.approx(0.05)
+    bad = _write_checks(tmp_path, ["videoreloc.kept >= 0.75 - 0.1"])
+    assert reloc_main(["check", str(bad), str(res)]) == 2
+    assert "an offset ('- 0.10') follows a metric" in capsys.readouterr().err
