@@ -190,26 +190,30 @@ def test_every_demo_check_can_fail(monkeypatch, tmp_path, spec):
         return _feasible(name.removesuffix(".lo").removesuffix(".hi"))
 
     good: dict[str, float] = {}
-    for c in items:  # a passing value for each metric: the threshold with a margin on the right side
-        for side in (c.left, c.right):
-            try:
-                float(side)
-            except ValueError:
-                assert side in known, f"{c.text}: unknown metric {side}"
-        if c.left in good and (c.right in good or c.right not in known):  # already decided: must hold
-            if ck.OPS[c.op](good[c.left], good[c.right] if c.right in known else float(c.right)):
-                continue
-        if c.right in known:
-            if c.left in good and c.right not in good:  # the left side is set already: put the right below it
-                good[c.right] = good[c.left] - 0.05 if c.op in (">", ">=") else good[c.left] + 0.05
-                continue
-            good.setdefault(c.right, 0.5)
-        r = good[c.right] if c.right in known else float(c.right)
-        lo, hi = feasible(c.left)
-        room = (hi - r) if c.op in (">", ">=") else (r - lo)  # how far the passing side reaches
-        assert room > 0, f"{c.text}: cannot pass"
-        step = 0.5 * room if math.isfinite(room) else max(abs(r) * 0.2, 0.05)
-        good[c.left] = r + step if c.op in (">", ">=") else r - step
+    for _ in range(10):  # rounds until every check holds (an offset check and its reverse push each other)
+        before = dict(good)
+        for c in items:  # a passing value for each metric: the threshold with a margin on the right side
+            for side in (c.left, c.right):
+                try:
+                    float(side)
+                except ValueError:
+                    assert side in known, f"{c.text}: unknown metric {side}"
+            if c.left in good and (c.right in good or c.right not in known):  # already decided: must hold
+                if ck.OPS[c.op](good[c.left], good[c.right] + c.offset if c.right in known else float(c.right)):
+                    continue
+            if c.right in known:
+                if c.left in good and c.right not in good:  # the left side is set already: put the right below it
+                    good[c.right] = good[c.left] - c.offset - 0.05 if c.op in (">", ">=") else good[c.left] - c.offset + 0.05
+                    continue
+                good.setdefault(c.right, 0.5)
+            r = good[c.right] + c.offset if c.right in known else float(c.right)  # 'A >= B - 0.10': B's value plus the offset
+            lo, hi = feasible(c.left)
+            room = (hi - r) if c.op in (">", ">=") else (r - lo)  # how far the passing side reaches
+            assert room > 0, f"{c.text}: cannot pass"
+            step = 0.5 * room if math.isfinite(room) else max(abs(r) * 0.2, 0.05)
+            good[c.left] = r + step if c.op in (">", ">=") else r - step
+        if good == before:
+            break
     monkeypatch.setattr(ck, "_Resolver", _StubResolver)
     monkeypatch.setattr(_StubResolver, "VALUES", dict(good))
     res_dir = tmp_path  # run_checks reads a results.json; the values come from the stub
@@ -217,7 +221,7 @@ def test_every_demo_check_can_fail(monkeypatch, tmp_path, spec):
     assert all(r["passed"] for r in ck.run_checks(path, res_dir)), "the demo-like values must pass"
     for i, c in enumerate(items):
         bad = dict(good)
-        r = good[c.right] if c.right in known else float(c.right)
+        r = good[c.right] + c.offset if c.right in known else float(c.right)
         lo, hi = feasible(c.left)
         bad[c.left] = max(lo, r - 0.01) if c.op in (">", ">=") else min(hi, r + 0.01)
         monkeypatch.setattr(_StubResolver, "VALUES", bad)
