@@ -307,3 +307,20 @@ def test_unknown_variant_names_and_bad_rules_in_code(root, tmp_path, capsys):
                       (dict(materials={"floor": "marble"}), "materials.floor"), (dict(skew_deg="2"), "skew_deg")):
         with pytest.raises(SceneFormatError, match=f"StageRules: {field}: "):
             StageRules(**kw)
+
+
+def test_furnished_floor_is_the_scenes_own_navmeshes_and_splits_the_flat(src, tmp_path):
+    """`furnished` (the rules under which the issue-55 user's stand-in broke our checks): the floor is the
+    union of the scenes' own navmeshes (navmeshes/apt_K.navmesh, built with the furniture; the vendored
+    real files), smaller than the empty stage's footprint, with walls just outside it; the importer
+    finds two rooms on it, as that user saw."""
+    out = tmp_path / "furnished"
+    rows = build(src, out, load_stage_variant("furnished"))
+    row = next(r for r in rows if r["kind"] == "stage" and r["file"].endswith(f"{STAGE}.glb"))
+    assert sorted(row["navmeshes"]) == [f"navmeshes/apt_{k}.navmesh" for k in range(6)]
+    plain = build(src, tmp_path / "plain", load_stage_variant("plain"))
+    plain_row = next(r for r in plain if r["kind"] == "stage" and r["file"].endswith(f"{STAGE}.glb"))
+    assert row["footprint_m2"] < plain_row["footprint_m2"] - 1.0, (row["footprint_m2"], plain_row["footprint_m2"])
+    card = json.loads((out / "stages" / f"{STAGE}{CARD_SUFFIX}").read_text())
+    assert card["variant"]["name"] == "furnished" and card["rules"]["footprint"] == "furnished"
+    assert card["structure"]["rooms"] == 2, card["structure"]
