@@ -42,7 +42,7 @@ def test_a_bare_name_is_a_shipped_spec_and_a_file_wins(tmp_path, monkeypatch, ca
     (tmp_path / "smoke").write_text(yaml.safe_dump({**doc, "name": "mine"}))
     assert load_spec("smoke").name == "mine"
     for argv, shipped in ((["render", "nosuch", "--dry-run"], "demo, detector_eval, quickstart, reference, replicacad_6x3, "
-                                                             "replicacad_apt_6x3, replicacad_demo, smoke, sweep_rearrangement ("),
+                                                             "replicacad_apt_6x3, replicacad_demo, replicacad_stages, smoke, sweep_rearrangement ("),
                           (["trainset", "render", "nosuch"], "shipped: detector_train, detector_train_replicacad, detector_train_v2 (")):
         assert synth_main(argv) == 2
         err = capsys.readouterr().err.strip()
