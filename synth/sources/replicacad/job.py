@@ -70,7 +70,10 @@ def parse_section(doc, source: str) -> dict:
     paths_from = doc.get("paths_from")
     if paths_from is not None and (not isinstance(paths_from, str) or not paths_from):
         raise SceneFormatError(source, "replicacad.paths_from", f"expected a folder or null, got {paths_from!r}")
-    return {"root": root, "allow_unknown": allow, "obstacles": obstacles, "paths_from": paths_from}
+    out = {"root": root, "allow_unknown": allow, "obstacles": obstacles}
+    if paths_from is not None:  # only when set: a job's state document (which a resume compares) stays as it was
+        out["paths_from"] = paths_from
+    return out
 
 
 def reused_path_file(paths_from: str, name: str, source: str) -> Path:
