@@ -980,16 +980,19 @@ def _stage_line(r: dict) -> str:
     return d
 
 
+def _row_detail(r: dict, box_bounds: bool) -> str:
+    """One built file's details: a stage's line, an object box (with its bounds or not), or why nothing was built."""
+    if r["kind"] == "stage" and "footprint_m2" in r:
+        return _stage_line(r)
+    if "bounds_min" in r:
+        return f"box {r['bounds_min']} .. {r['bounds_max']} from {r['from']}" if box_bounds else f"box from {r['from']}"
+    return r.get("built", "")
+
+
 def print_table(rows: list[dict]) -> None:
     print(f"{'built':<46} {'kind':<7} details")
     for r in rows:
-        if r["kind"] == "stage" and "footprint_m2" in r:
-            d = _stage_line(r)
-        elif "bounds_min" in r:
-            d = f"box {r['bounds_min']} .. {r['bounds_max']} from {r['from']}"
-        else:
-            d = r.get("built", "")
-        print(f"{r['file']:<46} {r['kind']:<7} {d}")
+        print(f"{r['file']:<46} {r['kind']:<7} {_row_detail(r, True)}")
 
 
 def write_notes(out: Path, variant: StageVariant, rows: list[dict], src: Path, overrides: dict | None = None) -> Path:
@@ -1007,12 +1010,6 @@ def write_notes(out: Path, variant: StageVariant, rows: list[dict], src: Path, o
              "Each stage's card (rules, seed, what was built, what the importer finds in it) lies beside its GLB: "
              f"`stages/<stem>{CARD_SUFFIX}`.", "", "| file | built |", "|---|---|"]
     for r in rows:
-        if r["kind"] == "stage" and "footprint_m2" in r:
-            d = _stage_line(r)
-        elif "bounds_min" in r:
-            d = f"box from {r['from']}"
-        else:
-            d = r.get("built", "")
-        lines.append(f"| `{r['file']}` | {d.replace('|', '/')} |")
+        lines.append(f"| `{r['file']}` | {_row_detail(r, False).replace('|', '/')} |")
     lines += ["", "## What a stand-in cannot show", ""] + [f"- {x}" for x in CANNOT_SHOW] + [""]
     return write_text_atomic(Path(out) / NOTES, "\n".join(lines))
